@@ -1,0 +1,36 @@
+# Two commands on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+# One thread per process: BLAS/OpenMP oversubscription costs throughput and
+# changes floating-point summation order (bit-identical reruns need it fixed).
+export OMP_NUM_THREADS := 1
+export OPENBLAS_NUM_THREADS := 1
+export MKL_NUM_THREADS := 1
+export NUMBA_NUM_THREADS ?= 2
+export MPLBACKEND := Agg
+
+.PHONY: install test demo bench meshes clean
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e ".[dev]"
+	touch $@
+
+install: $(VENV)/.installed
+
+test: install
+	$(PY) -m pytest -q tests
+
+demo: install
+	$(PY) -m service.cli demo --out demo_output
+
+bench: install
+	$(PY) benchmarks/bench_forward.py
+
+meshes: install
+	$(PY) scripts/make_meshes.py
+
+clean:
+	rm -rf $(VENV) demo_output .pytest_cache
