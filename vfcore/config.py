@@ -1,0 +1,63 @@
+"""Simulation configuration (numerics and observation), SI units except where named."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+MESHES = ("coarse", "medium", "fine")  # ~172, ~205, ~263 triangles; "medium" is the paper's default
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Numerical and observation settings of one forward simulation.
+
+    Attributes
+    ----------
+    mesh : one of ``MESHES``.
+    dt : time step, s (paper: 5e-5; 2.5e-5 and 1e-4 supported).
+    duration : simulated time, s (paper: 0.55).
+    discard : initial transient thrown away, s (paper: 0.25).
+    fps : camera frame rate the GAW is downsampled to, frames/s.
+    nu : Poisson ratio, in (-1, 0.5).
+    sep_ratio : flow separates where the area first exceeds ``sep_ratio * A_min``.
+    p_sup : supraglottal pressure, Pa.
+    length_mm : fold length (anterior-posterior), mm; area = length * width.
+    keep_trajectories : also return nodal displacements at the camera rate.
+    """
+
+    mesh: str = "medium"
+    dt: float = 5e-5
+    duration: float = 0.55
+    discard: float = 0.25
+    fps: float = 2000.0
+    nu: float = 0.4995
+    sep_ratio: float = 1.3
+    p_sup: float = 0.0
+    length_mm: float = 17.0
+    keep_trajectories: bool = False
+
+    def __post_init__(self) -> None:
+        if self.mesh not in MESHES:
+            raise ValueError(f"mesh must be one of {MESHES}, got {self.mesh!r}")
+        for name in ("dt", "duration", "fps", "length_mm", "sep_ratio"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"config {name} must be a finite number > 0, got {v!r}")
+        if not (math.isfinite(self.discard) and 0 <= self.discard < self.duration):
+            raise ValueError(f"config discard must be in [0, duration), got {self.discard!r}")
+        if not (math.isfinite(self.nu) and -1.0 < self.nu < 0.5):
+            raise ValueError(f"config nu (Poisson ratio) must lie in (-1, 0.5), got {self.nu!r}")
+        if self.sep_ratio < 1.0:
+            raise ValueError(f"config sep_ratio must be >= 1, got {self.sep_ratio!r}")
+        if not math.isfinite(self.p_sup):
+            raise ValueError(f"config p_sup must be finite, got {self.p_sup!r}")
+        if self.fps * self.dt > 1.0:
+            raise ValueError(f"config fps={self.fps} exceeds the simulation rate 1/dt={1/self.dt:.0f}")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def replace(self, **kw) -> "SimConfig":
+        d = self.as_dict()
+        d.update(kw)
+        return SimConfig(**d)

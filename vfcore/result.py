@@ -1,0 +1,70 @@
+"""Result of one forward simulation."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import SimConfig
+from .params import Params
+
+
+@dataclass(frozen=True)
+class CycleSummary:
+    """Per-cycle summaries over the kept (post-transient) window.
+
+    All arrays have shape (n_cycles,). Pressures in Pa, areas in mm^2, flow in m^3/s.
+    """
+
+    t_start: np.ndarray          # s, cycle start (glottal-area minimum) relative to the kept window
+    period: np.ndarray           # s
+    peak_area: np.ndarray        # mm^2
+    min_area: np.ndarray         # mm^2
+    mean_flow: np.ndarray        # m^3/s
+    mean_contact_pressure: np.ndarray  # Pa, time-mean over the cycle of the spatial max over nodes
+    max_contact_pressure: np.ndarray   # Pa, max over the cycle and over nodes
+
+    @property
+    def f0(self) -> float:
+        return float(1.0 / np.mean(self.period)) if self.period.size else float("nan")
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """One simulation, observed at the camera rate over the kept window.
+
+    ``ok`` is False when the simulation failed (non-finite state, no oscillation is
+    *not* a failure); then ``message`` says why and the arrays are empty.
+
+    Attributes (n = frames at ``fps`` after discarding the transient; m = free-surface nodes)
+    ----------
+    t : (n,) s, from 0 at the start of the kept window.
+    gaw : (n,) glottal area, mm^2.
+    width : (n,) glottal width W, mm.
+    flow : (n,) volume flow rate Q, m^3/s.
+    contact_pressure : (n, m) Pa, per free-surface node (inferior to superior).
+    contact_force : (n, m) N/m (force per unit fold length), per free-surface node.
+    surface_z : (m,) mm, undeformed height of each free-surface node.
+    cycles : per-cycle summaries.
+    trajectories : (n, n_nodes, 2) mm nodal displacements, when requested.
+    """
+
+    ok: bool
+    message: str
+    params: Params
+    config: SimConfig
+    fps: float
+    t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    gaw: np.ndarray = field(default_factory=lambda: np.empty(0))
+    width: np.ndarray = field(default_factory=lambda: np.empty(0))
+    flow: np.ndarray = field(default_factory=lambda: np.empty(0))
+    contact_pressure: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    contact_force: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    surface_z: np.ndarray = field(default_factory=lambda: np.empty(0))
+    cycles: CycleSummary | None = None
+    trajectories: np.ndarray | None = None
+    wall_time: float = 0.0
+
+    @property
+    def f0(self) -> float:
+        return self.cycles.f0 if (self.ok and self.cycles is not None) else float("nan")
