@@ -1,0 +1,302 @@
+"""The inverse problem: observed GAW, noise model, prior, simulation settings; likelihood.
+
+Likelihood (Hadwin et al. 2019, Eq. 15): the observed glottal area waveform ``y`` (mm^2,
+at the camera rate) equals the phase-aligned simulated waveform plus independent
+Gaussian noise with standard deviation ``sigma_e`` (mm^2, default 1 mm^2),
+
+    log L(theta) = -1/(2 sigma_e^2) sum_k (y_k - A_k(theta))^2 - n/2 log(2 pi sigma_e^2),
+
+over the ``n_compare`` frames fixed by ``vfcore.observe.alignment_window``. Computed in
+log space throughout. A failed simulation has log-likelihood ``-inf``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..config import SimConfig
+from ..measures import estimate_f0
+from ..observe import align, alignment_window
+from .prior import Prior
+
+
+# ---------------------------------------------------------------------------- observation
+def validate_observation(gaw, fps: float) -> np.ndarray:
+    """Check an observed GAW before any simulation runs; return it as float64 (n,).
+
+    Raises ValueError for: non-numeric / non-1D input, NaN or inf, a constant waveform,
+    no detectable oscillation, or fewer than two cycles.
+    """
+    try:
+        fps = float(fps)
+    except (TypeError, ValueError):
+        raise ValueError(f"fps must be a number, got {fps!r}") from None
+    if not (math.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a finite number > 0, got {fps!r}")
+    try:
+        y = np.asarray(gaw, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError("observed GAW must be a 1D array of numbers") from None
+    if y.ndim != 1:
+        raise ValueError(f"observed GAW must be 1D, got shape {y.shape}")
+    if y.size < 4:
+        raise ValueError(f"observed GAW has {y.size} frames; at least two cycles are needed")
+    bad = ~np.isfinite(y)
+    if bad.any():
+        raise ValueError(f"observed GAW contains {int(bad.sum())} NaN/inf value(s) (first at frame "
+                         f"{int(np.argmax(bad))})")
+    if float(np.ptp(y)) <= 1e-12 * max(1.0, float(np.max(np.abs(y)))):
+        raise ValueError("observed GAW is constant: there is no oscillation to fit")
+    f0 = estimate_f0(y, fps)
+    if not math.isfinite(f0):
+        raise ValueError("observed GAW shows no periodic oscillation (f0 could not be estimated)")
+    n_cycles = y.size * f0 / fps
+    if n_cycles < 2.0:
+        raise ValueError(f"observed GAW spans {n_cycles:.2f} cycles (f0 = {f0:.1f} Hz, {y.size} frames at "
+                         f"{fps:g} fps); at least two cycles are needed")
+    return y
+
+
+def n_sim_frames(config: SimConfig) -> int:
+    """Frames a simulation yields at the camera rate (conservative by one frame)."""
+    return int(math.floor((config.duration - config.discard) * config.fps + 1e-9))
+
+
+# ---------------------------------------------------------------------------- problem
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """One inverse problem. Frozen and picklable: it is shipped to every worker.
+
+    ``config.fps`` is set to the observation's ``fps`` (the camera defines the rate).
+    """
+
+    obs_gaw: np.ndarray
+    fps: float
+    prior: Prior
+    sigma_e: float = 1.0
+    config: SimConfig = field(default_factory=SimConfig)
+    model: str = "fe"
+
+    def __post_init__(self) -> None:
+        y = validate_observation(self.obs_gaw, self.fps)
+        y = y.copy()
+        y.setflags(write=False)
+        object.__setattr__(self, "obs_gaw", y)
+        object.__setattr__(self, "fps", float(self.fps))
+        if not isinstance(self.prior, Prior):
+            raise ValueError(f"prior must be a Prior, got {type(self.prior).__name__}")
+        s = self.sigma_e
+        if not (isinstance(s, (int, float, np.floating)) and math.isfinite(float(s)) and float(s) > 0):
+            raise ValueError(f"sigma_e must be a finite number > 0 (mm^2), got {s!r}")
+        object.__setattr__(self, "sigma_e", float(s))
+        if not isinstance(self.config, SimConfig):
+            raise ValueError(f"config must be a SimConfig, got {type(self.config).__name__}")
+        if self.config.fps != self.fps:
+            object.__setattr__(self, "config", self.config.replace(fps=self.fps))
+        if self.model != "fe":
+            raise ValueError(f"unknown model {self.model!r}; only 'fe' is available")
+        # fails (ValueError) here, before any simulation, if the simulation is too short
+        object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config)))
+
+    @property
+    def window(self) -> tuple[int, int]:
+        """(max_lag, n_compare) in frames."""
+        return self._window  # type: ignore[attr-defined]
+
+    @property
+    def n_compare(self) -> int:
+        return self.window[1]
+
+    @property
+    def obs_compared(self) -> np.ndarray:
+        """The trimmed observation the likelihood compares against, (n_compare,)."""
+        return self.obs_gaw[: self.n_compare]
+
+    def to_dict(self) -> dict:
+        return {"obs_gaw": self.obs_gaw.tolist(), "fps": self.fps, "sigma_e": self.sigma_e,
+                "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Problem":
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown Problem field(s): {sorted(unknown)}")
+        return cls(obs_gaw=np.asarray(d["obs_gaw"], dtype=float), fps=d["fps"],
+                   prior=Prior.from_dict(d["prior"]), sigma_e=d.get("sigma_e", 1.0),
+                   config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"))
+
+
+# ---------------------------------------------------------------------------- likelihood
+def gaussian_loglik(sim, obs, sigma: float) -> float:
+    """Eq. 15 in log space: sum of independent N(obs_k | sim_k, sigma^2) log densities."""
+    sim = np.asarray(sim, dtype=float)
+    obs = np.asarray(obs, dtype=float)
+    if sim.shape != obs.shape:
+        raise ValueError(f"simulated and observed GAW differ in shape: {sim.shape} vs {obs.shape}")
+    r = (sim - obs) / sigma
+    if not np.all(np.isfinite(r)):
+        return -math.inf
+    return float(-0.5 * np.dot(r, r) - obs.size * (math.log(sigma) + 0.5 * math.log(2 * math.pi)))
+
+
+# ---------------------------------------------------------------------------- evaluation
+@dataclass
+class Evaluation:
+    """Per-draw results of a batch of forward evaluations (k draws).
+
+    ``loglik`` (k,) float64, ``-inf`` where the simulation failed; ``ok`` (k,) bool.
+    The optional arrays are absent (None) for likelihoods that are not the FE model:
+    ``gaw`` (k, n_compare) float32 aligned predictions (NaN rows for failures),
+    ``mean_flow`` (k,) m^3/s, ``mean_contact`` / ``max_contact`` (k,) Pa.
+    ``messages``: one string per failed draw, ``"i: message"``.
+    """
+
+    loglik: np.ndarray
+    ok: np.ndarray
+    gaw: np.ndarray | None = None
+    mean_flow: np.ndarray | None = None
+    mean_contact: np.ndarray | None = None
+    max_contact: np.ndarray | None = None
+    messages: tuple[str, ...] = ()
+
+    _ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact")
+
+    def __len__(self) -> int:
+        return int(self.loglik.shape[0])
+
+    @property
+    def n_failed(self) -> int:
+        return int(np.count_nonzero(~self.ok))
+
+    @classmethod
+    def from_loglik(cls, loglik) -> "Evaluation":
+        ll = np.asarray(loglik, dtype=float).reshape(-1)
+        ll = np.where(np.isnan(ll), -np.inf, ll)
+        return cls(loglik=ll, ok=np.isfinite(ll))
+
+    @classmethod
+    def coerce(cls, x) -> "Evaluation":
+        """An Evaluation from an Evaluation or an array of log-likelihoods."""
+        return x if isinstance(x, Evaluation) else cls.from_loglik(x)
+
+    @classmethod
+    def concat(cls, parts: Sequence["Evaluation"]) -> "Evaluation":
+        parts = [cls.coerce(p) for p in parts]
+        if not parts:
+            return cls(loglik=np.empty(0), ok=np.empty(0, bool))
+        kw = {}
+        for name in cls._ARRAYS:
+            vals = [getattr(p, name) for p in parts]
+            kw[name] = None if any(v is None for v in vals) else np.concatenate(vals, axis=0)
+        msgs, off = [], 0
+        for p in parts:
+            for m in p.messages:
+                i, _, rest = m.partition(": ")
+                msgs.append(f"{int(i) + off}: {rest}" if i.isdigit() else m)
+            off += len(p)
+        return cls(**kw, messages=tuple(msgs))
+
+    def take(self, idx) -> "Evaluation":
+        idx = np.asarray(idx)
+        kw = {n: (None if getattr(self, n) is None else getattr(self, n)[idx]) for n in self._ARRAYS}
+        return Evaluation(**kw)
+
+    def where(self, mask, other: "Evaluation") -> "Evaluation":
+        """Rows of ``other`` where ``mask`` else rows of ``self`` (same length)."""
+        mask = np.asarray(mask, dtype=bool)
+        kw = {}
+        for n in self._ARRAYS:
+            a, b = getattr(self, n), getattr(other, n)
+            if a is None or b is None:
+                kw[n] = None
+            else:
+                m = mask.reshape((-1,) + (1,) * (a.ndim - 1))
+                kw[n] = np.where(m, b, a).astype(a.dtype, copy=False)
+        return Evaluation(**kw)
+
+    def scatter(self, idx, other: "Evaluation") -> "Evaluation":
+        """Copy of self with rows ``idx`` replaced by the rows of ``other``."""
+        kw = {}
+        for n in self._ARRAYS:
+            a, b = getattr(self, n), getattr(other, n)
+            if a is None or b is None:
+                kw[n] = None
+            else:
+                a = a.copy()
+                a[np.asarray(idx)] = b
+                kw[n] = a
+        return Evaluation(**kw)
+
+
+def _cycle_means(r) -> tuple[float, float, float]:
+    """(mean flow m^3/s, mean contact Pa, max contact Pa) of one successful simulation."""
+    c = r.cycles
+    if c is not None and np.size(c.period) > 0:
+        return (float(np.mean(c.mean_flow)), float(np.mean(c.mean_contact_pressure)),
+                float(np.max(c.max_contact_pressure)))
+    flow = float(np.mean(r.flow)) if np.size(r.flow) else math.nan
+    cp = np.asarray(r.contact_pressure)
+    if cp.ndim == 2 and cp.size:
+        spatial_max = cp.max(axis=1)
+        return flow, float(spatial_max.mean()), float(spatial_max.max())
+    return flow, math.nan, math.nan
+
+
+def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None) -> Evaluation:
+    """Run the forward model at each row of ``thetas`` (k, d) and score it against the data.
+
+    A pure function of its inputs (the unit of work of one worker chunk). A simulation
+    that fails (``ok`` False, an exception, non-finite output, or too short to align)
+    gets log-likelihood ``-inf`` and a NaN prediction row; its reason is in ``messages``.
+    ``simulate_fn(params, config) -> SimResult`` defaults to ``vfcore.simulate.simulate``.
+    """
+    if simulate_fn is None:
+        from vfcore.simulate import simulate as simulate_fn  # lazy: keeps this module importable alone
+    thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+    k = thetas.shape[0]
+    max_lag, n_cmp = problem.window
+    obs = problem.obs_compared
+    loglik = np.full(k, -np.inf)
+    ok = np.zeros(k, dtype=bool)
+    gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
+    flow = np.full(k, np.nan)
+    cmean = np.full(k, np.nan)
+    cmax = np.full(k, np.nan)
+    messages = []
+    for i in range(k):
+        try:
+            params = problem.prior.to_params(thetas[i])
+            r = simulate_fn(params, problem.config)
+            if not r.ok:
+                raise RuntimeError(r.message or "simulation failed")
+            sim = np.asarray(r.gaw, dtype=float)
+            if sim.size < max_lag + n_cmp:
+                raise RuntimeError(f"simulation yielded {sim.size} frames, {max_lag + n_cmp} needed to align")
+            if not np.all(np.isfinite(sim)):
+                raise RuntimeError("simulated GAW is not finite")
+            seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp))
+            ll = gaussian_loglik(seg, obs, problem.sigma_e)
+        except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble; counted
+            messages.append(f"{i}: {type(exc).__name__}: {exc}")
+            continue
+        loglik[i] = ll
+        ok[i] = True
+        gaw[i] = seg
+        flow[i], cmean[i], cmax[i] = _cycle_means(r)
+    return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean,
+                      max_contact=cmax, messages=tuple(messages))
+
+
+class ProblemEvaluator:
+    """Picklable batch function ``thetas -> Evaluation`` for a Problem (what ``map`` ships)."""
+
+    def __init__(self, problem: Problem, simulate_fn: Callable | None = None):
+        self.problem = problem
+        self.simulate_fn = simulate_fn
+
+    def __call__(self, thetas) -> Evaluation:
+        return evaluate(thetas, self.problem, self.simulate_fn)

@@ -1,0 +1,339 @@
+"""Likelihood-tempered sequential Monte Carlo (adaptive SMC sampler).
+
+Targets the sequence ``pi_phi(theta) ∝ prior(theta) L(theta)^phi`` with ``0 = phi_0 < ... < phi_T = 1``
+(Del Moral, Doucet & Jasra 2006; Chopin & Papaspiliopoulos 2020, ch. 17):
+
+1. ``N`` particles from the prior, each evaluated once.
+2. Next temperature by bisection so that the effective sample size of the incremental
+   weights ``L^(phi' - phi)`` equals ``ess_fraction * N`` (adaptive tempering, Jasra et al.
+   2011; with equal weights this is the conditional ESS of Zhou, Johansen & Aston 2016).
+3. Evidence increment ``log mean_i L_i^(phi' - phi)``; ``log Z = sum`` of the increments.
+4. Systematic resampling to equal weights.
+5. Random-walk Metropolis moves targeting ``pi_phi'`` with Gaussian proposals whose
+   covariance is ``scale^2 * Cov(particles)``; proposals outside the prior box are rejected
+   without a simulation. The scale is adapted towards ``target_acceptance`` and the number of
+   moves per generation is chosen from the observed acceptance rate ``a`` so that a particle
+   has moved with probability ``p_move``: ``n = ceil(log(1 - p_move) / log(1 - a))`` clipped to
+   ``[min_moves, max_moves]``.
+6. Repeat until ``phi = 1``; the final particles are an equally weighted posterior sample.
+
+The sampler is an ask/tell state machine (``SMCSampler.ask() -> thetas or None``,
+``SMCSampler.tell(evaluation)``) so a distributed worker evaluates each batch itself; all
+randomness comes from ``SeedSequence(seed, spawn_key=(generation, step, stream))``, so the run
+is deterministic for a seed and independent of how batches were evaluated.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+from scipy.linalg import solve_triangular
+from scipy.special import logsumexp
+
+from .diagnostics import DegenerateEnsembleWarning, systematic_resample
+from .importance import batch_function, map_evaluate
+from .posterior import Posterior
+from .prior import Prior
+from .problem import Evaluation, Problem
+
+_INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL = 0, 1, 2, 3, 4
+
+DEFAULT_PARTICLES = 300
+
+
+def _ess_of(logw: np.ndarray) -> float:
+    finite = np.isfinite(logw)
+    if not finite.any():
+        return 0.0
+    lw = logw[finite]
+    return float(math.exp(2.0 * logsumexp(lw) - logsumexp(2.0 * lw)))
+
+
+def next_temperature(loglik: np.ndarray, phi: float, target_ess: float, tol: float = 1e-10) -> float:
+    """Largest ``phi' in (phi, 1]`` with ``ESS(L^(phi' - phi)) >= target_ess`` (bisection)."""
+    ll = np.asarray(loglik, dtype=float)
+    if _ess_of((1.0 - phi) * ll) >= target_ess:
+        return 1.0
+    lo, hi = 0.0, 1.0 - phi
+    while hi - lo > tol * max(1.0, hi):
+        mid = 0.5 * (lo + hi)
+        if _ess_of(mid * ll) >= target_ess:
+            lo = mid
+        else:
+            hi = mid
+    # lo may be 0 if even an infinitesimal step fails (can't happen for finite ll); ensure progress
+    return phi + max(lo, 1e-12)
+
+
+class SMCSampler:
+    """Ask/tell likelihood-tempered SMC.
+
+    >>> s = SMCSampler(prior, n_particles=300, seed=1)
+    >>> while (thetas := s.ask()) is not None:
+    ...     s.tell(batch_fn(thetas))          # Evaluation or array of log-likelihoods
+    >>> post = s.result()
+    """
+
+    def __init__(self, prior: Prior, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *,
+                 ess_fraction: float = 0.5, target_acceptance: float = 0.3, p_move: float = 0.8,
+                 min_moves: int = 2, max_moves: int = 4,
+                 max_generations: int = 200, init_scale: float | None = None, kernel: str = "rw",
+                 independent_inflation: float = 1.5):
+        if not isinstance(prior, Prior):
+            raise ValueError("prior must be a Prior")
+        if int(n_particles) < 10:
+            raise ValueError(f"n_particles must be >= 10, got {n_particles}")
+        if not 0.0 < ess_fraction < 1.0:
+            raise ValueError(f"ess_fraction must lie in (0, 1), got {ess_fraction}")
+        if not 0.0 < p_move < 1.0:
+            raise ValueError(f"p_move must lie in (0, 1), got {p_move}")
+        if not 1 <= int(min_moves) <= int(max_moves):
+            raise ValueError("need 1 <= min_moves <= max_moves")
+        if kernel not in ("rw", "independent", "mixture"):
+            raise ValueError(f"kernel must be 'rw', 'independent' or 'mixture', got {kernel!r}")
+        self.kernel = kernel
+        self.independent_inflation = float(independent_inflation)
+        self.prior = prior
+        self.n = int(n_particles)
+        self.seed = int(seed)
+        self.ess_fraction = float(ess_fraction)
+        self.target_acceptance = float(target_acceptance)
+        self.p_move = float(p_move)
+        self.min_moves, self.max_moves = int(min_moves), int(max_moves)
+        self.max_generations = int(max_generations)
+        d = prior.ndim
+        self.scale = float(init_scale) if init_scale is not None else 2.38 / math.sqrt(d)
+        self.phi = 0.0
+        self.generation = 0
+        self.theta: np.ndarray | None = None
+        self.ev: Evaluation | None = None
+        self.log_evidence = 0.0
+        self.log_evidence_var = 0.0
+        self.n_simulations = 0
+        self.n_failed = 0
+        self.history: list[dict] = []
+        self.last_ess = float(self.n)
+        self._phase = "init"          # init -> move -> ... -> done
+        self._pending: np.ndarray | None = None
+        self._pending_idx: np.ndarray | None = None
+        self._chol: np.ndarray | None = None
+        self._mu: np.ndarray | None = None
+        self._log_q_old: np.ndarray | None = None
+        self._log_q_new: np.ndarray | None = None
+        self._step = 0
+        self._n_moves = self.max_moves
+        self._gen_acc: list[float] = []
+        self._gen_sims = 0
+
+    # ------------------------------------------------------------------ randomness
+    def _rng(self, stream: int, step: int = 0) -> np.random.Generator:
+        ss = np.random.SeedSequence(self.seed, spawn_key=(self.generation, step, stream))
+        return np.random.default_rng(ss)
+
+    @property
+    def done(self) -> bool:
+        return self._phase == "done"
+
+    # ------------------------------------------------------------------ ask / tell
+    def ask(self) -> np.ndarray | None:
+        """The parameter vectors (k, d) to evaluate next, or None when finished.
+
+        Calling ``ask`` again before ``tell`` returns the same batch."""
+        if self._phase == "done":
+            return None
+        if self._pending is None:
+            if self._phase == "init":
+                self._pending = self.prior.sample(self.n, self._rng(_INIT))
+                self._pending_idx = np.arange(self.n)
+            else:
+                self._propose()
+                while self._pending is not None and self._pending.shape[0] == 0:
+                    # every proposal fell outside the prior: a step with no simulations
+                    self._finish_move(np.zeros(self.n, bool))
+                    if self._phase == "done":
+                        return None
+                    self._propose()
+        return self._pending
+
+    def tell(self, evaluation) -> None:
+        """Report the evaluation (Evaluation or log-likelihood array) of the last ``ask``."""
+        if self._pending is None:
+            raise RuntimeError("tell() without a pending ask()")
+        ev = Evaluation.coerce(evaluation)
+        if len(ev) != self._pending.shape[0]:
+            raise ValueError(f"expected {self._pending.shape[0]} evaluations, got {len(ev)}")
+        self.n_simulations += len(ev)
+        self._gen_sims += len(ev)
+        self.n_failed += ev.n_failed
+        if self._phase == "init":
+            self.theta = self._pending
+            self.ev = ev
+            self._pending = self._pending_idx = None
+            if not np.any(np.isfinite(ev.loglik)):
+                raise RuntimeError("every initial simulation failed or had zero likelihood")
+            self._advance()
+            return
+        # Metropolis accept/reject; uniform prior => ratio is the tempered likelihood ratio
+        idx = self._pending_idx
+        props = self._pending
+        ll_old = self.ev.loglik[idx]
+        ll_new = ev.loglik
+        with np.errstate(invalid="ignore"):
+            log_alpha = np.where(np.isfinite(ll_new), self.phi * (ll_new - ll_old), -np.inf)
+            if self._log_q_new is not None:  # independence proposal: Hastings correction
+                log_alpha = log_alpha + self._log_q_old - self._log_q_new
+        log_alpha = np.where(np.isnan(log_alpha), np.inf, log_alpha)  # old -inf, new finite
+        u = self._rng(_ACCEPT, self._step).random(idx.size)
+        acc = np.log(u) < log_alpha
+        accepted = np.zeros(self.n, bool)
+        accepted[idx[acc]] = True
+        th = self.theta.copy()
+        th[idx[acc]] = props[acc]
+        self.theta = th
+        self.ev = self.ev.scatter(idx[acc], ev.take(np.flatnonzero(acc)))
+        self._pending = self._pending_idx = None
+        self._finish_move(accepted)
+
+    # ------------------------------------------------------------------ internals
+    def _advance(self) -> None:
+        """Reweight to the next temperature, resample, prepare the moves (or finish)."""
+        if self.phi >= 1.0:
+            self._phase = "done"
+            return
+        if self.generation >= self.max_generations:
+            raise RuntimeError(f"SMC did not reach phi = 1 in {self.max_generations} generations (phi={self.phi:.3g})")
+        ll = self.ev.loglik
+        n_fin = int(np.count_nonzero(np.isfinite(ll)))
+        phi_new = next_temperature(ll, self.phi, self.ess_fraction * n_fin)
+        dphi = phi_new - self.phi
+        logw = np.where(np.isfinite(ll), dphi * ll, -np.inf)  # previous weights are equal (resampled)
+        lse = logsumexp(logw)
+        inc = float(lse - math.log(self.n))
+        w = np.exp(logw - lse)
+        self.log_evidence += inc
+        sw2 = float(np.sum(w * w))
+        self.log_evidence_var += max(self.n / (self.n - 1) * (sw2 - 1.0 / self.n), 0.0) / 1.0
+        self.last_ess = 1.0 / sw2
+        self.generation += 1
+        # covariance of the reweighted particles -> RW proposal
+        mu = w @ self.theta
+        dev = self.theta - mu
+        cov = (dev * w[:, None]).T @ dev
+        cov += np.diag((1e-9 * self.prior.width) ** 2)
+        try:
+            self._chol = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            self._chol = np.diag(np.sqrt(np.clip(np.diag(cov), 1e-30, None)))
+        idx = systematic_resample(w, self.n, self._rng(_RESAMPLE))
+        self.theta = self.theta[idx]
+        self.ev = self.ev.take(idx)
+        self._mu = mu
+        self.history.append({"generation": self.generation, "phi": phi_new, "ess": self.last_ess,
+                             "log_evidence_increment": inc, "n_unique_after_resample": int(np.unique(idx).size)})
+        self.phi = phi_new
+        self._phase = "move"
+        self._step = 0
+        self._n_moves = self.max_moves
+        self._gen_acc = []
+        self._gen_sims = 0
+
+    def _independent_step(self) -> bool:
+        return self.kernel == "independent" or (self.kernel == "mixture" and self._step % 2 == 1)
+
+    def _log_q(self, x: np.ndarray) -> np.ndarray:
+        # Gaussian N(mu, c^2 Sigma) log density up to a constant (the box truncation cancels)
+        c = self.independent_inflation
+        z = solve_triangular(self._chol, (x - self._mu).T, lower=True)
+        return -0.5 * np.sum(z * z, axis=0) / (c * c)
+
+    def _propose(self) -> None:
+        rng = self._rng(_MOVE, self._step)
+        z = rng.standard_normal((self.n, self.prior.ndim))
+        if self._independent_step():
+            prop = self._mu + self.independent_inflation * z @ self._chol.T
+        else:
+            prop = self.theta + self.scale * z @ self._chol.T
+        inside = self.prior.contains(prop)
+        self._pending_idx = np.flatnonzero(inside)
+        self._pending = prop[inside]
+        if self._independent_step():
+            self._log_q_old = self._log_q(self.theta[self._pending_idx])
+            self._log_q_new = self._log_q(self._pending)
+        else:
+            self._log_q_old = self._log_q_new = None
+
+    def _independent_step_done(self) -> bool:
+        return self.kernel == "independent" or (self.kernel == "mixture" and (self._step - 1) % 2 == 1)
+
+    def _finish_move(self, accepted: np.ndarray) -> None:
+        a = float(np.mean(accepted))
+        self._gen_acc.append(a)
+        self._step += 1
+        if not self._independent_step_done():
+            # adapt the random-walk scale towards the target acceptance rate
+            self.scale *= math.exp(2.0 * (a - self.target_acceptance))
+            self.scale = min(max(self.scale, 1e-3), 10.0)
+        if self._step == 1:
+            a_eff = min(max(a, 1e-3), 0.999)
+            n = math.ceil(math.log(1.0 - self.p_move) / math.log(1.0 - a_eff))
+            self._n_moves = int(min(max(n, self.min_moves), self.max_moves))
+        if self._step >= self._n_moves:
+            h = self.history[-1]
+            h.update({"moves": self._step, "acceptance": float(np.mean(self._gen_acc)), "scale": self.scale,
+                      "n_simulations": self._gen_sims,
+                      "n_unique_after_moves": int(np.unique(self.theta, axis=0).shape[0])})
+            self._advance()
+
+    # ------------------------------------------------------------------ result
+    def result(self, *, obs_gaw=None, fps: float | None = None) -> Posterior:
+        if not self.done:
+            raise RuntimeError("SMC has not finished (keep calling ask/tell)")
+        import warnings
+
+        msgs = []
+        last = self.history[-1] if self.history else {}
+        acc = last.get("acceptance", 1.0)
+        uniq = last.get("n_unique_after_moves", self.n)
+        if uniq < 0.5 * self.n or acc < 0.05:
+            msgs.append(f"DEGENERATE ENSEMBLE (smc): final generation acceptance {acc:.3f}, {uniq} distinct "
+                        f"particles of {self.n}; increase max_moves or n_particles.")
+            warnings.warn(msgs[-1], DegenerateEnsembleWarning, stacklevel=2)
+        logw = np.full(self.n, -math.log(self.n))
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(self.generation + 1, 0, _FINAL)))
+        post = Posterior.from_weighted(self.prior.names, self.theta, logw, rng=rng,
+                                       log_evidence=self.log_evidence,
+                                       log_evidence_se=math.sqrt(self.log_evidence_var),
+                                       n_simulations=self.n_simulations, n_failed=self.n_failed, method="smc",
+                                       check=False, warnings=msgs, obs_gaw=obs_gaw, fps=fps)
+        post.ess = self.last_ess
+        post.pareto_k = float("nan")
+        if self.ev is not None and self.ev.gaw is not None:
+            post.predictive = self.ev
+            post.predictive_index = np.arange(self.n)
+        post.info.update({"generations": self.history, "n_generations": self.generation,
+                          "n_particles": self.n, "temperatures": [h["phi"] for h in self.history]})
+        return post
+
+
+def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *, map: Callable = map,
+        chunk_size: int = 32, **options) -> Posterior:
+    """Run likelihood-tempered SMC to completion.
+
+    ``target``: a ``Problem`` or a callable ``thetas (k, d) -> loglik (k,)`` (then ``prior`` is
+    required). Options go to ``SMCSampler``. Returns a Posterior with ``n_simulations`` counted
+    and ``log_evidence`` (its ``log_evidence_se`` is the delta-method error summed over
+    generations, ignoring the particle dependence: a rough lower bound).
+    """
+    if isinstance(target, Problem):
+        prior = target.prior if prior is None else prior
+        obs, fps = target.obs_compared, target.fps
+    else:
+        obs, fps = None, None
+    if prior is None:
+        raise ValueError("a prior is needed when the target is a plain log-likelihood function")
+    fn = batch_function(target)
+    sampler = SMCSampler(prior, n_particles, seed, **options)
+    while (th := sampler.ask()) is not None:
+        sampler.tell(map_evaluate(fn, th, map=map, chunk_size=chunk_size))
+    return sampler.result(obs_gaw=obs, fps=fps)
