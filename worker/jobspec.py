@@ -1,0 +1,203 @@
+"""The job specification shared by the service, the worker and the CLI.
+
+One versioned, JSON-serialisable pydantic model.  It is validated once at the edge (HTTP body,
+CLI arguments) and stored verbatim in the job's Zarr attributes, so a job can always be
+re-run from its store alone.  Validation errors name the offending field (pydantic ``loc``).
+"""
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+
+from vfcore.config import MESHES
+from vfcore.params import PARAM_NAMES
+
+#: Bump when the meaning of a field changes; stored jobs carry the version they were made with.
+SCHEMA_VERSION = 1
+
+#: Absurd-size guards (the HTTP layer also limits the body size).
+MAX_FRAMES = 200_000
+MAX_SIMULATIONS = 1_000_000
+MAX_SMC_GENERATIONS = 100
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class GAWSpec(_Strict):
+    """An observed glottal area waveform."""
+
+    areas: list[FiniteFloat] = Field(min_length=4, max_length=MAX_FRAMES,
+                                     description="glottal area per frame, mm^2, finite and >= 0")
+    fps: FiniteFloat = Field(gt=0, le=1e6, description="camera frame rate, frames/s")
+    units: Literal["mm2"] = "mm2"
+
+    @field_validator("areas")
+    @classmethod
+    def _non_negative(cls, v: list[float]) -> list[float]:
+        bad = [i for i, a in enumerate(v) if a < 0]
+        if bad:
+            raise ValueError(f"areas must be >= 0 mm^2 (first negative frame: {bad[0]})")
+        return v
+
+    @model_validator(mode="after")
+    def _two_cycles(self) -> "GAWSpec":
+        from vfcore.inference.problem import validate_observation
+        try:
+            validate_observation(self.areas, self.fps)   # NaN/inf, constant, < 2 cycles
+        except ValueError as exc:
+            raise ValueError(f"gaw.areas: {exc}") from None
+        return self
+
+
+class ISSettings(_Strict):
+    """Importance sampling from the prior."""
+
+    kind: Literal["is"] = "is"
+    n_samples: int = Field(ge=1, le=MAX_SIMULATIONS, description="number of prior draws (= simulations)")
+
+
+class SMCSettings(_Strict):
+    """Adaptive sequential Monte Carlo (tempered), run generation by generation."""
+
+    kind: Literal["smc"] = "smc"
+    n_particles: int = Field(ge=10, le=MAX_SIMULATIONS)
+    max_generations: int = Field(default=50, ge=1, le=MAX_SMC_GENERATIONS)
+    ess_fraction: FiniteFloat = Field(default=0.5, gt=0, lt=1,
+                                      description="target relative ESS per tempering step")
+    min_moves: int = Field(default=2, ge=1, le=50, description="fewest Metropolis moves per generation")
+    max_moves: int = Field(default=8, ge=1, le=50, description="most Metropolis moves per generation")
+
+    @model_validator(mode="after")
+    def _moves(self) -> "SMCSettings":
+        if self.min_moves > self.max_moves:
+            raise ValueError(f"sampler.min_moves ({self.min_moves}) must be <= max_moves ({self.max_moves})")
+        return self
+
+    def sampler_options(self) -> dict:
+        return {"ess_fraction": self.ess_fraction, "max_generations": self.max_generations,
+                "min_moves": self.min_moves, "max_moves": self.max_moves}
+
+
+SamplerSettings = Annotated[Union[ISSettings, SMCSettings], Field(discriminator="kind")]
+
+
+class ToyOptions(_Strict):
+    """Options of the analytic test double (``model="toy"``); see worker/toy.py."""
+
+    delay_s: float = Field(default=0.0, ge=0, le=5.0, description="artificial cost per simulation, s")
+
+
+class JobSpec(_Strict):
+    """Everything that defines one inference job."""
+
+    version: Literal[1] = SCHEMA_VERSION
+    model: Literal["fe", "toy"] = Field(
+        default="fe", description='"fe": the vfcore finite-element model; "toy": analytic test double '
+                                  "(accepted only when the service enables it)")
+    gaw: GAWSpec
+    priors: dict[str, tuple[FiniteFloat, FiniteFloat]] | None = Field(
+        default=None, description="{name: [lo, hi]} in paper units; omitted names keep the default "
+                                  "(Table 2) bounds unless fixed")
+    fixed: dict[str, FiniteFloat] = Field(default_factory=dict, description="{name: value}, paper units")
+    sampler: SamplerSettings
+    mesh: Literal["coarse", "medium", "fine"] = "medium"
+    dt: FiniteFloat = Field(default=5e-5, gt=0, le=1e-3, description="time step, s")
+    duration: FiniteFloat = Field(default=0.55, gt=0, le=5.0, description="simulated time, s")
+    discard: FiniteFloat = Field(default=0.25, ge=0, le=5.0, description="initial transient discarded, s")
+    sigma_e: FiniteFloat = Field(gt=0, le=1e6, description="observation noise sd, mm^2")
+    seed: int = Field(ge=0, lt=2**63)
+    chunk_size: int | None = Field(default=None, ge=1, le=10_000,
+                                   description="simulations per worker task (default: sized to run for seconds)")
+    toy: ToyOptions | None = None
+
+    @field_validator("priors")
+    @classmethod
+    def _check_priors(cls, v):
+        if v is None:
+            return v
+        for name, (lo, hi) in v.items():
+            if name not in PARAM_NAMES:
+                raise ValueError(f"unknown parameter {name!r}; known: {list(PARAM_NAMES)}")
+            if not lo < hi:
+                raise ValueError(f"prior for {name}: lo ({lo}) must be < hi ({hi})")
+        return v
+
+    @field_validator("fixed")
+    @classmethod
+    def _check_fixed(cls, v):
+        for name in v:
+            if name not in PARAM_NAMES:
+                raise ValueError(f"unknown parameter {name!r}; known: {list(PARAM_NAMES)}")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "JobSpec":
+        both = set(self.priors or {}) & set(self.fixed)
+        if both:
+            raise ValueError(f"fixed: parameter(s) {sorted(both)} both fixed and given a prior")
+        if len(self.fixed) == len(PARAM_NAMES):
+            raise ValueError("fixed: every parameter is fixed; nothing to infer")
+        if self.discard >= self.duration:
+            raise ValueError(f"discard ({self.discard}) must be < duration ({self.duration})")
+        if self.gaw.fps * self.dt > 1.0:
+            raise ValueError(f"dt: camera fps {self.gaw.fps} exceeds the simulation rate 1/dt={1 / self.dt:.0f}")
+        if self.mesh not in MESHES:  # pragma: no cover - Literal already enforces it
+            raise ValueError(f"mesh must be one of {MESHES}")
+        if self.model == "toy" and self.toy is None:
+            object.__setattr__(self, "toy", ToyOptions())
+        if self.model != "toy" and self.toy is not None:
+            raise ValueError("toy: options given but model is not 'toy'")
+        try:
+            prior = self.to_prior()
+        except ValueError as exc:
+            raise ValueError(f"priors/fixed: {exc}") from None
+        try:
+            self._problem(prior)
+        except ValueError as exc:
+            raise ValueError(f"gaw/duration/discard: {exc}") from None
+        return self
+
+    # ------------------------------------------------------------------ derived quantities
+    @property
+    def n_simulations(self) -> int:
+        """Simulations of the first (IS: only) stage, known up front."""
+        if isinstance(self.sampler, ISSettings):
+            return self.sampler.n_samples
+        return self.sampler.n_particles
+
+    def to_json(self) -> str:
+        return self.model_dump_json()
+
+    @classmethod
+    def from_json(cls, s: str | bytes) -> "JobSpec":
+        return cls.model_validate_json(s)
+
+    def sim_config(self):
+        from vfcore.config import SimConfig
+        return SimConfig(mesh=self.mesh, dt=self.dt, duration=self.duration, discard=self.discard,
+                         fps=self.gaw.fps)
+
+    def observed(self) -> np.ndarray:
+        return np.asarray(self.gaw.areas, dtype=float)
+
+    def to_prior(self):
+        """The ``vfcore.inference`` Prior: Table 2 bounds, overridden by ``priors``, minus ``fixed``."""
+        from vfcore.inference.prior import TABLE2_BOUNDS, Prior
+        bounds = {k: tuple(v) for k, v in TABLE2_BOUNDS.items()}
+        bounds.update({k: (float(lo), float(hi)) for k, (lo, hi) in (self.priors or {}).items()})
+        for k in self.fixed:
+            bounds.pop(k, None)
+        return Prior(bounds=bounds, fixed={k: float(v) for k, v in self.fixed.items()})
+
+    def _problem(self, prior):
+        from vfcore.inference.problem import Problem
+        return Problem(obs_gaw=self.observed(), fps=float(self.gaw.fps), prior=prior,
+                       sigma_e=float(self.sigma_e), config=self.sim_config())
+
+    def to_problem(self):
+        """The ``vfcore.inference.Problem`` this job solves (the toy test double scores against it too)."""
+        return self._problem(self.to_prior())

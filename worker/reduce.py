@@ -1,0 +1,242 @@
+"""Reducer: log-likelihoods in the store -> vfcore Posterior -> summaries, CSV and figures in the store.
+
+All statistics are vfcore.inference's (``reduce_importance``, ``Posterior``); this module only
+moves arrays between the store and those functions and renders figures.  It runs as a Dask task
+(so the service process stays responsive) and is deterministic: the same store gives the same
+posterior bytes.
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from vfcore.params import PARAM_UNITS
+
+from . import store as st
+from .jobspec import JobSpec
+
+SUMMARY_QUANTITIES = {"mean_flow": "m^3/s", "mean_contact": "Pa", "max_contact": "Pa"}
+
+
+def _clean(x):
+    """JSON-safe copy: non-finite floats -> None, numpy scalars -> Python."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    return x
+
+
+def reduce_is_job(store_path: str) -> dict:
+    """Importance-sampling reducer (a Dask task): read batch 0, reduce, publish."""
+    from vfcore.inference.importance import reduce_importance
+
+    root = st.open_store(Path(store_path))
+    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
+    problem = spec.to_problem()
+    g = root[st.batch_path(0)]
+    thetas = g["thetas"][...]
+    ev = st.read_evaluation(g)
+    post = reduce_importance(thetas, ev, problem.prior.names, spec.seed, obs_gaw=problem.obs_compared,
+                             fps=problem.fps)
+    post.info["n_draws"] = int(thetas.shape[0])
+    return publish_posterior(store_path, post)
+
+
+def _predictive_summary(post) -> tuple[dict, np.ndarray | None]:
+    pred = post.resampled_predictive()
+    out = {}
+    bands = None
+    if pred is None:
+        return out, bands
+    for name, unit in SUMMARY_QUANTITIES.items():
+        a = getattr(pred, name)
+        if a is None:
+            continue
+        a = np.asarray(a, dtype=float)
+        a = a[np.isfinite(a)]
+        if a.size == 0:
+            continue
+        q = np.quantile(a, [0.05, 0.5, 0.95])
+        out[name] = {"unit": unit, "mean": float(a.mean()), "sd": float(a.std(ddof=1)) if a.size > 1 else 0.0,
+                     "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])}
+    if pred.gaw is not None:
+        g = np.asarray(pred.gaw, dtype=float)
+        g = g[np.all(np.isfinite(g), axis=1)]
+        if g.shape[0]:
+            bands = np.quantile(g, [0.05, 0.5, 0.95], axis=0)
+    return out, bands
+
+
+def posterior_summary(post) -> dict:
+    pred, _ = _predictive_summary(post)
+    info = {k: v for k, v in post.info.items() if k in (
+        "generations", "n_generations", "n_particles", "temperatures", "max_loglik", "n_draws",
+        "failure_messages")}
+    return _clean({
+        "method": post.method, "names": list(post.names), "units": {n: PARAM_UNITS[n] for n in post.names},
+        "table": post.summary_table(), "ess": post.ess, "pareto_k": post.pareto_k,
+        "log_evidence": post.log_evidence, "log_evidence_se": post.log_evidence_se,
+        "n_simulations": post.n_simulations, "n_failed": post.n_failed, "n_samples": int(post.samples.shape[0]),
+        "n_resampled": int(post.resampled.size), "warnings": list(post.warnings), "predictive": pred,
+        "info": info, "formatted": post.format_summary(),
+    })
+
+
+def publish_posterior(store_path: str, post) -> dict:
+    """Write the posterior arrays, summary, CSV and figures into the store; return the summary."""
+    root = st.open_store(Path(store_path))
+    summary = posterior_summary(post)
+    pg = root.require_group("posterior")
+    for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
+                      ("log_weights", np.asarray(post.log_weights, dtype=float)),
+                      ("resampled", np.asarray(post.resampled, dtype=np.int64))):
+        a = pg.create_array(name, shape=arr.shape, chunks=arr.shape or (1,), dtype=arr.dtype, overwrite=True)
+        a[...] = arr
+    _, bands = _predictive_summary(post)
+    if bands is not None:
+        a = pg.create_array("gaw_bands", shape=bands.shape, chunks=bands.shape, dtype="float64", overwrite=True)
+        a[...] = bands
+    # CSV via vfcore's exporter (one definition of the format)
+    fd, tmp = tempfile.mkstemp(suffix=".csv")
+    os.close(fd)
+    try:
+        post.to_csv(tmp)
+        st.write_blob(root, "samples_csv", Path(tmp).read_bytes())
+    finally:
+        os.unlink(tmp)
+    for name, fn in (("gaw_fit", fig_gaw_fit), ("corner", fig_corner), ("contact_pressure", fig_contact)):
+        try:
+            st.write_blob(root, name, fn(post, bands))
+        except Exception as exc:  # noqa: BLE001 - a figure must not fail the job; recorded
+            summary.setdefault("figure_errors", {})[name] = f"{type(exc).__name__}: {exc}"
+    pg.attrs["summary"] = summary   # written last: its presence means "posterior published"
+    return summary
+
+
+# ---------------------------------------------------------------------------------------- figures
+def _png(fig) -> bytes:
+    import matplotlib.pyplot as plt
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def fig_gaw_fit(post, bands) -> bytes:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    if post.obs_gaw is not None:
+        obs = np.asarray(post.obs_gaw, dtype=float)
+        fps = float(post.fps or 1.0)
+        t = np.arange(obs.size) / fps * 1e3
+        if bands is not None:
+            n = min(obs.size, bands.shape[1])
+            ax.fill_between(t[:n], bands[0, :n], bands[2, :n], color="C1", alpha=0.35, label="90% predictive band")
+            ax.plot(t[:n], bands[1, :n], color="C1", lw=1.2, label="posterior predictive median")
+        ax.plot(t, obs, "k.", ms=2.5, label="observed GAW")
+        ax.set_xlabel("time (ms)")
+    ax.set_ylabel("glottal area (mm$^2$)")
+    ax.set_title(f"GAW fit ({post.method}, ESS={post.ess:.0f})")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def fig_corner(post, bands=None) -> bytes:
+    plt = _plt()
+    x = post.resampled_samples
+    d = x.shape[1]
+    fig, axes = plt.subplots(d, d, figsize=(1.7 * d + 1, 1.7 * d + 1), squeeze=False)
+    for i in range(d):
+        for j in range(d):
+            ax = axes[i, j]
+            if j > i:
+                ax.axis("off")
+                continue
+            if i == j:
+                ax.hist(x[:, i], bins=30, color="C0")
+                ax.set_yticks([])
+            else:
+                ax.hist2d(x[:, j], x[:, i], bins=25, cmap="Blues")
+            if i == d - 1:
+                ax.set_xlabel(f"{post.names[j]} ({PARAM_UNITS[post.names[j]]})", fontsize=7)
+            else:
+                ax.set_xticklabels([])
+            if j == 0 and i > 0:
+                ax.set_ylabel(f"{post.names[i]}", fontsize=7)
+            elif j > 0:
+                ax.set_yticklabels([])
+            ax.tick_params(labelsize=6)
+    fig.suptitle("posterior (resampled ensemble)")
+    return _png(fig)
+
+
+def fig_contact(post, bands=None) -> bytes:
+    plt = _plt()
+    pred = post.resampled_predictive()
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3))
+    for ax, (name, unit) in zip(axes, SUMMARY_QUANTITIES.items()):
+        a = None if pred is None else getattr(pred, name)
+        if a is not None:
+            a = np.asarray(a, dtype=float)
+            a = a[np.isfinite(a)]
+        if a is not None and a.size:
+            ax.hist(a, bins=30, color="C2")
+        else:
+            ax.text(0.5, 0.5, "not available", ha="center", transform=ax.transAxes)
+        ax.set_xlabel(f"{name} ({unit})")
+    axes[0].set_ylabel("posterior count")
+    fig.suptitle("posterior contact pressure and flow rate")
+    fig.tight_layout()
+    return _png(fig)
+
+
+# ---------------------------------------------------------------------------------------- compare
+def compare_posteriors(named_paths: dict[str, Path]) -> dict:
+    """Pairwise Welch t-tests of the resampled ensembles, per common parameter."""
+    from scipy import stats
+
+    ens = {}
+    for jid, path in named_paths.items():
+        arr = st.read_posterior_arrays(path)
+        summ = st.read_summary(path) or {}
+        ens[jid] = (list(summ.get("names", [])), arr["samples"][arr["resampled"]])
+    ids = list(ens)
+    out = []
+    for a in range(len(ids)):
+        for b in range(a + 1, len(ids)):
+            na, xa = ens[ids[a]]
+            nb, xb = ens[ids[b]]
+            for name in [n for n in na if n in nb]:
+                va, vb = xa[:, na.index(name)], xb[:, nb.index(name)]
+                t, p = stats.ttest_ind(va, vb, equal_var=False)
+                out.append({"job_a": ids[a], "job_b": ids[b], "parameter": name, "mean_a": float(va.mean()),
+                            "mean_b": float(vb.mean()), "t": float(t), "p_value": float(p)})
+    return _clean({"tests": out, "method": "Welch two-sample t-test on resampled posterior ensembles"})
+
+
+def summary_json(summary: dict) -> str:
+    return json.dumps(summary, sort_keys=True)

@@ -1,0 +1,234 @@
+"""Run a job on a Dask cluster: chunks of forward simulations, each writing its own store region.
+
+* IS: ``draw_prior(prior, N, seed)`` -> batch 0 -> chunks -> ``reduce_importance`` (reducer task).
+* SMC: vfcore's ask/tell ``SMCSampler`` is driven here; every ``ask()`` is one batch, evaluated
+  in chunks exactly like IS; ``tell()`` gets the batch read back from the store.
+
+Chunks are pure functions of (thetas, problem): their Dask keys are derived from the job id,
+batch and chunk index, so a chunk lost with a worker is recomputed by the scheduler and writes
+the same bytes.  On resume (service restart) every batch whose ``done`` mask is complete is
+read from the store instead of recomputed, and only missing chunks are submitted; the SMC
+sampler is replayed deterministically from the stored log-likelihoods.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from scipy.special import logsumexp
+
+from vfcore.inference.importance import draw_prior
+from vfcore.inference.problem import Evaluation, Problem, ProblemEvaluator
+
+from . import store as st
+from .jobspec import ISSettings, JobSpec, SMCSettings
+
+#: Wall time one chunk should take (seconds): long enough that scheduling overhead (~ms per
+#: task) is < 1 %, short enough that a lost worker costs little and progress stays live.
+TARGET_CHUNK_SECONDS = 4.0
+#: Rough single-core seconds per time step of the FE model, per mesh (sizing only).
+FE_SECONDS_PER_STEP = {"coarse": 4e-5, "medium": 5e-5, "fine": 7e-5}
+MIN_CHUNKS = 16
+
+
+class JobCancelled(Exception):
+    pass
+
+
+def estimated_seconds_per_sim(spec: JobSpec) -> float:
+    if spec.model == "toy":
+        return (spec.toy.delay_s if spec.toy else 0.0) + 2e-4
+    return (spec.duration / spec.dt) * FE_SECONDS_PER_STEP[spec.mesh]
+
+
+def chunk_size_for(spec: JobSpec) -> int:
+    """Simulations per task; a function of the spec only (it fixes the store's chunking)."""
+    if spec.chunk_size:
+        return int(spec.chunk_size)
+    by_time = max(1, int(TARGET_CHUNK_SECONDS / estimated_seconds_per_sim(spec)))
+    by_count = max(1, -(-spec.n_simulations // MIN_CHUNKS))
+    return int(min(by_time, by_count, 10_000))
+
+
+def evaluator_for(spec: JobSpec, problem: Problem) -> Callable[[np.ndarray], Evaluation]:
+    if spec.model == "toy":
+        from .toy import ToyEvaluator
+        return ToyEvaluator(problem, spec.toy.delay_s if spec.toy else 0.0)
+    return ProblemEvaluator(problem)
+
+
+def run_chunk(c: int, lo: int, thetas: np.ndarray, *, store_path: str, b: int, evaluator) -> np.ndarray:
+    """Worker task: evaluate one chunk, write its region of batch ``b``, mark it done."""
+    ev = evaluator(thetas)
+    st.write_chunk(store_path, b, c, lo, ev)
+    return np.asarray(ev.loglik, dtype=float)
+
+
+def ess_of(loglik: np.ndarray) -> float:
+    ll = np.asarray(loglik, dtype=float)
+    ll = ll[np.isfinite(ll)]
+    if ll.size == 0:
+        return 0.0
+    return float(math.exp(2.0 * logsumexp(ll) - logsumexp(2.0 * ll)))
+
+
+@dataclass
+class JobControl:
+    """Shared between the runner thread and whoever may cancel it (service DELETE)."""
+
+    cancelled: threading.Event = field(default_factory=threading.Event)
+    futures: list = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    client: object | None = None
+
+    def cancel(self) -> None:
+        self.cancelled.set()
+        with self.lock:
+            futs = list(self.futures)
+        if futs and self.client is not None:
+            try:
+                self.client.cancel(futs, force=True)
+            except Exception:  # noqa: BLE001 - best effort; the runner also checks the flag
+                pass
+
+
+@dataclass
+class Progress:
+    n_done: int = 0          # simulations finished (this run + already in the store)
+    n_total: int = 0         # simulations known so far (IS: N; SMC: grows per generation)
+    ess: float = float("nan")
+    chunks_computed: int = 0
+    chunks_skipped: int = 0
+    generation: int = 0
+    phase: str = "simulating"
+
+
+def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.ndarray, evaluator,
+               prog: Progress, report: Callable[[Progress], None], control: JobControl,
+               seen_ll: list | None = None) -> Evaluation:
+    from distributed import as_completed
+
+    g = st.ensure_batch(root, b, thetas)
+    cs = int(g.attrs["chunk_size"])
+    n_chunks = int(g.attrs["n_chunks"])
+    n = thetas.shape[0]
+    done = st.done_mask(g)
+    todo = [c for c in range(n_chunks) if not done[c]]
+    skipped = n_chunks - len(todo)
+    prog.chunks_skipped += skipped
+    already = sum(min(cs, n - c * cs) for c in range(n_chunks) if done[c])
+    prog.n_done += already
+    if skipped and seen_ll is not None:
+        ll = g["loglik"][...]
+        seen_ll.extend(ll[np.repeat(done, cs)[:n]].tolist())
+        prog.ess = ess_of(np.asarray(seen_ll))
+    report(prog)
+    if todo:
+        if control.cancelled.is_set():
+            raise JobCancelled()
+        keys = [f"vfchunk-{job_id}-b{b}-c{c}" for c in todo]
+        futs = client.map(run_chunk, todo, [c * cs for c in todo], [thetas[c * cs:(c + 1) * cs] for c in todo],
+                          key=keys, pure=True, store_path=str(store_path), b=b, evaluator=evaluator)
+        with control.lock:
+            control.futures = list(futs)
+        try:
+            for fut in as_completed(futs):
+                if control.cancelled.is_set():
+                    raise JobCancelled()
+                if fut.cancelled():
+                    raise JobCancelled()
+                ll = fut.result()
+                prog.n_done += ll.size
+                prog.chunks_computed += 1
+                if seen_ll is not None:
+                    seen_ll.extend(ll.tolist())
+                    prog.ess = ess_of(np.asarray(seen_ll))
+                report(prog)
+        except BaseException:
+            client.cancel(futs, force=True)
+            raise
+        finally:
+            with control.lock:
+                control.futures = []
+            del futs
+    # the reducer / sampler read what the store holds (the same bytes whether or not recomputed)
+    done = st.done_mask(g)
+    if not done.all():
+        raise RuntimeError(f"batch {b}: {int((~done).sum())} chunk(s) not written")
+    return st.read_evaluation(g)
+
+
+def prepare(store_path: Path, job_id: str, spec: JobSpec):
+    """Create the store (idempotent); return (root, problem)."""
+    problem = spec.to_problem()
+    root = st.create_job_store(store_path, job_id, spec.to_json(), chunk_size_for(spec), problem.n_compare,
+                               problem.prior.ndim)
+    return root, problem
+
+
+def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
+            report: Callable[[Progress], None] | None = None, control: JobControl | None = None) -> dict:
+    """Run (or resume) a job to completion; publish the posterior into the store.
+
+    Returns timing and chunk statistics. Raises JobCancelled when cancelled.
+    """
+    report = report or (lambda p: None)
+    control = control or JobControl()
+    control.client = client
+    t0 = time.perf_counter()
+    root, problem = prepare(store_path, job_id, spec)
+    evaluator = evaluator_for(spec, problem)
+    prog = Progress()
+    sp = str(store_path)
+    if isinstance(spec.sampler, ISSettings):
+        thetas = draw_prior(problem.prior, spec.sampler.n_samples, spec.seed)
+        prog.n_total = thetas.shape[0]
+        _run_batch(client, root, sp, job_id, 0, thetas, evaluator, prog, report, control, seen_ll=[])
+        t_sim = time.perf_counter() - t0
+        prog.phase = "reducing"
+        report(prog)
+        from .reduce import reduce_is_job
+        fut = client.submit(reduce_is_job, sp, key=f"vfreduce-{job_id}", pure=True)
+    elif isinstance(spec.sampler, SMCSettings):
+        from vfcore.inference.smc import SMCSampler
+        s = spec.sampler
+        sampler = SMCSampler(problem.prior, s.n_particles, spec.seed, **s.sampler_options())
+        b = 0
+        while (th := sampler.ask()) is not None:
+            if control.cancelled.is_set():
+                raise JobCancelled()
+            prog.n_total += th.shape[0]
+            prog.generation = sampler.generation
+            ev = _run_batch(client, root, sp, job_id, b, th, evaluator, prog, report, control)
+            sampler.tell(ev)
+            prog.ess = float(sampler.last_ess)
+            b += 1
+        t_sim = time.perf_counter() - t0
+        prog.phase = "reducing"
+        report(prog)
+        post = sampler.result(obs_gaw=problem.obs_compared, fps=problem.fps)
+        from .reduce import publish_posterior
+        fut = client.submit(publish_posterior, sp, post, key=f"vfreduce-{job_id}", pure=True)
+    else:  # pragma: no cover
+        raise ValueError("unknown sampler")
+    with control.lock:
+        control.futures = [fut]
+    try:
+        summary = fut.result()
+    finally:
+        with control.lock:
+            control.futures = []
+    if control.cancelled.is_set():
+        raise JobCancelled()
+    prog.phase = "done"
+    prog.ess = float(summary.get("ess", prog.ess))
+    report(prog)
+    t_total = time.perf_counter() - t0
+    return {"simulate_s": t_sim, "reduce_s": t_total - t_sim, "total_s": t_total,
+            "chunks_computed": prog.chunks_computed, "chunks_skipped": prog.chunks_skipped,
+            "n_simulations": prog.n_done, "ess": prog.ess}

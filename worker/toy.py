@@ -1,0 +1,80 @@
+"""TEST DOUBLE: a cheap analytic stand-in for the finite-element forward model.
+
+This is *not* physics and never runs unless a job says ``model="toy"`` and the service was
+started with ``allow_toy_model`` (tests, benchmarks of the distributed machinery).  It maps the
+seven parameters to a smooth half-rectified, slowly growing sinusoid (a "damped oscillator"
+GAW) so the queue, store, fault-tolerance and resume logic can be exercised in milliseconds
+per simulation.  Scoring (alignment window, Gaussian log-likelihood) is vfcore's, so the
+worker code path is identical to the FE one apart from the function that makes a GAW.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from vfcore.inference.problem import Evaluation, Problem, gaussian_loglik, n_sim_frames
+from vfcore.observe import align
+from vfcore.params import PARAM_NAMES, TABLE3
+
+
+def toy_gaw(full_params: np.ndarray, fps: float, n_frames: int) -> tuple[np.ndarray, float, float, float]:
+    """Analytic GAW (mm^2) for one full 7-vector in PARAM_NAMES order.
+
+    Returns (gaw, mean_flow m^3/s, mean_contact Pa, max_contact Pa) - all made-up but smooth.
+    """
+    p = dict(zip(PARAM_NAMES, np.asarray(full_params, dtype=float)))
+    ref = TABLE3.as_dict()
+    f0 = 110.0 * math.sqrt(p["E_cover"] / ref["E_cover"]) * (p["E_body"] / ref["E_body"]) ** 0.25 \
+        * math.sqrt(ref["rho"] / p["rho"]) * (p["E_lig"] / ref["E_lig"]) ** 0.1
+    amp = 12.0 * math.sqrt(max(p["p_sub"], 0.0) / ref["p_sub"]) * (1.0 + 0.5 * (8.4 - p["x0"]))
+    tau = 0.02 * p["eta"] / ref["eta"]
+    t = np.arange(n_frames) / fps
+    s = np.sin(2 * math.pi * f0 * t)
+    gaw = amp * np.maximum(s, 0.0) ** 1.5 * (1.0 - 0.3 * np.exp(-t / tau))
+    flow = 1e-4 * float(np.mean(gaw)) * math.sqrt(max(p["p_sub"], 0.0) / 1000.0)
+    contact = 50.0 * p["E_cover"] / ref["E_cover"] * (p["p_sub"] / ref["p_sub"])
+    return gaw, flow, contact, 3.0 * contact
+
+
+class ToyEvaluator:
+    """Picklable ``thetas (k, d) -> Evaluation`` with the same contract as vfcore's ``evaluate``."""
+
+    def __init__(self, problem: Problem, delay_s: float = 0.0):
+        self.problem = problem
+        self.delay_s = float(delay_s)
+
+    def __call__(self, thetas) -> Evaluation:
+        pb = self.problem
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        k = thetas.shape[0]
+        max_lag, n_cmp = pb.window
+        n = n_sim_frames(pb.config)
+        full = pb.prior.full_array(thetas) if k else np.empty((0, len(PARAM_NAMES)))
+        ll = np.full(k, -np.inf)
+        ok = np.zeros(k, bool)
+        gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
+        flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
+        for i in range(k):
+            if self.delay_s:
+                time.sleep(self.delay_s)
+            g, flow[i], cmean[i], cmax[i] = toy_gaw(full[i], pb.fps, n)
+            seg, _, _ = align(g, pb.obs_gaw, pb.fps, (max_lag, n_cmp))
+            ll[i] = gaussian_loglik(seg, pb.obs_compared, pb.sigma_e)
+            ok[i] = True
+            gaw[i] = seg
+        return Evaluation(loglik=ll, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax)
+
+
+def toy_observation(params: dict | None = None, fps: float = 4000.0, duration: float = 0.1,
+                    noise: float = 0.0, seed: int = 0) -> list[float]:
+    """A GAW made by the toy model (for tests), optionally with Gaussian noise (mm^2)."""
+    full = TABLE3.as_array().copy()
+    for k, v in (params or {}).items():
+        full[PARAM_NAMES.index(k)] = v
+    n = int(round(duration * fps))
+    g, *_ = toy_gaw(full, fps, n)
+    if noise:
+        g = g + np.random.default_rng(seed).normal(0.0, noise, g.size)
+    return np.maximum(g, 0.0).tolist()
