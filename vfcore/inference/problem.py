@@ -52,7 +52,8 @@ def validate_observation(gaw, fps: float) -> np.ndarray:
         raise ValueError("observed GAW is constant: there is no oscillation to fit")
     f0 = estimate_f0(y, fps)
     if not math.isfinite(f0):
-        raise ValueError("observed GAW shows no periodic oscillation (f0 could not be estimated)")
+        raise ValueError("observed GAW shows no periodic oscillation (f0 could not be estimated; at least "
+                         "two cycles are needed)")
     n_cycles = y.size * f0 / fps
     if n_cycles < 2.0:
         raise ValueError(f"observed GAW spans {n_cycles:.2f} cycles (f0 = {f0:.1f} Hz, {y.size} frames at "
