@@ -1,0 +1,165 @@
+"""Job endpoints. A user only ever sees their own jobs: any other id answers 404 (existence is not
+revealed).  Paths into the data directory are built from table rows, never from request text."""
+from __future__ import annotations
+
+import time
+from enum import Enum
+from typing import Annotated, Literal
+
+import numpy as np
+from fastapi import APIRouter, HTTPException, Query, Response, status
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, Field
+
+from worker import store as st
+from worker.jobspec import JobSpec
+from worker.reduce import compare_posteriors
+
+from ..db import ACTIVE
+from ..deps import JOB_ID_RE, JobIdDep, ManagerDep, SettingsDep, UserDep
+
+router = APIRouter(tags=["jobs"])
+
+
+class Figure(str, Enum):
+    gaw_fit = "gaw_fit"
+    corner = "corner"
+    contact_pressure = "contact_pressure"
+
+
+class Submitted(BaseModel):
+    id: str
+    state: str
+    status_url: str
+
+
+class JobStatus(BaseModel):
+    id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    progress: dict
+    ess: float | None
+    timings: dict
+    error: str | None = None
+    sampler: str
+    model: str
+    stats: dict = Field(default_factory=dict)
+
+
+class CompareRequest(BaseModel):
+    job_ids: list[str] = Field(min_length=2, max_length=10)
+
+
+def _own(manager, job_id: str, user: str) -> dict:
+    rec = manager.db.get(job_id, owner=user)
+    if rec is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
+    return rec
+
+
+def _status(manager, rec: dict) -> JobStatus:
+    lv = manager.live(rec["id"]) if rec["state"] == "running" else None
+    n_done, n_total, ess, phase = rec["n_done"], rec["n_total"], rec["ess"], rec["state"]
+    if lv is not None:
+        p = lv.progress
+        n_done, n_total, phase = p.n_done, max(p.n_total, p.n_done), p.phase
+        ess = p.ess if p.ess == p.ess else None
+    now = time.time()
+    timings = {"created": rec["created"], "started": rec["started"], "finished": rec["finished"],
+               "queued_s": ((rec["started"] or now) - rec["created"]),
+               "running_s": (((rec["finished"] or now) - rec["started"]) if rec["started"] else None)}
+    spec = JobSpec.from_json(rec["spec"])
+    return JobStatus(id=rec["id"], state=rec["state"], ess=ess, timings=timings, error=rec["error"],
+                     progress={"simulations_done": n_done, "simulations_total": n_total,
+                               "fraction": (n_done / n_total) if n_total else 0.0, "phase": phase},
+                     sampler=spec.sampler.kind, model=spec.model, stats=rec["stats"] or {})
+
+
+@router.post("/jobs", status_code=status.HTTP_202_ACCEPTED, response_model=Submitted)
+def submit(spec: JobSpec, user: UserDep, manager: ManagerDep, settings: SettingsDep) -> Submitted:
+    if spec.model == "toy" and not settings.allow_toy_model:
+        return JSONResponse(status_code=422, content={"detail": [{
+            "loc": ["body", "model"], "type": "value_error",
+            "msg": "model 'toy' is a test double and is disabled on this service"}]})
+    if manager.db.count_active(user) >= settings.max_active_jobs_per_user:
+        raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS,
+                            f"at most {settings.max_active_jobs_per_user} queued/running jobs per user")
+    job_id = manager.submit(user, spec)
+    return Submitted(id=job_id, state="queued", status_url=f"/jobs/{job_id}")
+
+
+@router.get("/jobs", response_model=list[JobStatus])
+def list_jobs(user: UserDep, manager: ManagerDep) -> list[JobStatus]:
+    return [_status(manager, r) for r in manager.db.list(owner=user)]
+
+
+@router.get("/jobs/{job_id}", response_model=JobStatus)
+def get_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> JobStatus:
+    return _status(manager, _own(manager, job_id, user))
+
+
+def _done(manager, job_id: str, user: str) -> dict:
+    rec = _own(manager, job_id, user)
+    if rec["state"] != "done":
+        raise HTTPException(status.HTTP_409_CONFLICT, f"job is {rec['state']}, not done")
+    return rec
+
+
+@router.get("/jobs/{job_id}/posterior")
+def get_posterior(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
+    rec = _done(manager, job_id, user)
+    summary = st.read_summary(manager.store_path(rec["id"]))
+    if summary is None:
+        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "posterior missing from the store")
+    return {"id": rec["id"], **summary}
+
+
+@router.get("/jobs/{job_id}/samples", responses={200: {"content": {"text/csv": {}, "application/json": {}}}})
+def get_samples(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
+                format: Annotated[Literal["csv", "json"], Query()] = "csv") -> Response:
+    rec = _done(manager, job_id, user)
+    path = manager.store_path(rec["id"])
+    if format == "csv":
+        blob = st.read_blob(path, "samples_csv")
+        if blob is None:
+            raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "samples missing from the store")
+        return Response(blob, media_type="text/csv",
+                        headers={"Content-Disposition": f'attachment; filename="{rec["id"]}.csv"'})
+    arr = st.read_posterior_arrays(path)
+    summ = st.read_summary(path) or {}
+    lw = arr["log_weights"]
+    return JSONResponse({"names": summ.get("names"), "samples": arr["samples"].tolist(),
+                         "log_weights": [float(x) if np.isfinite(x) else None for x in lw],
+                         "resampled": arr["resampled"].tolist()})
+
+
+@router.get("/jobs/{job_id}/figures/{name}", responses={200: {"content": {"image/png": {}}}})
+def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDep) -> Response:
+    rec = _done(manager, job_id, user)
+    blob = st.read_blob(manager.store_path(rec["id"]), name.value)
+    if blob is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, "figure not available")
+    return Response(blob, media_type="image/png")
+
+
+@router.delete("/jobs/{job_id}")
+def cancel_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
+    rec = _own(manager, job_id, user)
+    if rec["state"] in ACTIVE:
+        manager.cancel(rec["id"])
+    return {"id": rec["id"], "state": manager.db.get(rec["id"])["state"]}
+
+
+@router.post("/compare")
+def compare(req: CompareRequest, user: UserDep, manager: ManagerDep) -> dict:
+    ids = list(dict.fromkeys(req.job_ids))
+    if len(ids) < 2:
+        raise HTTPException(422, [{"loc": ["body", "job_ids"], "msg": "need two distinct job ids",
+                                   "type": "value_error"}])
+    paths = {}
+    for jid in ids:
+        if not JOB_ID_RE.match(jid):
+            raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
+        rec = _done(manager, jid, user)
+        paths[rec["id"]] = manager.store_path(rec["id"])
+    return compare_posteriors(paths)
+

@@ -1,0 +1,69 @@
+"""Helpers shared by the service tests (imported by name: tests/ has no packages)."""
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import uvicorn
+
+from worker.toy import toy_observation
+
+TOKENS = {"alice": "alice-token-0123456789", "bob": "bob-token-0123456789", "carol": "carol-token-0123456789"}
+
+
+def auth(user: str) -> dict:
+    return {"Authorization": f"Bearer {TOKENS[user]}"}
+
+
+def toy_spec(n: int = 400, seed: int = 1, delay: float = 0.0, sampler: dict | None = None, **kw) -> dict:
+    """A valid toy-model job (the analytic test double; see worker/toy.py)."""
+    spec = {"model": "toy", "toy": {"delay_s": delay},
+            "gaw": {"areas": toy_observation(noise=0.5, seed=7), "fps": 4000.0, "units": "mm2"},
+            "priors": {"E_cover": [450.0, 850.0], "p_sub": [700.0, 1300.0]},
+            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+            "sampler": sampler or {"kind": "is", "n_samples": n},
+            "duration": 0.35, "discard": 0.2, "sigma_e": 10.0, "seed": seed}
+    spec.update(kw)
+    return spec
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ServerThread:
+    def __init__(self, app):
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning",
+                                                    lifespan="on"))
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+
+    def __enter__(self):
+        self.thread.start()
+        t0 = time.time()
+        while not self.server.started:
+            if time.time() - t0 > 60 or not self.thread.is_alive():
+                raise RuntimeError("uvicorn did not start")
+            time.sleep(0.02)
+        return self
+
+    def __exit__(self, *exc):
+        self.server.should_exit = True
+        self.thread.join(30)
+
+
+def wait_done(http, job_id: str, user: str, timeout: float = 120.0, states=("done", "failed", "cancelled")) -> dict:
+    t0 = time.time()
+    while True:
+        r = http.get(f"/jobs/{job_id}", headers=auth(user))
+        r.raise_for_status()
+        st = r.json()
+        if st["state"] in states:
+            return st
+        if time.time() - t0 > timeout:
+            raise TimeoutError(f"job {job_id} still {st['state']}: {st}")
+        time.sleep(0.1)
