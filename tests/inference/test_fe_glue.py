@@ -157,3 +157,15 @@ def test_sensitivity(problem, fitted, tmp_path):
     assert len(rows) == 2 * 3 and (tmp_path / "fig8.png").exists()
     with pytest.raises(ValueError):
         ensemble_size_study(fitted[1], [10])
+
+
+def test_make_twin_with_fake_model():
+    from vfcore.inference import make_twin
+    prior = Prior({"E_body": (9.0, 15.0), "p_sub": (400.0, 1800.0)})
+    tw = make_twin(prior, SimConfig(mesh="coarse"), seed=4, simulate_fn=FakeSimulator())
+    tw2 = make_twin(prior, SimConfig(mesh="coarse"), seed=4, simulate_fn=FakeSimulator())
+    assert np.array_equal(tw.problem.obs_gaw, tw2.problem.obs_gaw) and np.array_equal(tw.truth, tw2.truth)
+    assert tw.problem.obs_gaw.size == 400 and np.all(prior.contains(tw.truth[None]))
+    resid = tw.problem.obs_gaw - tw.clean_gaw
+    assert 0.8 < resid.std() < 1.2
+    assert set(tw.truth_dict) == {"E_body", "p_sub"}

@@ -14,6 +14,7 @@ from .products import compare, flow_contact_table, plot_marginals, plot_predicti
 from .sensitivity import dt_mesh_configs, ensemble_size_study, numerics_study, write_table
 from .smc import DEFAULT_PARTICLES, SMCSampler, next_temperature, smc
 from .toy import LinearGaussianToy
+from .twin import Twin, make_twin
 
 __all__ = [
     "PARETO_K_THRESHOLD", "DegenerateEnsembleWarning", "ess", "log_evidence_is", "normalize_log_weights",
@@ -27,5 +28,5 @@ __all__ = [
     "compare", "flow_contact_table", "plot_marginals", "plot_predictive", "predictive_bands",
     "dt_mesh_configs", "ensemble_size_study", "numerics_study", "write_table",
     "DEFAULT_PARTICLES", "SMCSampler", "next_temperature", "smc",
-    "LinearGaussianToy",
+    "LinearGaussianToy", "Twin", "make_twin",
 ]
