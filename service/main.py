@@ -7,6 +7,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from .cluster import close_client, make_client
+from . import errors
 from .db import JobDB
 from .limits import BodySizeLimit
 from .manager import JobManager
@@ -36,6 +37,7 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
 
     app = FastAPI(title="vfinfer", version="0.1.0", lifespan=lifespan,
                   description="Distributed Bayesian inference of vocal-fold properties from GAWs")
+    errors.install(app)
     app.include_router(health.router)
     app.include_router(jobs.router)
     app.add_middleware(BodySizeLimit, max_bytes=(settings or Settings.from_env()).max_body_bytes)
