@@ -144,7 +144,7 @@ class Posterior:
             raise RuntimeError("predictive outputs do not cover the resampled draws") from None
         return self.predictive.take(rows)
 
-    def as_dict(self, name_first: bool = True) -> dict[str, dict[str, float]]:
+    def as_dict(self) -> dict[str, dict[str, float]]:
         return {n: {"mean": float(self.mean[i]), "sd": float(self.sd[i])} for i, n in enumerate(self.names)}
 
     # ------------------------------------------------------------------ tables

@@ -213,7 +213,7 @@ class SMCSampler:
         w = np.exp(logw - lse)
         self.log_evidence += inc
         sw2 = float(np.sum(w * w))
-        self.log_evidence_var += max(self.n / (self.n - 1) * (sw2 - 1.0 / self.n), 0.0) / 1.0
+        self.log_evidence_var += max(self.n / (self.n - 1) * (sw2 - 1.0 / self.n), 0.0)
         self.last_ess = 1.0 / sw2
         self.generation += 1
         # covariance of the reweighted particles -> RW proposal
