@@ -260,6 +260,16 @@ def segment_frames(frames: np.ndarray, roi=None, max_grow: int = 3) -> Segmentat
     area = masks.sum(axis=(1, 2)).astype(float)
     if area.max() <= 0:
         raise VideoError("no visible opening: the segmented glottal area is zero in every frame")
+    # an opening is darker than the tissue around it in the same frame (a pulsing
+    # highlight only looks dark relative to its own brightest state)
+    im = int(np.argmax(area))
+    m = masks[im]
+    ring = ndimage.binary_dilation(m, iterations=4) & ~m
+    crop = frames[im, roi[0]:roi[1], roi[2]:roi[3]]
+    inside, around = float(np.median(crop[m])), float(np.median(crop[ring])) if ring.any() else float("inf")
+    if not inside < 0.8 * around:
+        raise VideoError("no visible opening: the segmented region is not darker than the tissue around it "
+                         f"(median grey {inside:.3g} inside vs {around:.3g} around)")
 
     # quality flags
     border = (masks[:, 0, :].any(1) | masks[:, -1, :].any(1) | masks[:, :, 0].any(1) | masks[:, :, -1].any(1))
