@@ -137,7 +137,7 @@ def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.nd
         with control.lock:
             control.futures = list(futs)
         try:
-            for fut in as_completed(futs):
+            for fut in as_completed(futs, loop=client.loop):
                 if control.cancelled.is_set():
                     raise JobCancelled()
                 if fut.cancelled():

@@ -1,0 +1,272 @@
+"""``vfinfer`` command line: local inference, the service, a client for it, and the demo."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="Bayesian inference of vocal-fold properties from glottal area waveforms.")
+console = Console()
+
+DEMO_GAW = Path(__file__).resolve().parent.parent / "vfcore" / "data" / "demo_gaw.csv"
+
+
+# ------------------------------------------------------------------------------------ helpers
+def _kv(items: list[str] | None, what: str) -> dict[str, str]:
+    out = {}
+    for it in items or []:
+        k, sep, v = it.partition("=")
+        if not sep:
+            raise typer.BadParameter(f"{what} must look like NAME=VALUE, got {it!r}")
+        out[k.strip()] = v.strip()
+    return out
+
+
+def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
+               duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
+               fix: list[str] | None, chunk_size: int | None = None, model: str = "fe"):
+    """A validated JobSpec from CLI options (exit code 2 with the pydantic message on bad input)."""
+    from pydantic import ValidationError
+
+    from vfvideo.io import read_gaw
+    from worker.jobspec import JobSpec
+
+    g = read_gaw(gaw, fps=fps)
+    priors = {}
+    for k, v in _kv(prior, "--prior").items():
+        lo, _, hi = v.partition(":")
+        priors[k] = [float(lo), float(hi)]
+    fixed = {k: float(v) for k, v in _kv(fix, "--fix").items()}
+    smp = {"kind": "is", "n_samples": n} if sampler == "is" else {"kind": "smc", "n_particles": particles}
+    body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
+            "priors": priors or None, "fixed": fixed, "sampler": smp, "mesh": mesh, "dt": dt,
+            "duration": duration, "discard": discard, "sigma_e": sigma_e, "seed": seed, "chunk_size": chunk_size}
+    try:
+        return JobSpec.model_validate(body)
+    except ValidationError as exc:
+        for e in exc.errors():
+            console.print(f"[red]invalid {'.'.join(map(str, e['loc'])) or 'input'}:[/red] {e['msg']}")
+        raise typer.Exit(2) from None
+
+
+def print_table(summary: dict, title: str = "Posterior") -> None:
+    """The posterior in the layout of Hadwin et al. (2019), Table 3: estimate, sd and sd as % of it."""
+    t = Table(title=title)
+    for col in ("parameter", "unit", "estimate", "sd", "% of est.", "5%", "95%"):
+        t.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for r in summary["table"]:
+        t.add_row(r["name"], r["unit"], f"{r['mean']:.5g}", f"{r['sd']:.4g}", f"{r['pct']:.2f}" if r["pct"] else "-",
+                  f"{r['q05']:.5g}", f"{r['q95']:.5g}")
+    console.print(t)
+    le, se = summary.get("log_evidence"), summary.get("log_evidence_se")
+    console.print(f"method={summary['method']}  simulations={summary['n_simulations']} "
+                  f"(failed {summary['n_failed']})  ESS={summary['ess']:.1f}  "
+                  f"log evidence={le if le is None else round(le, 3)} +- {se if se is None else round(se, 3)}")
+    for name, q in (summary.get("predictive") or {}).items():
+        console.print(f"  {name}: {q['mean']:.4g} +- {q['sd']:.3g} {q['unit']} (90%: {q['q05']:.4g} .. {q['q95']:.4g})")
+    for w in summary.get("warnings", []):
+        console.print(f"[yellow]WARNING[/yellow] {w}")
+
+
+def export_products(store_path: Path, out: Path) -> dict:
+    """Copy summary, samples CSV and figures out of a job store into ``out``."""
+    from worker import store as st
+    out.mkdir(parents=True, exist_ok=True)
+    summary = st.read_summary(store_path)
+    (out / "posterior.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
+    (out / "posterior_table.txt").write_text(summary.get("formatted", "") + "\n")
+    for name in st.PRODUCT_NAMES:
+        blob = st.read_blob(store_path, name)
+        if blob is not None:
+            (out / (("samples.csv") if name == "samples_csv" else f"{name}.png")).write_bytes(blob)
+    return summary
+
+
+def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
+    """Run a job on an in-process LocalCluster with a progress bar; products go to ``out``."""
+    from distributed import Client, LocalCluster
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from worker.run import run_job
+
+    out.mkdir(parents=True, exist_ok=True)
+    store_path = out / f"{job_id}.zarr"
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+            Client(cl) as client, Progress(TextColumn("{task.description}"), BarColumn(),
+                                           TextColumn("{task.completed}/{task.total} sims  {task.fields[ess]}"),
+                                           TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("simulating", total=spec.n_simulations, ess="")
+
+        def report(p):
+            bar.update(task, completed=p.n_done, total=max(p.n_total, p.n_done), description=p.phase,
+                       ess=f"ESS={p.ess:.1f}" if p.ess == p.ess else "")
+
+        stats = run_job(client, job_id, store_path, spec, report=report)
+    summary = export_products(store_path, out)
+    (out / "timings.json").write_text(json.dumps(stats, indent=1))
+    return summary
+
+
+def _http(url: str, token: str | None):
+    import httpx
+    token = token or os.environ.get("VFINFER_TOKEN")
+    if not token:
+        console.print("[red]no token: pass --token or set VFINFER_TOKEN[/red]")
+        raise typer.Exit(2)
+    return httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=60)
+
+
+def _check(r) -> dict:
+    if r.status_code >= 400:
+        console.print(f"[red]HTTP {r.status_code}[/red] {r.text[:2000]}")
+        raise typer.Exit(1)
+    return r.json()
+
+
+# ------------------------------------------------------------------------------------ options
+Fps = Annotated[Optional[float], typer.Option(help="frame rate, if the file does not say")]
+Sampler = Annotated[str, typer.Option(help="'is' (importance sampling) or 'smc'")]
+N = Annotated[int, typer.Option("--n", help="IS: number of prior draws")]
+Particles = Annotated[int, typer.Option(help="SMC: number of particles")]
+Mesh = Annotated[str, typer.Option(help="coarse | medium | fine")]
+Prior = Annotated[Optional[list[str]], typer.Option("--prior", help="NAME=LO:HI (paper units), repeatable")]
+Fix = Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable")]
+Url = Annotated[str, typer.Option(envvar="VFINFER_URL", help="service URL")]
+Token = Annotated[Optional[str], typer.Option(envvar="VFINFER_TOKEN", help="bearer token")]
+
+
+# ------------------------------------------------------------------------------------ commands
+@app.command()
+def infer(gaw: Path, fps: Fps = None, sampler: Sampler = "is", n: N = 2000, particles: Particles = 200,
+          mesh: Mesh = "coarse", dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25,
+          sigma_e: float = 1.0, seed: int = 0, prior: Prior = None, fix: Fix = None,
+          workers: Annotated[int, typer.Option(help="local worker processes")] = 2,
+          out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output")) -> None:
+    """Run an inference on this machine (in-process Dask LocalCluster) and print the posterior table."""
+    spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix)
+    summary = run_local(spec, out, workers)
+    print_table(summary, title=f"Posterior for {gaw.name}")
+    console.print(f"products written to {out}/")
+
+
+@app.command()
+def serve(host: str = "127.0.0.1", port: int = 8000,
+          workers: Annotated[Optional[int], typer.Option(help="LocalCluster workers (if no scheduler)")] = None
+          ) -> None:
+    """Run the HTTP API (with a LocalCluster unless VFINFER_SCHEDULER is set)."""
+    import uvicorn
+
+    from .main import create_app
+    from .settings import Settings
+    settings = Settings.from_env(**({"n_workers": workers} if workers else {}))
+    if not settings.users:
+        console.print("[yellow]no tokens configured (VFINFER_TOKENS=user:token,...): every request will be 401[/yellow]")
+    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+
+
+@app.command()
+def submit(gaw: Path, url: Url = "http://127.0.0.1:8000", token: Token = None, fps: Fps = None,
+           sampler: Sampler = "is", n: N = 2000, particles: Particles = 200, mesh: Mesh = "coarse",
+           dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25, sigma_e: float = 1.0, seed: int = 0,
+           prior: Prior = None, fix: Fix = None) -> None:
+    """Submit a job to a running service; prints the job id."""
+    spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix)
+    with _http(url, token) as http:
+        d = _check(http.post("/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"}))
+    console.print(d["id"])
+
+
+@app.command()
+def status(job_id: str, url: Url = "http://127.0.0.1:8000", token: Token = None,
+           wait: Annotated[bool, typer.Option(help="poll until the job finishes")] = False) -> None:
+    """Show a job's state and progress."""
+    with _http(url, token) as http:
+        while True:
+            d = _check(http.get(f"/jobs/{job_id}"))
+            p = d["progress"]
+            console.print(f"{d['id']}  {d['state']:<9} {p['simulations_done']}/{p['simulations_total']} sims  "
+                          f"ESS={d['ess']}")
+            if not wait or d["state"] in ("done", "failed", "cancelled"):
+                break
+            time.sleep(2)
+    if d.get("error"):
+        console.print(f"[red]{d['error']}[/red]")
+
+
+@app.command()
+def fetch(job_id: str, url: Url = "http://127.0.0.1:8000", token: Token = None,
+          out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output")) -> None:
+    """Download a finished job's posterior, samples and figures; print the table."""
+    out.mkdir(parents=True, exist_ok=True)
+    with _http(url, token) as http:
+        summary = _check(http.get(f"/jobs/{job_id}/posterior"))
+        (out / "posterior.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
+        r = http.get(f"/jobs/{job_id}/samples")
+        if r.status_code == 200:
+            (out / "samples.csv").write_bytes(r.content)
+        for name in ("gaw_fit", "corner", "contact_pressure"):
+            r = http.get(f"/jobs/{job_id}/figures/{name}")
+            if r.status_code == 200:
+                (out / f"{name}.png").write_bytes(r.content)
+    print_table(summary, title=f"Posterior of job {job_id}")
+
+
+@app.command()
+def simulate(param: Annotated[Optional[list[str]], typer.Option("--param", help="NAME=VALUE, repeatable")] = None,
+             mesh: Mesh = "medium", dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25,
+             fps: float = 2000.0, out: Annotated[Path, typer.Option(help="GAW CSV to write")] = Path("gaw.csv")
+             ) -> None:
+    """Run one forward simulation (Table 3 values unless overridden) and write its GAW as CSV."""
+    from vfcore.config import SimConfig
+    from vfcore.params import TABLE3
+    from vfcore.simulate import simulate as sim
+    from vfvideo.io import write_gaw_csv
+
+    p = TABLE3.replace(**{k: float(v) for k, v in _kv(param, "--param").items()})
+    r = sim(p, SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=fps))
+    if not r.ok:
+        console.print(f"[red]simulation failed:[/red] {r.message}")
+        raise typer.Exit(1)
+    write_gaw_csv(out, r.t, r.gaw, r.fps, meta={"source": "vfinfer simulate", "params": json.dumps(p.as_dict()),
+                                                "mesh": mesh, "dt": dt})
+    console.print(f"f0={r.f0:.1f} Hz, {r.gaw.size} frames, peak area {r.gaw.max():.2f} mm^2 -> {out}")
+
+
+#: The `make demo` configuration: short and honest (see docs/service.md).
+DEMO = {"sampler": "is", "n": 240, "mesh": "coarse", "dt": 1e-4, "duration": 0.3, "discard": 0.15,
+        "sigma_e": 1.0, "seed": 2019, "fix": ["E_body=12.15", "E_lig=1.808", "rho=1051", "eta=3.079", "x0=8.4"],
+        "prior": ["E_cover=400:900", "p_sub=700:1300"]}
+
+
+@app.command()
+def demo(out: Annotated[Path, typer.Option(help="output folder")] = Path("demo_output"),
+         workers: int = 2) -> None:
+    """End-to-end inference on the GAW shipped with the package; writes table and figures."""
+    if not DEMO_GAW.exists():
+        console.print(f"[red]{DEMO_GAW} missing[/red]")
+        raise typer.Exit(1)
+    d = DEMO
+    spec = build_spec(DEMO_GAW, None, d["sampler"], d["n"], 0, d["mesh"], d["dt"], d["duration"], d["discard"],
+                      d["sigma_e"], d["seed"], d["prior"], d["fix"])
+    console.print(f"demo: {spec.n_simulations} FE simulations ({spec.mesh} mesh, dt={spec.dt}) of {DEMO_GAW.name} "
+                  f"on {workers} local workers")
+    t0 = time.perf_counter()
+    summary = run_local(spec, out, workers, job_id="demo")
+    print_table(summary, title="Posterior (demo GAW)")
+    console.print(f"wall time {time.perf_counter() - t0:.1f} s; products in {out}/")
+
+
+def main() -> None:  # console-script entry point
+    app()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
