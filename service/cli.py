@@ -95,7 +95,7 @@ def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
     from distributed import Client, LocalCluster
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from worker.run import run_job
+    from worker.run import register_warm_up, run_job
 
     out.mkdir(parents=True, exist_ok=True)
     store_path = out / f"{job_id}.zarr"
@@ -103,6 +103,7 @@ def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
             Client(cl) as client, Progress(TextColumn("{task.description}"), BarColumn(),
                                            TextColumn("{task.completed}/{task.total} sims  {task.fields[ess]}"),
                                            TimeElapsedColumn(), console=console) as bar:
+        register_warm_up(client)
         task = bar.add_task("simulating", total=spec.n_simulations, ess="")
 
         def report(p):

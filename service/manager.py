@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from worker.jobspec import JobSpec
-from worker.run import JobCancelled, JobControl, Progress, run_job
+from worker.run import JobCancelled, JobControl, Progress, register_warm_up, run_job
 
 from .db import ACTIVE, JobDB
 from .settings import Settings
@@ -55,6 +55,8 @@ class JobManager:
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> int:
         """Start the runner threads and re-queue unfinished jobs; returns how many were re-queued."""
+        if self.client is not None:
+            register_warm_up(self.client)
         pending = self.db.list(states=ACTIVE)
         for rec in pending:
             self._q.put(rec["id"])

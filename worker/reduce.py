@@ -83,8 +83,9 @@ def _predictive_summary(post) -> tuple[dict, np.ndarray | None]:
     return out, bands
 
 
-def posterior_summary(post) -> dict:
-    pred, _ = _predictive_summary(post)
+def posterior_summary(post, pred: dict | None = None) -> dict:
+    if pred is None:
+        pred, _ = _predictive_summary(post)
     info = {k: v for k, v in post.info.items() if k in (
         "generations", "n_generations", "n_particles", "temperatures", "max_loglik", "n_draws",
         "failure_messages")}
@@ -101,14 +102,14 @@ def posterior_summary(post) -> dict:
 def publish_posterior(store_path: str, post) -> dict:
     """Write the posterior arrays, summary, CSV and figures into the store; return the summary."""
     root = st.open_store(Path(store_path))
-    summary = posterior_summary(post)
+    pred, bands = _predictive_summary(post)
+    summary = posterior_summary(post, pred)
     pg = root.require_group("posterior")
     for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
                       ("log_weights", np.asarray(post.log_weights, dtype=float)),
                       ("resampled", np.asarray(post.resampled, dtype=np.int64))):
         a = pg.create_array(name, shape=arr.shape, chunks=arr.shape or (1,), dtype=arr.dtype, overwrite=True)
         a[...] = arr
-    _, bands = _predictive_summary(post)
     if bands is not None:
         a = pg.create_array("gaw_bands", shape=bands.shape, chunks=bands.shape, dtype="float64", overwrite=True)
         a[...] = bands

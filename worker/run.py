@@ -40,6 +40,43 @@ class JobCancelled(Exception):
     pass
 
 
+def warm_up() -> None:
+    """Import and JIT-compile what a reducer needs (arviz, matplotlib, numba ufuncs: ~2 s per process)
+    once, when a worker starts, instead of inside the first job's critical path."""
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot  # noqa: F401
+
+    from vfcore.inference.diagnostics import pareto_k
+    pareto_k(np.log(np.linspace(1.0, 2.0, 64)))
+    from . import reduce  # noqa: F401
+
+
+try:
+    from distributed.diagnostics.plugin import WorkerPlugin
+except ImportError:  # pragma: no cover
+    WorkerPlugin = object
+
+
+class WarmUpPlugin(WorkerPlugin):
+    """Runs ``warm_up`` on every worker, including workers that join or restart later."""
+
+    name = "vfinfer-warm-up"
+
+    def setup(self, worker) -> None:
+        try:
+            warm_up()
+        except Exception:  # noqa: BLE001 - warming is an optimisation only
+            pass
+
+
+def register_warm_up(client) -> None:
+    try:
+        client.register_plugin(WarmUpPlugin(), name=WarmUpPlugin.name)
+    except Exception:  # noqa: BLE001
+        pass
+
+
 def estimated_seconds_per_sim(spec: JobSpec) -> float:
     if spec.model == "toy":
         return (spec.toy.delay_s if spec.toy else 0.0) + 2e-4
