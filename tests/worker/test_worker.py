@@ -1,0 +1,84 @@
+"""Worker layer: job spec, store layout, chunk purity, resume without recomputation."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "service"))
+from svc_helpers import toy_spec  # noqa: E402
+
+from worker import store as st  # noqa: E402
+from worker.jobspec import JobSpec  # noqa: E402
+from worker.run import chunk_size_for, evaluator_for, prepare, run_chunk, run_job  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cl, \
+            Client(cl, set_as_default=False) as c:
+        yield c
+
+
+def test_jobspec_roundtrip_and_version():
+    spec = JobSpec.model_validate(toy_spec(n=100))
+    again = JobSpec.from_json(spec.to_json())
+    assert again == spec and again.version == 1
+    assert json.loads(spec.to_json())["gaw"]["units"] == "mm2"
+    pb = spec.to_problem()
+    assert pb.prior.names == ("E_cover", "p_sub") and pb.sigma_e == 10.0
+    with pytest.raises(ValueError, match="version"):
+        JobSpec.model_validate({**toy_spec(), "version": 2})
+
+
+def test_chunk_size_is_a_function_of_the_spec():
+    fe = JobSpec.model_validate({**toy_spec(n=50_000), "model": "fe", "toy": None, "mesh": "coarse"})
+    assert 1 <= chunk_size_for(fe) <= 50_000 // 16
+    assert chunk_size_for(JobSpec.model_validate(toy_spec(n=100, chunk_size=7))) == 7
+
+
+def test_recomputed_chunk_writes_identical_bytes(tmp_path):
+    spec = JobSpec.model_validate(toy_spec(n=40, chunk_size=10))
+    path = tmp_path / "j.zarr"
+    root, pb = prepare(path, "j", spec)
+    from vfcore.inference.importance import draw_prior
+    th = draw_prior(pb.prior, 40, spec.seed)
+    st.ensure_batch(root, 0, th)
+    ev = evaluator_for(spec, pb)
+    run_chunk(1, 10, th[10:20], store_path=str(path), b=0, evaluator=ev)
+    files = sorted(p for p in (path / "batches" / "0").rglob("*") if p.is_file() and "/c/" in str(p))
+    before = {p: p.read_bytes() for p in files}
+    run_chunk(1, 10, th[10:20], store_path=str(path), b=0, evaluator=ev)
+    after = {p: p.read_bytes() for p in files}
+    assert before == after and len(before) == 8
+    assert st.done_mask(root["batches/0"]).tolist() == [False, True, False, False]
+    attrs = zarr.open_group(str(path), mode="r").attrs
+    assert JobSpec.model_validate(attrs["jobspec"]) == spec and attrs["chunk_size"] == 10
+    g = root["batches/0"]
+    assert g["gaw"].dtype == np.float32 and g["gaw"].shape == (40, pb.n_compare)
+
+
+def test_resume_skips_done_chunks(tmp_path, client):
+    spec = JobSpec.model_validate(toy_spec(n=60, chunk_size=10))
+    path = tmp_path / "r.zarr"
+    root, pb = prepare(path, "r", spec)
+    from vfcore.inference.importance import draw_prior
+    th = draw_prior(pb.prior, 60, spec.seed)
+    st.ensure_batch(root, 0, th)
+    ev = evaluator_for(spec, pb)
+    for c in (0, 3):
+        run_chunk(c, 10 * c, th[10 * c:10 * c + 10], store_path=str(path), b=0, evaluator=ev)
+    marker = path / "batches" / "0" / "loglik" / "c" / "0"
+    mtime = marker.stat().st_mtime_ns
+    stats = run_job(client, "r", path, spec)
+    assert stats["chunks_skipped"] == 2 and stats["chunks_computed"] == 4
+    assert marker.stat().st_mtime_ns == mtime                # not rewritten
+    again = run_job(client, "r", path, spec)                  # everything done: nothing recomputed
+    assert again["chunks_computed"] == 0 and again["chunks_skipped"] == 6
+    s = st.read_summary(path)
+    assert s["n_simulations"] == 60 and len(s["table"]) == 2
