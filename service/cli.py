@@ -16,7 +16,6 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Bayesian inference of vocal-fold properties from glottal area waveforms.")
 console = Console()
 
-DEMO_GAW = Path(__file__).resolve().parent.parent / "vfcore" / "data" / "demo_gaw.csv"
 
 
 # ------------------------------------------------------------------------------------ helpers
@@ -142,6 +141,7 @@ Prior = Annotated[Optional[list[str]], typer.Option("--prior", help="NAME=LO:HI 
 Fix = Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable")]
 Url = Annotated[str, typer.Option(envvar="VFINFER_URL", help="service URL")]
 Token = Annotated[Optional[str], typer.Option(envvar="VFINFER_TOKEN", help="bearer token")]
+Model = Annotated[str, typer.Option(hidden=True, help="'fe' or the 'toy' test double (tests only)")]
 
 
 # ------------------------------------------------------------------------------------ commands
@@ -150,9 +150,11 @@ def infer(gaw: Path, fps: Fps = None, sampler: Sampler = "is", n: N = 2000, part
           mesh: Mesh = "coarse", dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25,
           sigma_e: float = 1.0, seed: int = 0, prior: Prior = None, fix: Fix = None,
           workers: Annotated[int, typer.Option(help="local worker processes")] = 2,
-          out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output")) -> None:
+          out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output"),
+          model: Model = "fe") -> None:
     """Run an inference on this machine (in-process Dask LocalCluster) and print the posterior table."""
-    spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix)
+    spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
+                      model=model)
     summary = run_local(spec, out, workers)
     print_table(summary, title=f"Posterior for {gaw.name}")
     console.print(f"products written to {out}/")
@@ -177,9 +179,10 @@ def serve(host: str = "127.0.0.1", port: int = 8000,
 def submit(gaw: Path, url: Url = "http://127.0.0.1:8000", token: Token = None, fps: Fps = None,
            sampler: Sampler = "is", n: N = 2000, particles: Particles = 200, mesh: Mesh = "coarse",
            dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25, sigma_e: float = 1.0, seed: int = 0,
-           prior: Prior = None, fix: Fix = None) -> None:
+           prior: Prior = None, fix: Fix = None, model: Model = "fe") -> None:
     """Submit a job to a running service; prints the job id."""
-    spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix)
+    spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
+                      model=model)
     with _http(url, token) as http:
         d = _check(http.post("/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"}))
     console.print(d["id"])
@@ -241,27 +244,24 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option("--param", help=
     console.print(f"f0={r.f0:.1f} Hz, {r.gaw.size} frames, peak area {r.gaw.max():.2f} mm^2 -> {out}")
 
 
-#: The `make demo` configuration: short and honest (see docs/service.md).
-DEMO = {"sampler": "is", "n": 240, "mesh": "coarse", "dt": 1e-4, "duration": 0.3, "discard": 0.15,
-        "sigma_e": 1.0, "seed": 2019, "fix": ["E_body=12.15", "E_lig=1.808", "rho=1051", "eta=3.079", "x0=8.4"],
-        "prior": ["E_cover=400:900", "p_sub=700:1300"]}
-
-
 @app.command()
 def demo(out: Annotated[Path, typer.Option(help="output folder")] = Path("demo_output"),
+         n: Annotated[int, typer.Option("--n", help="IS draws (FE simulations)")] = 240,
          workers: int = 2) -> None:
-    """End-to-end inference on the GAW shipped with the package; writes table and figures."""
+    """End-to-end inference on the GAW shipped with the package (vfcore/data); writes table and figures."""
+    from vfcore.data import DEMO_GAW, DEMO_TRUTH, demo_spec_dict
+    from worker.jobspec import JobSpec
+
     if not DEMO_GAW.exists():
         console.print(f"[red]{DEMO_GAW} missing[/red]")
         raise typer.Exit(1)
-    d = DEMO
-    spec = build_spec(DEMO_GAW, None, d["sampler"], d["n"], 0, d["mesh"], d["dt"], d["duration"], d["discard"],
-                      d["sigma_e"], d["seed"], d["prior"], d["fix"])
-    console.print(f"demo: {spec.n_simulations} FE simulations ({spec.mesh} mesh, dt={spec.dt}) of {DEMO_GAW.name} "
+    spec = JobSpec.model_validate(demo_spec_dict(n=n))
+    console.print(f"demo: {spec.n_simulations} FE simulations ({spec.mesh} mesh, dt={spec.dt} s) against "
+                  f"{DEMO_GAW.name} (synthetic: {DEMO_TRUTH['mesh']} mesh at Table 3 values + noise) "
                   f"on {workers} local workers")
     t0 = time.perf_counter()
     summary = run_local(spec, out, workers, job_id="demo")
-    print_table(summary, title="Posterior (demo GAW)")
+    print_table(summary, title="Posterior (demo GAW; truth: E_cover=636.2 Pa, p_sub=989.9 Pa)")
     console.print(f"wall time {time.perf_counter() - t0:.1f} s; products in {out}/")
 
 
