@@ -253,8 +253,13 @@ def demo(out: Annotated[Path, typer.Option(help="output folder")] = Path("demo_o
     from worker.jobspec import JobSpec
 
     if not DEMO_GAW.exists():
-        console.print(f"[red]{DEMO_GAW} missing[/red]")
-        raise typer.Exit(1)
+        try:
+            from vfcore.data import make_demo_gaw
+            console.print(f"{DEMO_GAW.name} missing: generating it with the FE model")
+            make_demo_gaw()
+        except ImportError as exc:
+            console.print(f"[red]{DEMO_GAW} missing and the FE model is not available ({exc})[/red]")
+            raise typer.Exit(1) from None
     spec = JobSpec.model_validate(demo_spec_dict(n=n))
     console.print(f"demo: {spec.n_simulations} FE simulations ({spec.mesh} mesh, dt={spec.dt} s) against "
                   f"{DEMO_GAW.name} (synthetic: {DEMO_TRUTH['mesh']} mesh at Table 3 values + noise) "

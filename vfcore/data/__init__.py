@@ -40,11 +40,11 @@ def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
         "params": json.dumps(TABLE3.as_dict()), **{k: str(v) for k, v in d.items()}})
 
 
-def demo_spec_dict(n: int = 240, **overrides) -> dict:
+def demo_spec_dict(n: int = 240, path: Path = DEMO_GAW, **overrides) -> dict:
     """A JobSpec body (dict) for the demo GAW: IS over E_cover and p_sub, the rest fixed."""
     from vfvideo.io import read_gaw
 
-    g = read_gaw(DEMO_GAW)
+    g = read_gaw(path)
     spec = {"model": "fe", "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
             "priors": {"E_cover": [400.0, 900.0], "p_sub": [700.0, 1300.0]},
             "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
