@@ -114,6 +114,26 @@ def ess_of(loglik: np.ndarray) -> float:
     return float(math.exp(2.0 * logsumexp(ll) - logsumexp(2.0 * ll)))
 
 
+class RunningESS:
+    """ESS of the self-normalised IS weights over the log-likelihoods seen so far, O(chunk) per update."""
+
+    def __init__(self) -> None:
+        self.lse1 = -math.inf
+        self.lse2 = -math.inf
+
+    def add(self, loglik: np.ndarray) -> float:
+        ll = np.asarray(loglik, dtype=float)
+        ll = ll[np.isfinite(ll)]
+        if ll.size:
+            self.lse1 = float(np.logaddexp(self.lse1, logsumexp(ll)))
+            self.lse2 = float(np.logaddexp(self.lse2, logsumexp(2.0 * ll)))
+        return self.value
+
+    @property
+    def value(self) -> float:
+        return 0.0 if self.lse1 == -math.inf else float(math.exp(2.0 * self.lse1 - self.lse2))
+
+
 @dataclass
 class JobControl:
     """Shared between the runner thread and whoever may cancel it (service DELETE)."""
@@ -147,7 +167,7 @@ class Progress:
 
 def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.ndarray, evaluator,
                prog: Progress, report: Callable[[Progress], None], control: JobControl,
-               seen_ll: list | None = None) -> Evaluation:
+               seen_ll: RunningESS | None = None) -> Evaluation:
     from distributed import as_completed
 
     g = st.ensure_batch(root, b, thetas)
@@ -162,8 +182,7 @@ def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.nd
     prog.n_done += already
     if skipped and seen_ll is not None:
         ll = g["loglik"][...]
-        seen_ll.extend(ll[np.repeat(done, cs)[:n]].tolist())
-        prog.ess = ess_of(np.asarray(seen_ll))
+        prog.ess = seen_ll.add(ll[np.repeat(done, cs)[:n]])
     report(prog)
     if todo:
         if control.cancelled.is_set():
@@ -183,8 +202,7 @@ def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.nd
                 prog.n_done += ll.size
                 prog.chunks_computed += 1
                 if seen_ll is not None:
-                    seen_ll.extend(ll.tolist())
-                    prog.ess = ess_of(np.asarray(seen_ll))
+                    prog.ess = seen_ll.add(ll)
                 report(prog)
         except BaseException:
             client.cancel(futs, force=True)
@@ -225,7 +243,7 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
     if isinstance(spec.sampler, ISSettings):
         thetas = draw_prior(problem.prior, spec.sampler.n_samples, spec.seed)
         prog.n_total = thetas.shape[0]
-        _run_batch(client, root, sp, job_id, 0, thetas, evaluator, prog, report, control, seen_ll=[])
+        _run_batch(client, root, sp, job_id, 0, thetas, evaluator, prog, report, control, seen_ll=RunningESS())
         t_sim = time.perf_counter() - t0
         prog.phase = "reducing"
         report(prog)
