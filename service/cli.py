@@ -231,7 +231,7 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option("--param", help=
     """Run one forward simulation (Table 3 values unless overridden) and write its GAW as CSV."""
     from vfcore.config import SimConfig
     from vfcore.params import TABLE3
-    from vfcore.simulate import simulate as sim
+    from vfcore.forward import simulate as sim
     from vfvideo.io import write_gaw_csv
 
     p = TABLE3.replace(**{k: float(v) for k, v in _kv(param, "--param").items()})

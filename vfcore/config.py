@@ -22,6 +22,9 @@ class SimConfig:
     sep_ratio : flow separates where the area first exceeds ``sep_ratio * A_min``.
     p_sup : supraglottal pressure, Pa.
     length_mm : fold length (anterior-posterior), mm; area = length * width.
+    rho_inf : high-frequency spectral radius of the time integrator; 1 = Newmark average
+        acceleration (the paper), < 1 = generalised-alpha with numerical dissipation.
+    half_gap_mm : prephonatory half gap, mm: the midline (contact plane) lies at x0 + half_gap_mm.
     keep_trajectories : also return nodal displacements at the camera rate.
     """
 
@@ -34,6 +37,8 @@ class SimConfig:
     sep_ratio: float = 1.3
     p_sup: float = 0.0
     length_mm: float = 17.0
+    half_gap_mm: float = 0.05
+    rho_inf: float = 1.0
     keep_trajectories: bool = False
 
     def __post_init__(self) -> None:
@@ -49,6 +54,10 @@ class SimConfig:
             raise ValueError(f"config nu (Poisson ratio) must lie in (-1, 0.5), got {self.nu!r}")
         if self.sep_ratio < 1.0:
             raise ValueError(f"config sep_ratio must be >= 1, got {self.sep_ratio!r}")
+        if not (math.isfinite(self.rho_inf) and 0.0 <= self.rho_inf <= 1.0):
+            raise ValueError(f"config rho_inf must lie in [0, 1], got {self.rho_inf!r}")
+        if not (math.isfinite(self.half_gap_mm) and self.half_gap_mm >= 0):
+            raise ValueError(f"config half_gap_mm must be >= 0, got {self.half_gap_mm!r}")
         if not math.isfinite(self.p_sup):
             raise ValueError(f"config p_sup must be finite, got {self.p_sup!r}")
         if self.fps * self.dt > 1.0:

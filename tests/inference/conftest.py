@@ -20,7 +20,7 @@ def synthetic_gaw(f0=120.0, fps=2000.0, n=600, amp=10.0, phase=0.0, noise=0.0, s
 
 
 class FakeSimulator:
-    """Analytic stand-in for ``vfcore.simulate.simulate``: a half-rectified sine whose
+    """Analytic stand-in for ``vfcore.forward.simulate``: a half-rectified sine whose
     frequency follows E_body and amplitude p_sub. Fails (ok=False) for p_sub < 450 and
     raises for E_lig > 2.9, so failure handling is exercised. Picklable."""
 

@@ -16,7 +16,7 @@ ESTIMATED = ("E_body", "p_sub")
 
 def test_fe_twin_recovers_truth_within_2_sigma():
     try:
-        from vfcore.simulate import simulate  # noqa: F401
+        from vfcore.forward import simulate  # noqa: F401
     except ImportError as exc:  # deliberately not a skip: the twin experiment is a requirement
         pytest.fail(f"the FE forward model vfcore.simulate is not available yet (issue 2): {exc}")
 

@@ -7,7 +7,7 @@ import pytest
 
 from svc_helpers import auth, wait_done
 
-pytest.importorskip("vfcore.simulate", reason="FE forward model not available yet")
+pytest.importorskip("vfcore.forward", reason="FE forward model not available yet")
 
 N = 160
 

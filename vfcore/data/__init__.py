@@ -25,7 +25,7 @@ def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
 
     from vfcore.config import SimConfig
     from vfcore.params import TABLE3
-    from vfcore.simulate import simulate
+    from vfcore.forward import simulate
     from vfvideo.io import write_gaw_csv
 
     d = DEMO_TRUTH

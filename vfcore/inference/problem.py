@@ -253,10 +253,10 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None) -> E
     A pure function of its inputs (the unit of work of one worker chunk). A simulation
     that fails (``ok`` False, an exception, non-finite output, or too short to align)
     gets log-likelihood ``-inf`` and a NaN prediction row; its reason is in ``messages``.
-    ``simulate_fn(params, config) -> SimResult`` defaults to ``vfcore.simulate.simulate``.
+    ``simulate_fn(params, config) -> SimResult`` defaults to ``vfcore.forward.simulate``.
     """
     if simulate_fn is None:
-        from vfcore.simulate import simulate as simulate_fn  # lazy: keeps this module importable alone
+        from vfcore.forward import simulate as simulate_fn  # lazy: keeps this module importable alone
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     k = thetas.shape[0]
     max_lag, n_cmp = problem.window

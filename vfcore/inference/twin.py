@@ -35,7 +35,7 @@ def make_twin(prior: Prior, config: SimConfig, seed: int, *, sigma_e: float = 1.
               offset: int = 7, truth=None, simulate_fn: Callable | None = None, max_tries: int = 50) -> Twin:
     """Build a twin data set and its Problem (deterministic in ``seed``)."""
     if simulate_fn is None:
-        from vfcore.simulate import simulate as simulate_fn
+        from vfcore.forward import simulate as simulate_fn
     ss = np.random.SeedSequence(seed)
     rng_truth, rng_noise = (np.random.default_rng(s) for s in ss.spawn(2))
     redraws = 0

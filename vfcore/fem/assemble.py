@@ -1,0 +1,88 @@
+"""P1 plane-strain elasticity, Kelvin-Voigt damping and mass matrices with scikit-fem.
+
+Hadwin et al. (2019), Section 3: linear isotropic plane strain, uniform density,
+Kelvin-Voigt viscosity by replacing mu with mu + eta d/dt. Because lambda and mu are
+both proportional to E at fixed nu, K = sum_layers E_layer * K_layer(E = 1), and the
+damping matrix is D = eta * D1 where D1 is the shear (mu-) part with mu = 1. The mass
+matrix is M = rho * M1. All matrices are per unit depth (N/m, SI).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import Basis, BilinearForm, ElementTriP1, ElementVector, MeshTri, asm
+from skfem.helpers import ddot, div, dot, sym_grad
+
+from ..mesh import FoldMesh
+
+
+@BilinearForm
+def _volumetric(u, v, w):
+    return div(u) * div(v)
+
+
+@BilinearForm
+def _shear(u, v, w):
+    # mu-part of the plane-strain stiffness with mu = 1: 2 eps(u):eps(v)
+    return 2.0 * ddot(sym_grad(u), sym_grad(v))
+
+
+@BilinearForm
+def _mass(u, v, w):
+    return dot(u, v)
+
+
+def lame(E: float, nu: float) -> tuple[float, float]:
+    """Lame parameters (lambda, mu) of Young's modulus E and Poisson ratio nu."""
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+@dataclass(frozen=True)
+class UnitMatrices:
+    """Layer stiffnesses at E = 1, shear damping at eta = 1, mass at rho = 1 (full dofs).
+
+    Dofs are node-interleaved: dof 2*i is x of node i, 2*i + 1 is z.
+    """
+
+    K_layers: tuple[sp.csr_matrix, ...]   # one per layer (body, ligament, cover)
+    D1: sp.csr_matrix
+    M1: sp.csr_matrix
+    nu: float
+
+
+def skfem_mesh(mesh: FoldMesh) -> MeshTri:
+    return MeshTri(mesh.points.T.copy(), mesh.triangles.T.copy())
+
+
+def _interleave_perm(basis: Basis) -> np.ndarray:
+    """perm such that A_interleaved = A[perm][:, perm] (dof 2i -> x of node i)."""
+    nd = basis.nodal_dofs  # (2, n_nodes)
+    perm = np.empty(2 * nd.shape[1], dtype=np.int64)
+    perm[0::2] = nd[0]
+    perm[1::2] = nd[1]
+    return perm
+
+
+def assemble_unit(mesh: FoldMesh, nu: float, n_layers: int = 3) -> UnitMatrices:
+    """Assemble the unit matrices of ``mesh`` at Poisson ratio ``nu``."""
+    if not (-1.0 < nu < 0.5):
+        raise ValueError(f"Poisson ratio nu must lie in (-1, 0.5), got {nu}")
+    m = skfem_mesh(mesh)
+    e = ElementVector(ElementTriP1())
+    full = Basis(m, e)
+    perm = _interleave_perm(full)
+    lam1, mu1 = lame(1.0, nu)
+    K_layers = []
+    for k in range(n_layers):
+        idx = np.nonzero(mesh.layer == k)[0]
+        if idx.size == 0:
+            K_layers.append(sp.csr_matrix((2 * mesh.n_nodes, 2 * mesh.n_nodes)))
+            continue
+        b = Basis(m, e, elements=idx)
+        Kk = lam1 * asm(_volumetric, b) + mu1 * asm(_shear, b)
+        K_layers.append(sp.csr_matrix(Kk)[perm][:, perm])
+    D1 = sp.csr_matrix(asm(_shear, full))[perm][:, perm]
+    M1 = sp.csr_matrix(asm(_mass, full))[perm][:, perm]
+    return UnitMatrices(K_layers=tuple(K_layers), D1=D1, M1=M1, nu=nu)

@@ -1,0 +1,191 @@
+"""Public face of the forward model: ``simulate(params, config) -> SimResult``.
+
+Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in docs/model.md.
+"""
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from .config import SimConfig
+from .measures import estimate_f0
+from .observe import downsample
+from .params import PARAM_NAMES, Params
+from .result import CycleSummary, SimResult
+from .solver import _kernels as kern
+from .solver.system import System, get_system
+
+RHO_AIR = 1.14          # kg/m^3 (issue / paper)
+CLOSED_TOL = 1e-9       # m: a surface node within 1 nm of the midline closes the glottis
+BLOWUP = 1e-2           # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
+
+
+def _params(params) -> Params:
+    if isinstance(params, Params):
+        return params
+    if isinstance(params, dict):
+        return Params.from_dict(params)
+    return Params.from_array(params)
+
+
+def midline(p: Params, config: SimConfig) -> float:
+    """Midline (contact plane) position in m: x0 plus the prephonatory half gap."""
+    return (p.x0 + config.half_gap_mm) * 1e-3
+
+
+def prestress(system: System, K_vals: np.ndarray, x_mid: float) -> tuple[np.ndarray, np.ndarray]:
+    """Static equilibrium with no surface node beyond the midline (medial compression).
+
+    Solves K u = E lambda with the active-set contact of :func:`_kernels.contact_correct`.
+    Returns (u (n,), contact force per surface node (m,), N/m >= 0).
+    """
+    u = np.zeros(system.n)
+    lam = np.zeros(system.sdx.size)
+    if np.all(system.sX <= x_mid):
+        return u, lam
+    Lk = system.factor(K_vals)
+    G = system.contact_columns(Lk)
+    active = np.zeros(system.sdx.size, dtype=np.bool_)
+    it = kern.contact_correct(u, system.sdx, system.sX, x_mid, G, lam, active, 200)
+    if it < 0:
+        raise RuntimeError("static contact (medial compression) did not converge")
+    return u, -lam
+
+
+def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray) -> CycleSummary:
+    """Cycles between successive upward crossings of the mean area (opening phases)."""
+    empty = np.empty(0)
+    level = 0.5 * (gaw.max() + gaw.min())
+    if gaw.max() - gaw.min() < 1e-6:
+        return CycleSummary(empty, empty, empty, empty, empty, empty, empty)
+    up = np.nonzero((gaw[:-1] < level) & (gaw[1:] >= level))[0]
+    if up.size < 2:
+        return CycleSummary(empty, empty, empty, empty, empty, empty, empty)
+    # sub-sample crossing times
+    frac = (level - gaw[up]) / (gaw[up + 1] - gaw[up])
+    tc = t[up] + frac * (t[up + 1] - t[up])
+    per, pk, mn, qf, cm, cx = [], [], [], [], [], []
+    for a, b in zip(up[:-1], up[1:]):
+        sl = slice(a + 1, b + 1)
+        pk.append(gaw[sl].max())
+        mn.append(gaw[sl].min())
+        qf.append(flow[sl].mean())
+        cm.append(cp_max[sl].mean())
+        cx.append(cp_max[sl].max())
+    per = np.diff(tc)
+    return CycleSummary(t_start=tc[:-1], period=per, peak_area=np.array(pk), min_area=np.array(mn),
+                        mean_flow=np.array(qf), mean_contact_pressure=np.array(cm),
+                        max_contact_pressure=np.array(cx))
+
+
+def simulate(params, config: SimConfig | None = None) -> SimResult:
+    """Run one forward simulation.
+
+    Parameters
+    ----------
+    params : Params, dict or array in ``PARAM_NAMES`` order, paper units
+        (E_body kPa, E_cover Pa, E_lig kPa, p_sub Pa, rho kg/m^3, eta Poise, x0 mm).
+    config : SimConfig (numerics, observation).
+
+    Returns
+    -------
+    SimResult at the camera rate over [discard, duration]. A simulation whose state
+    becomes non-finite (or exceeds 1 cm) is returned with ``ok=False``, never as NaNs.
+    """
+    p = _params(params)
+    config = config or SimConfig()
+    t_wall = time.perf_counter()
+    system = get_system(config.mesh, config.nu)
+    si = p.si()
+    h = config.dt
+    n_steps = int(round(config.duration / h))
+    x_mid = midline(p, config)
+    L = config.length_mm * 1e-3
+
+    K_vals = system.stiffness_values((si["E_body"], si["E_lig"], si["E_cover"]))
+    u, lam_static = prestress(system, K_vals, x_mid)
+    cM, cD, cK = kern.effective_scales(h, config.rho_inf)
+    eff = cK * K_vals + cD * si["eta"] * system.d_vals + cM * si["rho"] * system.m_vals
+    Lb = system.factor(eff)
+    G = system.contact_columns(Lb)
+    v = np.zeros(system.n)
+    a = np.zeros(system.n)
+    m = system.sdx.size
+    width = np.zeros(n_steps)
+    gsep = np.zeros(n_steps)
+    lam = np.zeros((n_steps, m))
+    traj_every = 0
+    n_traj = 0
+    if config.keep_trajectories:
+        traj_every = max(1, int(round(1.0 / (config.fps * h))))
+        n_traj = n_steps // traj_every
+    tu = np.zeros((n_traj, system.n))
+    tv = np.zeros((n_traj, system.n))
+    am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
+    status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals,
+                            si["rho"] * system.m_vals,
+                            si["eta"] * system.d_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
+                            u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL, BLOWUP,
+                            width, gsep, lam, traj_every, tu, tv)
+    if status != 0:
+        return SimResult(ok=False, message=f"state diverged at t = {status * h * 1e3:.2f} ms",
+                         params=p, config=config, fps=config.fps, wall_time=time.perf_counter() - t_wall)
+    dp = max(si["p_sub"] - config.p_sup, 0.0)
+    t_all = h * np.arange(1, n_steps + 1)
+    gaw_full = config.length_mm * width * 1e3                    # mm * mm
+    flow_full = 2.0 * L * gsep * math.sqrt(2.0 * dp / RHO_AIR)    # m^3/s
+    w_share = system.mesh.surface_weights()
+    cp_full = lam / np.where(w_share > 0, w_share, np.inf)       # Pa
+    keep = t_all >= config.discard - 1e-12
+    cyc = _cycles(t_all[keep] - config.discard, gaw_full[keep], flow_full[keep], cp_full[keep].max(axis=1))
+    tc, gaw = downsample(t_all, gaw_full, config.fps, config.discard)
+    _, wd = downsample(t_all, width * 1e3, config.fps, config.discard)
+    _, q = downsample(t_all, flow_full, config.fps, config.discard)
+    _, cp = downsample(t_all, cp_full, config.fps, config.discard)
+    _, cf = downsample(t_all, lam, config.fps, config.discard)
+    traj = None
+    if config.keep_trajectories:
+        t_tr = h * traj_every * np.arange(1, n_traj + 1)
+        full = np.zeros((n_traj, 2 * system.mesh.n_nodes))
+        full[:, system.dofs] = tu
+        _, tr = downsample(t_tr, full, config.fps, config.discard)
+        traj = tr.reshape(tr.shape[0], -1, 2) * 1e3
+    del lam_static
+    return SimResult(ok=True, message="ok", params=p, config=config, fps=config.fps, t=tc, gaw=gaw, width=wd,
+                     flow=q, contact_pressure=cp, contact_force=cf, surface_z=system.sZ * 1e3, cycles=cyc,
+                     trajectories=traj, wall_time=time.perf_counter() - t_wall)
+
+
+def _simulate_rows(args):
+    rows, config = args
+    return [simulate(Params.from_array(r), config) for r in rows]
+
+
+def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1) -> list[SimResult]:
+    """Simulate many parameter vectors.
+
+    params : (n, 7) array in ``PARAM_NAMES`` order (paper units), or a list of Params.
+    n_workers : processes to spread the batch over (1 = in this process). Each process
+    runs numba single-threaded (one level of parallelism at a time).
+    """
+    config = config or SimConfig()
+    if isinstance(params, np.ndarray):
+        arr = np.atleast_2d(np.asarray(params, dtype=float))
+        if arr.shape[1] != len(PARAM_NAMES):
+            raise ValueError(f"params must have shape (n, {len(PARAM_NAMES)}), got {arr.shape}")
+    else:
+        arr = np.array([_params(x).as_array() for x in params])
+    if n_workers <= 1 or len(arr) < 2:
+        return _simulate_rows((arr, config))
+    chunks = [c for c in np.array_split(arr, n_workers) if len(c)]
+    with ProcessPoolExecutor(n_workers) as ex:
+        out = list(ex.map(_simulate_rows, [(c, config) for c in chunks]))
+    return [r for part in out for r in part]
+
+
+def observed_f0(result: SimResult) -> float:
+    """f0 (Hz) of a result's camera-rate GAW (autocorrelation), nan if not oscillating."""
+    return estimate_f0(result.gaw, result.fps) if result.ok else float("nan")

@@ -1,0 +1,298 @@
+"""numba kernels of the time integration. Every constant is an argument.
+
+Banded storage: ``Lb[i, k]`` holds ``L[i, i - bw + k]`` for k = 0..bw (k = bw is the
+diagonal); entries left of column 0 are zero.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def band_cholesky(Ab: np.ndarray) -> int:
+    """In-place Cholesky factorisation of a symmetric positive-definite band matrix.
+
+    ``Ab`` (n, bw + 1) lower band (see module docstring). Returns 0, or i + 1 when the
+    leading minor of order i + 1 is not positive definite.
+    """
+    n, w = Ab.shape
+    bw = w - 1
+    for i in range(n):
+        j0 = max(0, i - bw)
+        for j in range(j0, i + 1):
+            s = Ab[i, j - i + bw]
+            k0 = max(j0, j - bw)
+            for k in range(k0, j):
+                s -= Ab[i, k - i + bw] * Ab[j, k - j + bw]
+            if j == i:
+                if not s > 0.0:
+                    return i + 1
+                Ab[i, bw] = np.sqrt(s)
+            else:
+                Ab[i, j - i + bw] = s / Ab[j, bw]
+    return 0
+
+
+@njit(cache=True)
+def band_solve(Lb: np.ndarray, b: np.ndarray) -> None:
+    """Solve (L L^T) x = b in place, L from :func:`band_cholesky`."""
+    n, w = Lb.shape
+    bw = w - 1
+    for i in range(n):
+        s = b[i]
+        j0 = max(0, i - bw)
+        off = bw - i
+        for j in range(j0, i):
+            s -= Lb[i, j + off] * b[j]
+        b[i] = s / Lb[i, bw]
+    for i in range(n - 1, -1, -1):
+        xi = b[i] / Lb[i, bw]
+        b[i] = xi
+        j0 = max(0, i - bw)
+        off = bw - i
+        for j in range(j0, i):
+            b[j] -= Lb[i, j + off] * xi
+
+
+@njit(cache=True)
+def csr_to_band(indptr, indices, data, n, bw, out):
+    """Scatter the lower triangle of a symmetric CSR matrix into band storage ``out``."""
+    out[:, :] = 0.0
+    for i in range(n):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            if j <= i:
+                out[i, j - i + bw] += data[p]
+
+
+@njit(cache=True)
+def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, fx, fz, pres):
+    """Bernoulli pressures along the free surface and the nodal forces they produce.
+
+    xs, zs : (m,) current surface node coordinates (inferior -> superior), m.
+    nxs, nzs : (m,) coordinates whose edges give the load directions (the reference
+        configuration in the small-strain model), m.
+    gap : (m,) half gap to the midline, m (written).
+    Returns (min half gap, half gap at separation, index of closure or -1).
+    Forces are per unit depth (N/m), pointing into the fold.
+    """
+    m = xs.size
+    imin = 0
+    for i in range(m):
+        if gap[i] < gap[imin]:
+            imin = i
+    gmin = gap[imin]
+    dp = p_sub - p_sup
+    iclose = -1
+    gsep = 0.0
+    if gmin <= closed_tol:
+        # closed glottis: p_sub upstream of the first closed node, p_sup downstream
+        for i in range(m):
+            if gap[i] <= closed_tol:
+                iclose = i
+                break
+        for i in range(m):
+            pres[i] = p_sub if i < iclose else p_sup
+    else:
+        gsep = sep_ratio * gmin
+        isep = m
+        for i in range(imin + 1, m):
+            if gap[i] >= gsep:
+                isep = i
+                break
+        for i in range(m):
+            if i < isep:
+                r = gsep / gap[i]
+                pres[i] = p_sub - dp * r * r
+            else:
+                pres[i] = p_sup
+    for i in range(m):
+        fx[i] = 0.0
+        fz[i] = 0.0
+    for i in range(m - 1):
+        ex = nxs[i + 1] - nxs[i]
+        ez = nzs[i + 1] - nzs[i]
+        # pressure on the edge acts along the inward normal: rot90(e) = (-ez, ex);
+        # half of the edge goes to each end node
+        fx[i] += 0.5 * pres[i] * (-ez)
+        fz[i] += 0.5 * pres[i] * ex
+        fx[i + 1] += 0.5 * pres[i + 1] * (-ez)
+        fz[i + 1] += 0.5 * pres[i + 1] * ex
+    return gmin, gsep, iclose
+
+
+@njit(cache=True)
+def contact_correct(u, sdx, sX, x_mid, G, lam, active, max_iter):
+    """Enforce x <= x_mid on free-surface nodes with Lagrange multipliers.
+
+    u : (n,) displacement from the unconstrained solve (corrected in place).
+    G : (n, m) columns K_eff^{-1} e_{x-dof of surface node j} (zero for fixed nodes).
+    lam : (m,) contact force in x on each surface node, N/m (written; <= 0 pushes laterally).
+    active : (m,) work array of booleans.
+    Returns the number of active-set iterations, or -1 if it did not settle.
+    """
+    m = sdx.size
+    any_pen = False
+    for j in range(m):
+        lam[j] = 0.0
+        active[j] = False
+        if sdx[j] >= 0 and sX[j] + u[sdx[j]] > x_mid:
+            active[j] = True
+            any_pen = True
+    if not any_pen:
+        return 0
+    u0 = u.copy()
+    for it in range(max_iter):
+        idx = np.nonzero(active)[0]
+        k = idx.size
+        if k > 0:
+            S = np.empty((k, k))
+            rhs = np.empty(k)
+            for a in range(k):
+                ja = idx[a]
+                rhs[a] = (x_mid - sX[ja]) - u0[sdx[ja]]
+                for b in range(k):
+                    S[a, b] = G[sdx[ja], idx[b]]
+            sol = np.linalg.solve(S, rhs)
+        for j in range(m):
+            lam[j] = 0.0
+        for a in range(k):
+            lam[idx[a]] = sol[a]
+        for i in range(u.size):
+            s = u0[i]
+            for a in range(k):
+                s += G[i, idx[a]] * sol[a]
+            u[i] = s
+        changed = False
+        for j in range(m):
+            if sdx[j] < 0:
+                continue
+            if active[j] and lam[j] > 0.0:       # tensile: release
+                active[j] = False
+                changed = True
+            elif (not active[j]) and sX[j] + u[sdx[j]] > x_mid * (1.0 + 1e-12):
+                active[j] = True
+                changed = True
+        if not changed:
+            return it + 1
+    return -1
+
+
+def newmark_coefficients(h: float, rho_inf: float) -> tuple[float, float, float, float]:
+    """(alpha_m, alpha_f, beta, gamma) of the generalised-alpha method.
+
+    ``rho_inf = 1`` gives the Newmark average-acceleration (trapezoidal) rule of the
+    paper exactly (alpha_m = alpha_f = 0, beta = 1/4, gamma = 1/2); ``rho_inf < 1``
+    the Chung & Hulbert (1993) scheme, second order, unconditionally stable, with
+    high-frequency spectral radius ``rho_inf``.
+    """
+    if rho_inf >= 1.0:
+        return 0.0, 0.0, 0.25, 0.5
+    am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
+    af = rho_inf / (rho_inf + 1.0)
+    return am, af, 0.25 * (1.0 - am + af) ** 2, 0.5 - am + af
+
+
+def effective_scales(h: float, rho_inf: float) -> tuple[float, float, float]:
+    """Factors (cM, cD, cK) with K_eff = cM M + cD D + cK K."""
+    am, af, beta, gamma = newmark_coefficients(h, rho_inf)
+    return (1.0 - am) / (beta * h * h), (1.0 - af) * gamma / (beta * h), 1.0 - af
+
+
+@njit(cache=True)
+def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
+              u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, blowup,
+              width, gsep_out, lam_out, traj_every, traj_u, traj_v):
+    """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
+
+    Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
+    load F is evaluated on the configuration at t_n. State u, v, a (n,) in the solver's
+    dof ordering is advanced in place. Per step k (1..n_steps) writes width[k-1]
+    (2 x min half gap, m), gsep_out[k-1] (half gap at separation, m; 0 when closed)
+    and lam_out[k-1, :] (contact force per surface node, N/m, >= 0). Every
+    ``traj_every`` steps (0 = never) u and v are stored in traj_u/v.
+    Returns 0 on success or the (1-based) step at which the state became non-finite or
+    exceeded ``blowup`` metres.
+    """
+    n = u.size
+    m = sdx.size
+    c0 = 1.0 / (beta * h * h)
+    c2 = 1.0 / (beta * h)
+    c3 = 0.5 / beta - 1.0
+    m_v = (1.0 - am) * c2
+    m_a = (1.0 - am) * c3 - am
+    d_v = -((1.0 - af) * (1.0 - gamma / beta) + af)
+    d_a = -(1.0 - af) * h * (1.0 - 0.5 * gamma / beta)
+    lam_scale = 1.0 / (1.0 - af)
+    y1 = np.empty(n)
+    y2 = np.empty(n)
+    r = np.empty(n)
+    xs = np.empty(m)
+    zs = np.empty(m)
+    gap = np.empty(m)
+    fx = np.empty(m)
+    fz = np.empty(m)
+    pres = np.empty(m)
+    lam = np.empty(m)
+    active = np.zeros(m, dtype=np.bool_)
+    ntr = 0
+    for k in range(1, n_steps + 1):
+        for j in range(m):
+            if sdx[j] >= 0:
+                xs[j] = sX[j] + u[sdx[j]]
+                zs[j] = sZ[j] + u[sdz[j]]
+            else:
+                xs[j] = sX[j]
+                zs[j] = sZ[j]
+            g = x_mid - xs[j]
+            gap[j] = g if g > 0.0 else 0.0
+        surface_loads(xs, zs, sX, sZ, gap, p_sub, p_sup, sep_ratio, closed_tol, fx, fz, pres)
+        for i in range(n):
+            y1[i] = m_v * v[i] + m_a * a[i]
+            y2[i] = d_v * v[i] + d_a * a[i]
+        for i in range(n):
+            s = 0.0
+            for p in range(indptr[i], indptr[i + 1]):
+                j = indices[p]
+                s += mval[p] * y1[j] + dval[p] * y2[j] - kval[p] * u[j]
+            r[i] = s
+        for j in range(m):
+            if sdx[j] >= 0:
+                r[sdx[j]] += fx[j]
+                r[sdz[j]] += fz[j]
+        band_solve(Lb, r)
+        for i in range(n):
+            r[i] += u[i]          # r is now u_{n+1} before contact
+        contact_correct(r, sdx, sX, x_mid, G, lam, active, 50)
+        bad = False
+        for i in range(n):
+            du = r[i] - u[i]
+            an = c0 * du - c2 * v[i] - c3 * a[i]
+            v[i] = v[i] + h * ((1.0 - gamma) * a[i] + gamma * an)
+            a[i] = an
+            u[i] = r[i]
+            if not (abs(u[i]) < blowup):
+                bad = True
+        if bad:
+            return k
+        # inelastic impact: a node held at the midline keeps no normal velocity or
+        # acceleration (the trapezoidal rule would otherwise bounce it back every step)
+        for j in range(m):
+            if active[j]:
+                v[sdx[j]] = 0.0
+                a[sdx[j]] = 0.0
+        gmin = 1e300
+        for j in range(m):
+            xj = sX[j] + (u[sdx[j]] if sdx[j] >= 0 else 0.0)
+            g = x_mid - xj
+            if g < gmin:
+                gmin = g
+            lam_out[k - 1, j] = -lam[j] * lam_scale
+        width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
+        gsep_out[k - 1] = sep_ratio * gmin if gmin > closed_tol else 0.0
+        if traj_every > 0 and k % traj_every == 0 and ntr < traj_u.shape[0]:
+            traj_u[ntr, :] = u
+            traj_v[ntr, :] = v
+            ntr += 1
+    return 0

@@ -1,0 +1,116 @@
+"""The discrete system of one mesh: free dofs, bandwidth-reducing order, matrices.
+
+Built once per (mesh, nu) and cached; per parameter vector only the values of the
+effective stiffness change (K = sum E_l K_l, D = eta D1, M = rho M1 share one sparsity
+pattern), so a simulation costs one band Cholesky plus the time loop.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from ..fem.assemble import assemble_unit
+from ..mesh import FoldMesh, load_mesh
+from . import _kernels as kern
+
+
+@dataclass(frozen=True)
+class System:
+    """Free-dof system in reverse Cuthill-McKee order.
+
+    Attributes
+    ----------
+    mesh : the FoldMesh.
+    dofs : (n,) full (node-interleaved) dof index of each solver dof.
+    indptr, indices : CSR pattern (n x n) shared by all matrices.
+    k_vals : (n_layers, nnz) unit layer stiffness values; d_vals, m_vals : (nnz,).
+    bw : half bandwidth.
+    sdx, sdz : (m,) solver dof of x / z of each surface node (-1 if fixed).
+    sX, sZ : (m,) reference surface coordinates, m.
+    """
+
+    mesh: FoldMesh
+    nu: float
+    dofs: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+    k_vals: np.ndarray
+    d_vals: np.ndarray
+    m_vals: np.ndarray
+    bw: int
+    sdx: np.ndarray
+    sdz: np.ndarray
+    sX: np.ndarray
+    sZ: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.dofs.size
+
+    def matrix(self, vals: np.ndarray) -> sp.csr_matrix:
+        return sp.csr_matrix((vals, self.indices, self.indptr), shape=(self.n, self.n))
+
+    def stiffness_values(self, E_layers) -> np.ndarray:
+        return np.tensordot(np.asarray(E_layers, dtype=float), self.k_vals, axes=1)
+
+    def factor(self, vals: np.ndarray) -> np.ndarray:
+        """Band Cholesky factor of the symmetric matrix with CSR values ``vals``."""
+        Lb = np.empty((self.n, self.bw + 1))
+        kern.csr_to_band(self.indptr, self.indices, vals, self.n, self.bw, Lb)
+        info = kern.band_cholesky(Lb)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"matrix not positive definite (minor {info})")
+        return Lb
+
+    def contact_columns(self, Lb: np.ndarray) -> np.ndarray:
+        """(n, m) columns A^{-1} e_{sdx[j]} for the factored A (zero for fixed nodes)."""
+        m = self.sdx.size
+        G = np.zeros((self.n, m))
+        for j in range(m):
+            if self.sdx[j] >= 0:
+                col = np.zeros(self.n)
+                col[self.sdx[j]] = 1.0
+                kern.band_solve(Lb, col)
+                G[:, j] = col
+        return G
+
+
+def _on_pattern(A: sp.spmatrix, pattern: sp.csr_matrix) -> np.ndarray:
+    A = sp.csr_matrix(A)
+    rows = np.repeat(np.arange(pattern.shape[0]), np.diff(pattern.indptr))
+    return np.asarray(A[rows, pattern.indices]).ravel()
+
+
+def build_system(mesh: FoldMesh, nu: float) -> System:
+    U = assemble_unit(mesh, nu)
+    free_full = np.nonzero(np.repeat(~mesh.fixed, 2))[0]
+    restrict = lambda A: sp.csr_matrix(A)[free_full][:, free_full]  # noqa: E731
+    Ks = [restrict(K) for K in U.K_layers]
+    D1, M1 = restrict(U.D1), restrict(U.M1)
+    graph = sp.csr_matrix(abs(M1) + abs(D1) + sum(abs(K) for K in Ks))
+    order = reverse_cuthill_mckee(graph, symmetric_mode=True)
+    perm = lambda A: sp.csr_matrix(A[order][:, order])  # noqa: E731
+    pattern = perm(graph)
+    pattern.sort_indices()
+    k_vals = np.stack([_on_pattern(perm(K), pattern) for K in Ks])
+    d_vals = _on_pattern(perm(D1), pattern)
+    m_vals = _on_pattern(perm(M1), pattern)
+    coo = pattern.tocoo()
+    bw = int(np.max(np.abs(coo.row - coo.col)))
+    dofs = free_full[order]
+    where = -np.ones(2 * mesh.n_nodes, dtype=np.int64)
+    where[dofs] = np.arange(dofs.size)
+    s = mesh.surface
+    return System(
+        mesh=mesh, nu=nu, dofs=dofs, indptr=pattern.indptr.astype(np.int64),
+        indices=pattern.indices.astype(np.int64), k_vals=k_vals, d_vals=d_vals, m_vals=m_vals, bw=bw,
+        sdx=where[2 * s], sdz=where[2 * s + 1], sX=mesh.points[s, 0].copy(), sZ=mesh.points[s, 1].copy())
+
+
+@lru_cache(maxsize=16)
+def get_system(mesh_name: str, nu: float) -> System:
+    return build_system(load_mesh(mesh_name), nu)
