@@ -34,7 +34,7 @@ def band_cholesky(Ab: np.ndarray) -> int:
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def band_solve(Lb: np.ndarray, b: np.ndarray) -> None:
     """Solve (L L^T) x = b in place, L from :func:`band_cholesky`."""
     n, w = Lb.shape
@@ -200,7 +200,7 @@ def effective_scales(h: float, rho_inf: float) -> tuple[float, float, float]:
     return (1.0 - am) / (beta * h * h), (1.0 - af) * gamma / (beta * h), 1.0 - af
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
               u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
