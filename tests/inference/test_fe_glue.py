@@ -12,7 +12,7 @@ from vfcore.inference import (DegenerateEnsembleWarning, Evaluation, Posterior, 
                               numerics_study, plot_marginals, plot_predictive, predictive_bands, smc)
 from vfcore.params import TABLE3
 
-from conftest import FakeSimulator
+from inf_helpers import FakeSimulator
 
 
 @pytest.fixture(scope="module")

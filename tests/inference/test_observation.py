@@ -4,7 +4,7 @@ import pytest
 from vfcore.config import SimConfig
 from vfcore.inference import Prior, Problem, importance_sample, validate_observation
 
-from conftest import synthetic_gaw
+from inf_helpers import synthetic_gaw
 
 
 class Counting:
