@@ -20,6 +20,7 @@ from .solver.system import System, get_system
 
 RHO_AIR = 1.14          # kg/m^3 (issue / paper)
 CLOSED_TOL = 1e-9       # m: a surface node within 1 nm of the midline closes the glottis
+MIN_CYCLE_AMPLITUDE = 0.05  # mm^2
 BLOWUP = 1e-2           # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
 
 
@@ -59,9 +60,14 @@ def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray
     """Cycles between successive upward crossings of the mean area (opening phases)."""
     empty = np.empty(0)
     level = 0.5 * (gaw.max() + gaw.min())
-    if gaw.max() - gaw.min() < 1e-6:
+    # a flicker below 0.05 mm^2 (a few camera pixels) is no oscillation
+    if gaw.max() - gaw.min() < MIN_CYCLE_AMPLITUDE:
         return CycleSummary(empty, empty, empty, empty, empty, empty, empty)
     up = np.nonzero((gaw[:-1] < level) & (gaw[1:] >= level))[0]
+    if up.size >= 2:
+        # cycles shorter than 1/1000 s (above any phonation f0) are numerical chatter
+        keep = np.concatenate([[True], np.diff(t[up]) > 1e-3])
+        up = up[keep]
     if up.size < 2:
         return CycleSummary(empty, empty, empty, empty, empty, empty, empty)
     # sub-sample crossing times
@@ -130,8 +136,21 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
                             si["eta"] * system.d_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
                             u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL, BLOWUP,
                             width, gsep, lam, traj_every, tu, tv)
+    del lam_static
+    return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall)
+
+
+def _result(p: Params, config: SimConfig, system: System, status: int, width: np.ndarray, gsep: np.ndarray,
+            lam: np.ndarray, traj_every: int, tu: np.ndarray, t_wall: float) -> SimResult:
+    """SimResult from the per-step arrays of one integration (status 0 = ok, else failing step)."""
+    si = p.si()
+    h = config.dt
+    n_steps = width.size
+    n_traj = tu.shape[0]
+    L = config.length_mm * 1e-3
     if status != 0:
-        return SimResult(ok=False, message=f"state diverged at t = {status * h * 1e3:.2f} ms",
+        why = "state diverged" if status > 0 else "contact active set did not settle"
+        return SimResult(ok=False, message=f"{why} at t = {abs(status) * h * 1e3:.2f} ms",
                          params=p, config=config, fps=config.fps, wall_time=time.perf_counter() - t_wall)
     dp = max(si["p_sub"] - config.p_sup, 0.0)
     t_all = h * np.arange(1, n_steps + 1)
@@ -153,7 +172,6 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
         full[:, system.dofs] = tu
         _, tr = downsample(t_tr, full, config.fps, config.discard)
         traj = tr.reshape(tr.shape[0], -1, 2) * 1e3
-    del lam_static
     return SimResult(ok=True, message="ok", params=p, config=config, fps=config.fps, t=tc, gaw=gaw, width=wd,
                      flow=q, contact_pressure=cp, contact_force=cf, surface_z=system.sZ * 1e3, cycles=cyc,
                      trajectories=traj, wall_time=time.perf_counter() - t_wall)

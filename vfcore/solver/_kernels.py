@@ -212,8 +212,8 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
     (2 x min half gap, m), gsep_out[k-1] (half gap at separation, m; 0 when closed)
     and lam_out[k-1, :] (contact force per surface node, N/m, >= 0). Every
     ``traj_every`` steps (0 = never) u and v are stored in traj_u/v.
-    Returns 0 on success or the (1-based) step at which the state became non-finite or
-    exceeded ``blowup`` metres.
+    Returns 0 on success, the (1-based) step at which the state became non-finite or
+    exceeded ``blowup`` metres, or minus the step at which contact did not settle.
     """
     n = u.size
     m = sdx.size
@@ -264,7 +264,8 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
         band_solve(Lb, r)
         for i in range(n):
             r[i] += u[i]          # r is now u_{n+1} before contact
-        contact_correct(r, sdx, sX, x_mid, G, lam, active, 50)
+        if contact_correct(r, sdx, sX, x_mid, G, lam, active, 50) < 0:
+            return -k          # contact active set did not settle: a failure, never silent penetration
         bad = False
         for i in range(n):
             du = r[i] - u[i]
