@@ -54,7 +54,8 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     p_sub, x_mid : (B,); width, gsep_out : (B, n_steps); lam_out : (B, n_steps, m);
     traj_u, traj_v : (B, n_traj, n). status : (B,) int64, in/out: a sample entering with
     status != 0 is skipped; one whose state becomes non-finite or exceeds ``blowup`` at step
-    k gets status k and is frozen (its state zeroed) while the others continue.
+    k gets status k (-k when its contact active set did not settle, as in ``integrate``) and is
+    frozen (its state zeroed) while the others continue.
     """
     n, B = u.shape
     m = sdx.size
@@ -80,6 +81,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     lam = np.zeros((B, m))
     active = np.zeros((B, m), dtype=np.bool_)
     live = np.zeros(B, dtype=np.bool_)
+    unsettled = np.zeros(B, dtype=np.bool_)
     for b in range(B):
         live[b] = status[b] == 0
         if not live[b]:
@@ -133,7 +135,8 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
                 continue
             for i in range(n):
                 rb[i] = r[i, b]
-            contact_correct(rb, sdx, sX, x_mid[b], G[b], lam[b], active[b], 50)
+            if contact_correct(rb, sdx, sX, x_mid[b], G[b], lam[b], active[b], 50) < 0:
+                unsettled[b] = True     # contact did not settle: fails with status -k below
             for i in range(n):
                 r[i, b] = rb[i]
         for i in range(n):
@@ -150,8 +153,8 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
             for i in range(n):
                 if not (abs(u[i, b]) < blowup):
                     bad = True
-            if bad:
-                status[b] = k
+            if unsettled[b] or bad:
+                status[b] = -k if unsettled[b] else k
                 live[b] = False
                 for i in range(n):
                     u[i, b] = 0.0
