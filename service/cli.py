@@ -270,6 +270,11 @@ def demo(out: Annotated[Path, typer.Option(help="output folder")] = Path("demo_o
     console.print(f"wall time {time.perf_counter() - t0:.1f} s; products in {out}/")
 
 
+from .cli_gaw import gaw as _gaw  # noqa: E402  (video -> GAW lives in its own module)
+
+app.command("gaw")(_gaw)
+
+
 def main() -> None:  # console-script entry point
     app()
 
