@@ -1,0 +1,214 @@
+"""vfcore.diagnose: phase-folded residuals, predictive p-values, extensions, evidence ranking.
+
+Synthetic waveforms with analytically known answers; no FE simulation is run."""
+import math
+
+import numpy as np
+import pytest
+
+from vfcore import measures as M
+from vfcore.diagnose import (CATALOGUE, NO_FINDING, PHASES, get, locate, measure_pvalues, phase_labels,
+                             predictive_measures, rank_extensions, residual_removed)
+from vfcore.diagnose import extensions as X
+
+FPS = 4000.0
+
+
+def gaw_like(oq=0.6, amp=10.0, f0=100.0, n_cycles=8, fps=FPS, shift=0.3):
+    """Half-sine pulses of open quotient ``oq`` and zero area in the closed phase."""
+    t = np.arange(int(round(n_cycles * fps / f0))) / fps
+    tau = ((t * f0 + shift) % 1.0) / f0          # time within the cycle
+    to = oq / f0
+    return np.where(tau < to, amp * np.sin(np.pi * tau / to), 0.0)
+
+
+# ------------------------------------------------------------------ locate
+def test_phase_labels_partition_cycle():
+    g = gaw_like()
+    codes, b = phase_labels(g, FPS)
+    assert b.size >= 7
+    inside = codes[b[0]:b[-1]]
+    assert np.all(inside >= 0) and np.all(codes[:b[0]] == -1) and np.all(codes[b[-1]:] == -1)
+    # closed fraction of a cycle ~ 1 - OQ (threshold 5 % of the half-sine: arcsin(0.05)/pi each side)
+    closed = np.mean(inside == 0)
+    assert closed == pytest.approx(0.4 + 0.6 * 2 * math.asin(0.05) / math.pi, abs=0.03)
+    # opening precedes peak precedes closing in each cycle
+    for k in range(b.size - 1):
+        c = codes[b[k]:b[k + 1]]
+        assert np.flatnonzero(c == 1).max() < np.flatnonzero(c == 2).min()
+        assert np.flatnonzero(c == 2).max() < np.flatnonzero(c == 3).min()
+
+
+def test_locate_closed_phase_leak_floor():
+    base = gaw_like()
+    obs = np.maximum(base, 1.0)            # incomplete closure: the area never drops below 1 mm^2
+    rep = locate(obs, np.tile(base, (5, 1)), FPS)
+    assert rep.dominant_phase == "closed"
+    assert rep.energy_share["closed"] > 0.99
+    assert rep.phase_rms["peak"] == pytest.approx(0.0, abs=1e-12)
+    assert sum(rep.energy_share.values()) == pytest.approx(1.0)
+    # folded profile: residual sits in the closed part of the cycle only (> 0 there, 0 near the peak)
+    assert np.all(np.isfinite(rep.fold_mean)) and rep.fold_mean.size == 40
+    assert rep.fold_mean.max() > 0.5 and rep.fold_mean.min() >= -1e-12
+    assert np.sum(np.abs(rep.fold_mean) > 1e-9) < 0.5 * rep.fold_mean.size
+
+
+def test_locate_peak_residual_goes_to_peak():
+    base = gaw_like()
+    pred = np.minimum(base, 9.5)          # prediction clipped below the observed peak
+    rep = locate(base, pred, FPS)
+    assert rep.dominant_phase == "peak"
+    assert rep.energy_share["peak"] > 0.99
+    assert rep.energy_share["closed"] == pytest.approx(0.0, abs=1e-12)
+
+
+# ------------------------------------------------------------------ p-values
+def _ensemble(rng, k):
+    oqs = rng.uniform(0.5, 0.7, k)
+    amps = rng.uniform(8.0, 12.0, k)
+    return np.array([gaw_like(o, a) for o, a in zip(oqs, amps)])
+
+
+def test_pvalues_far_outside_and_inside():
+    rng = np.random.default_rng(1)
+    ens = _ensemble(rng, 100)
+    hi = measure_pvalues(ens, gaw_like(oq=0.9), FPS, names=("open_quotient", "amplitude_mm2"))
+    lo = measure_pvalues(ens, gaw_like(oq=0.3), FPS, names=("open_quotient",))
+    assert hi["open_quotient"].p_upper == 0.0 and hi["open_quotient"].p_two_sided == 0.0
+    assert lo["open_quotient"].p_upper == 1.0 and lo["open_quotient"].p_two_sided == 0.0
+    assert hi["open_quotient"].n_draws == 100
+    # amplitude of the oq=0.9 observation (10) is inside the ensemble's range
+    assert 0.05 < hi["amplitude_mm2"].p_upper < 0.95
+    # an observation from the same generator
+    same = measure_pvalues(ens, _ensemble(np.random.default_rng(7), 1)[0], FPS, names=("open_quotient",))
+    assert 0.05 < same["open_quotient"].p_upper < 0.95
+
+
+def test_pvalues_uniform_under_the_generator():
+    rng = np.random.default_rng(3)
+    ens = _ensemble(rng, 100)
+    draws = predictive_measures(ens, FPS, ("open_quotient",))["open_quotient"]
+    obs = _ensemble(np.random.default_rng(4), 40)
+    p = np.array([np.mean(draws >= M.gaw_measures(o, FPS)["open_quotient"]) for o in obs])
+    assert 0.35 < p.mean() < 0.65
+    assert np.mean((p > 0.05) & (p < 0.95)) > 0.75
+
+
+# ------------------------------------------------------------------ extensions
+def test_leak_raises_minimum_exactly():
+    g = gaw_like()
+    out = get("leak").apply(g, {"leak_mm2": 1.7}, fps=FPS)
+    assert out.min() == pytest.approx(g.min() + 1.7, abs=1e-12)
+    np.testing.assert_allclose(out - g, 1.7)
+    assert M.glottal_gap_index(out, FPS) > 0.1 > M.glottal_gap_index(g, FPS)
+    with pytest.raises(ValueError):
+        get("leak").apply(g, {"leak_mm2": 5.0}, fps=FPS)   # outside its 0-3 mm^2 prior
+
+
+def test_leak_flow_bernoulli():
+    q = X.leak_flow(2.0, 800.0)
+    assert q == pytest.approx(2e-6 * math.sqrt(2 * 800.0 / X.RHO_AIR))
+
+
+def test_exposure_sinc_factor():
+    fps, f, n = 2000.0, 500.0, 400           # 100 whole periods
+    t = np.arange(n) / fps
+    x = np.sin(2 * np.pi * f * t + 0.3)
+    for e in (0.25, 0.5, 1.0):
+        y = X.apply_exposure(x, fps, e, edge="periodic")
+        np.testing.assert_allclose(y, np.sinc(f * e / fps) * x, atol=1e-10)
+    # default (reflected ends) is close in the interior
+    y = get("exposure").apply(x, {"exposure_fraction": 1.0}, fps=fps)
+    mid = slice(n // 4, 3 * n // 4)
+    np.testing.assert_allclose(y[mid], np.sinc(f / fps) * x[mid], atol=0.03)
+    assert np.sinc(f / fps) < 0.91    # the factor is not trivially 1
+
+
+def test_scale_scales_area_measures_only():
+    g = gaw_like() + 0.5
+    m0 = M.gaw_measures(g, FPS)
+    m1 = M.gaw_measures(get("scale").apply(g, {"scale": 1.15}, fps=FPS), FPS)
+    for k in ("min_area_mm2", "max_area_mm2", "amplitude_mm2"):
+        assert m1[k] == pytest.approx(1.15 * m0[k], rel=1e-12)
+    for k in ("open_quotient", "speed_quotient", "closing_quotient", "naq", "amplitude_quotient_s",
+              "glottal_gap_index", "hrf_db", "f0_hz"):
+        assert m1[k] == pytest.approx(m0[k], rel=1e-9, abs=1e-12)
+
+
+def test_frame_rate_scales_f0():
+    fps = 4000.0
+    t = np.arange(1600) / fps
+    x = np.sin(2 * np.pi * 120.0 * t)
+    y = get("frame_rate").apply(x, {"rate_ratio": 1.05}, fps=fps)
+    assert M.estimate_f0(y, fps) == pytest.approx(120.0 / 1.05, rel=5e-3)
+
+
+def test_sep_ratio_resimulates_with_config():
+    from vfcore import Params, SimConfig
+    from vfcore.params import PARAM_NAMES
+    seen = {}
+
+    class Base:
+        params = Params(**dict(zip(PARAM_NAMES, (12.15, 636.2, 1.808, 989.9, 1051, 3.079, 8.4))))
+        config = SimConfig(sep_ratio=1.3)
+
+    def fake_sim(p, cfg):
+        seen["cfg"] = cfg
+        return "sim"
+
+    assert get("sep_ratio").apply(Base(), {"sep_ratio": 1.5}, simulate_fn=fake_sim) == "sim"
+    assert seen["cfg"].sep_ratio == 1.5 and seen["cfg"].mesh == Base.config.mesh
+
+
+def test_catalogue_structural_not_implemented():
+    for name in ("epithelium", "zipper", "subglottal", "asymmetry"):
+        e = CATALOGUE[name]
+        assert not e.implemented and e.kind == "structural"
+        with pytest.raises(NotImplementedError):
+            e.apply(np.zeros(10), {p.name: p.lo for p in e.params}, fps=FPS)
+    for e in CATALOGUE.values():
+        assert set(e.phases) <= set(PHASES) and e.params
+        assert all(p.lo < p.hi for p in e.params)
+        assert set(e.measures) <= set(M.gaw_measures(gaw_like(), FPS))
+    assert "leak" in X.matching(phase="closed")
+
+
+# ------------------------------------------------------------------ rank
+class _Post:
+    def __init__(self, z, se):
+        self.log_evidence, self.log_evidence_se = z, se
+
+
+def test_rank_no_finding_within_noise():
+    rep = rank_extensions(_Post(-100.0, 0.5), {"leak": _Post(-99.0, 0.5), "scale": _Post(-101.0, 0.4)})
+    assert rep.winner is None and rep.verdict == NO_FINDING
+    # a large gain that is Monte Carlo noise is not a finding either
+    rep = rank_extensions((-100.0, 3.0), {"leak": (-94.0, 3.0)})
+    assert rep.winner is None and rep.rows[0].delta == pytest.approx(6.0)
+    assert rep.rows[0].delta_se == pytest.approx(math.sqrt(18.0))
+
+
+def test_rank_names_large_gain():
+    rep = rank_extensions(_Post(-100.0, 0.3), {"scale": _Post(-98.0, 0.3), "leak": _Post(-80.0, 0.4),
+                                               "exposure": _Post(-95.0, 0.3)},
+                          residual={"leak": 0.9})
+    assert rep.winner == "leak"
+    assert [r.name for r in rep.rows] == ["leak", "exposure", "scale"]
+    assert rep.rows[0].delta_se == pytest.approx(0.5)
+    assert "leak" in rep.verdict and "90 %" in rep.verdict
+    assert rep.rows[1].found and not rep.rows[2].found    # exposure: d = 5 > 3 and > 3 * 0.42
+
+
+def test_rank_missing_se_never_found():
+    rep = rank_extensions((-100.0, math.nan), {"leak": (-50.0, 0.1)})
+    assert rep.winner is None and rep.notes
+
+
+def test_residual_removed_by_leak_extension():
+    base = gaw_like()
+    obs = base + 1.2
+    before = locate(obs, base, FPS)
+    after = locate(obs, get("leak").apply(base, {"leak_mm2": 1.2}, fps=FPS), FPS)
+    assert residual_removed(before, after) == pytest.approx(1.0)
+    worse = locate(obs, base - 1.0, FPS)
+    assert residual_removed(before, worse) < 0

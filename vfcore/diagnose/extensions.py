@@ -1,0 +1,245 @@
+"""Catalogue of left-out physics: optional model extensions, their priors and GAW signatures.
+
+Each :class:`Extension` has extra parameters with uniform physical priors (:class:`ExtParam`,
+bounds and source), the GAW signature it explains (phases of :mod:`.locate` and measures of
+:mod:`vfcore.measures`), and an ``apply(base, theta, fps=...)`` mapping a base simulation
+(:class:`vfcore.result.SimResult` or a GAW array) to the extended observation.
+
+Kinds:
+
+- ``observation`` (implemented): act on the simulated GAW only — leak area, camera scale
+  error, exposure averaging, frame-rate mismatch.
+- ``forward`` (implemented): a forward-model parameter, re-simulated — ``sep_ratio``
+  (``SimConfig(sep_ratio=...)``).
+- ``structural`` (NOT implemented, ``implemented=False``; ``apply`` raises
+  ``NotImplementedError``): epithelium layer, anterior–posterior zipper, subglottal
+  resonator, left–right asymmetry. They are listed so that the ranking can name what a
+  signature *would* point to, but they cannot be fitted yet.
+
+Sources and prior ranges are in ``docs/diagnose.md``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
+           "apply_exposure", "apply_frame_rate", "leak_flow", "RHO_AIR"]
+
+#: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
+RHO_AIR = 1.14
+
+
+@dataclass(frozen=True)
+class ExtParam:
+    name: str
+    lo: float
+    hi: float
+    unit: str
+    source: str
+
+
+@dataclass(frozen=True)
+class Extension:
+    name: str
+    kind: str                      # "observation" | "forward" | "structural"
+    params: tuple[ExtParam, ...]
+    phases: tuple[str, ...]        # phases of .locate where its residual lives
+    measures: tuple[str, ...]      # gaw_measures keys it moves
+    signature: str                 # in words
+    implemented: bool
+    _apply: Callable | None = field(default=None, repr=False)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.params)
+
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        return {p.name: (p.lo, p.hi) for p in self.params}
+
+    def sample_prior(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        lo = np.array([p.lo for p in self.params])
+        hi = np.array([p.hi for p in self.params])
+        return lo + (hi - lo) * rng.random((n, len(self.params)))
+
+    def apply(self, base, theta, fps: float | None = None, **kw):
+        """Extended observation of ``base`` (SimResult or GAW array) for parameters ``theta``
+        (mapping name -> value, or a sequence in ``param_names`` order)."""
+        if not self.implemented or self._apply is None:
+            raise NotImplementedError(
+                f"extension {self.name!r} ({self.kind}) is catalogued but not implemented: it needs a change to "
+                "the forward model (see docs/diagnose.md)")
+        th = dict(theta) if isinstance(theta, dict) else dict(zip(self.param_names, np.atleast_1d(theta)))
+        missing = set(self.param_names) - set(th)
+        if missing:
+            raise ValueError(f"extension {self.name!r} missing parameters {sorted(missing)}")
+        for p in self.params:
+            v = float(th[p.name])
+            if not (p.lo <= v <= p.hi):
+                raise ValueError(f"{p.name}={v} outside its prior [{p.lo}, {p.hi}] {p.unit}")
+        return self._apply(base, th, fps, **kw)
+
+
+def _gaw_fps(base, fps):
+    if hasattr(base, "gaw"):
+        return np.asarray(base.gaw, dtype=float), float(fps if fps is not None else base.fps)
+    if fps is None:
+        raise ValueError("fps is required when base is a GAW array")
+    return np.asarray(base, dtype=float), float(fps)
+
+
+# ---------------------------------------------------------------- observation-level operators
+def apply_leak(gaw, leak_mm2: float) -> np.ndarray:
+    """Posterior-gap / incomplete-closure leak: a constant parallel area added to the GAW."""
+    return np.asarray(gaw, dtype=float) + float(leak_mm2)
+
+
+def leak_flow(leak_mm2: float, p_sub_pa, rho: float = RHO_AIR):
+    """Bernoulli flow through a rigid leak of area A at transglottal pressure p, m^3/s:
+    ``Q = A sqrt(2 p / rho)`` (Zañartu et al. 2014: the posterior gap carries DC flow)."""
+    return float(leak_mm2) * 1e-6 * np.sqrt(2.0 * np.maximum(np.asarray(p_sub_pa, dtype=float), 0.0) / rho)
+
+
+def apply_scale(gaw, scale: float) -> np.ndarray:
+    """Camera calibration (px -> mm^2) error: multiplicative area scale."""
+    return np.asarray(gaw, dtype=float) * float(scale)
+
+
+def apply_exposure(gaw, fps: float, exposure_fraction: float, edge: str = "reflect") -> np.ndarray:
+    """Exposure averaging: each frame is the mean of the area over a centred exposure window of
+    ``tau = exposure_fraction / fps`` seconds.
+
+    A centred boxcar of width ``tau`` has transfer function ``sinc(f tau)`` (numpy's normalised
+    sinc) and zero phase; it is applied in the frequency domain to the band-limited (trigonometric)
+    interpolant of the frames. ``edge="periodic"`` treats the record as one period of a periodic
+    signal: exact when it holds whole periods (a sine's amplitude is multiplied by exactly
+    ``sinc(f tau)``). ``edge="reflect"`` (default, for arbitrary records) even-reflects the record
+    to length 2n first so the periodic extension has no jump at the ends; then the result is
+    approximate near the ends (a kink remains in the derivative).
+    """
+    x = np.asarray(gaw, dtype=float)
+    tau = float(exposure_fraction) / float(fps)
+    if tau == 0 or x.size < 2:
+        return x.copy()
+    if edge not in ("reflect", "periodic"):
+        raise ValueError(f"edge must be 'reflect' or 'periodic', got {edge!r}")
+    ext = np.concatenate([x, x[::-1]]) if edge == "reflect" else x
+    f = np.fft.rfftfreq(ext.size, d=1.0 / fps)
+    y = np.fft.irfft(np.fft.rfft(ext) * np.sinc(f * tau), n=ext.size)
+    return y[: x.size]
+
+
+def apply_frame_rate(gaw, fps: float, rate_ratio: float) -> np.ndarray:
+    """Frame-rate mismatch: the true frame rate is ``rate_ratio * fps`` while the recording is
+    labelled ``fps``. A simulation sampled at the labelled rate, y(t_k), is seen by such a camera as
+    ``y(t_k / rate_ratio)`` (linear interpolation; frames beyond the simulated span hold the last
+    value). rate_ratio > 1: the recording looks slower (apparent f0 = f0 / rate_ratio)."""
+    x = np.asarray(gaw, dtype=float)
+    t = np.arange(x.size) / fps
+    return np.interp(t / float(rate_ratio), t, x)
+
+
+def _obs_apply(fn):
+    def wrapped(base, th, fps, **kw):
+        g, f = _gaw_fps(base, fps)
+        return fn(g, f, th)
+    return wrapped
+
+
+def _leak(base, th, fps, **kw):
+    """GAW + leak; for a SimResult also returns flow + Bernoulli leak flow (p_sub of its params)."""
+    g, f = _gaw_fps(base, fps)
+    out = apply_leak(g, th["leak_mm2"])
+    if hasattr(base, "flow") and hasattr(base, "params") and getattr(base, "flow").size:
+        q = np.asarray(base.flow, dtype=float) + leak_flow(th["leak_mm2"], base.params.p_sub - base.config.p_sup)
+        return {"gaw": out, "flow": q}
+    return out
+
+
+def _sep(base, th, fps, simulate_fn=None, **kw):
+    """Re-simulate ``base`` (a SimResult) with ``SimConfig(sep_ratio=...)``."""
+    if not hasattr(base, "params") or not hasattr(base, "config"):
+        raise TypeError("sep_ratio is a forward-model extension: pass the base SimResult")
+    if simulate_fn is None:
+        from ..forward import simulate as simulate_fn
+    cfg = dataclasses.replace(base.config, sep_ratio=float(th["sep_ratio"]))
+    return simulate_fn(base.params, cfg)
+
+
+def _structural(name, phases, measures, signature, params):
+    return Extension(name, "structural", params, phases, measures, signature, implemented=False)
+
+
+CATALOGUE: dict[str, Extension] = {e.name: e for e in [
+    Extension(
+        "leak", "observation",
+        (ExtParam("leak_mm2", 0.0, 3.0, "mm^2",
+                  "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)"),),
+        ("closed",), ("min_area_mm2", "glottal_gap_index", "open_quotient", "closing_quotient"),
+        "area floor above zero during the closed phase; GGI > 0; DC flow", True, _leak),
+    Extension(
+        "scale", "observation",
+        (ExtParam("scale", 0.8, 1.2, "-",
+                  "px-to-mm calibration error of laryngoscopic images (+-20 %; Deng, Hadwin & Peterson 2019)"),),
+        ("peak", "opening", "closing"), ("amplitude_mm2", "min_area_mm2", "max_area_mm2"),
+        "residual proportional to the GAW itself (largest at the peak); timing quotients unchanged", True,
+        _obs_apply(lambda g, f, th: apply_scale(g, th["scale"]))),
+    Extension(
+        "exposure", "observation",
+        (ExtParam("exposure_fraction", 0.0, 1.0, "-",
+                  "exposure time / frame interval, at most 1 (Deng, Hadwin & Peterson 2019)"),),
+        ("peak", "closed"), ("amplitude_mm2", "hrf_db", "naq", "amplitude_quotient_s", "speed_quotient"),
+        "peaks lowered and corners rounded (low-pass sinc(f tau)); HRF falls, closing slope shallower", True,
+        _obs_apply(lambda g, f, th: apply_exposure(g, f, th["exposure_fraction"]))),
+    Extension(
+        "frame_rate", "observation",
+        (ExtParam("rate_ratio", 0.9, 1.1, "-",
+                  "true/labelled frame rate, +-10 % (chosen bound; Deng, Hadwin & Peterson 2019 study fps)"),),
+        ("opening", "closing"), ("f0_hz", "period_s"),
+        "f0 offset; residual grows along the record as the phases drift (antisymmetric at edges)", True,
+        _obs_apply(lambda g, f, th: apply_frame_rate(g, f, th["rate_ratio"]))),
+    Extension(
+        "sep_ratio", "forward",
+        (ExtParam("sep_ratio", 1.0, 1.6, "-",
+                  "separation where A >= sep_ratio * A_min; range of empirical separation criteria "
+                  "(Pelorson et al. 1994, JASA); default 1.3 here; JASA-EL 2021 flow-model selection"),),
+        ("opening", "closing"), ("speed_quotient", "closing_quotient", "naq", "f0_hz", "amplitude_mm2"),
+        "GAW skew (opening vs closing asymmetry) and amplitude; driving-pressure timing", True, _sep),
+    _structural("epithelium", ("closing", "closed"), ("closing_quotient", "naq", "hrf_db"),
+                "stiffer thin surface layer: sharper closure, more high-frequency energy",
+                (ExtParam("E_epith_kpa", 10.0, 100.0, "kPa", "epithelium stiffness (literature range, TBD)"),
+                 ExtParam("h_epith_mm", 0.02, 0.1, "mm", "epithelium thickness (literature range, TBD)"))),
+    _structural("zipper", ("opening", "closing"), ("speed_quotient", "closing_quotient", "glottal_gap_index"),
+                "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
+                (ExtParam("ap_phase_lag", 0.0, 0.3, "cycles", "A-P phase difference (TBD)"),)),
+    _structural("subglottal", ("opening", "peak", "closing"), ("hrf_db", "f0_hz", "shr"),
+                "ripple at the subglottal resonance (~500-700 Hz) superposed on the GAW; f0 entrainment",
+                (ExtParam("f_sub_hz", 400.0, 800.0, "Hz", "first subglottal resonance (TBD)"),)),
+    _structural("asymmetry", ("opening", "closing", "closed"), ("shr", "shimmer", "jitter", "glottal_gap_index"),
+                "left-right tension imbalance: phase lag between folds, subharmonics / cycle modulation",
+                (ExtParam("Q_asym", 0.5, 1.5, "-", "left/right stiffness ratio (TBD)"),)),
+]}
+
+
+def get(name: str) -> Extension:
+    try:
+        return CATALOGUE[name]
+    except KeyError:
+        raise KeyError(f"unknown extension {name!r}; known: {sorted(CATALOGUE)}") from None
+
+
+def implemented(kind: str | None = None) -> list[str]:
+    return [n for n, e in CATALOGUE.items() if e.implemented and (kind is None or e.kind == kind)]
+
+
+def matching(phase: str | None = None, measures=()) -> list[str]:
+    """Catalogue entries whose signature covers ``phase`` and/or any of ``measures`` (candidate list)."""
+    out = []
+    for n, e in CATALOGUE.items():
+        if (phase is None or phase in e.phases) and (not measures or set(measures) & set(e.measures)):
+            out.append(n)
+    return out
