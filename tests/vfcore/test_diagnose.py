@@ -212,3 +212,26 @@ def test_residual_removed_by_leak_extension():
     assert residual_removed(before, after) == pytest.approx(1.0)
     worse = locate(obs, base - 1.0, FPS)
     assert residual_removed(before, worse) < 0
+
+
+def _posterior(pred_gaws, obs, logz, se, names=("E_body",)):
+    from vfcore.inference import Evaluation, Posterior
+    k = pred_gaws.shape[0]
+    ev = Evaluation(loglik=np.zeros(k), ok=np.ones(k, bool), gaw=pred_gaws.astype(np.float32))
+    return Posterior.from_weighted(names, np.arange(k * len(names), dtype=float).reshape(k, len(names)),
+                                   np.zeros(k), rng=np.random.default_rng(0), log_evidence=logz,
+                                   log_evidence_se=se, check=False, predictive=ev, obs_gaw=obs, fps=FPS)
+
+
+def test_compare_fits_from_posteriors():
+    from vfcore.diagnose import compare_fits, from_posterior
+    base = gaw_like()
+    obs = np.maximum(base, 1.0)
+    p0 = _posterior(np.tile(base, (20, 1)), obs, -200.0, 0.3)
+    p1 = _posterior(np.tile(np.maximum(base, 1.0), (20, 1)), obs, -150.0, 0.3, names=("E_body", "leak_mm2"))
+    rep, pv = from_posterior(p0)
+    assert rep.dominant_phase == "closed"
+    assert pv["min_area_mm2"].p_upper == 0.0 and pv["glottal_gap_index"].p_two_sided == 0.0
+    r = compare_fits(p0, {"leak": p1})
+    assert r.winner == "leak" and r.rows[0].n_extra == 1
+    assert r.rows[0].residual_removed == pytest.approx(1.0, abs=1e-6)
