@@ -21,14 +21,13 @@ Sources and prior ranges are in ``docs/diagnose.md``.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 __all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
-           "apply_exposure", "apply_frame_rate", "leak_flow", "RHO_AIR"]
+           "apply_exposure", "apply_frame_rate", "leak_flow", "RHO_AIR", "matching"]
 
 #: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
 RHO_AIR = 1.14
