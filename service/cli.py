@@ -261,7 +261,8 @@ def demo(out: Annotated[Path, typer.Option(help="output folder")] = Path("demo_o
             console.print(f"[red]{DEMO_GAW} missing and the FE model is not available ({exc})[/red]")
             raise typer.Exit(1) from None
     spec = JobSpec.model_validate(demo_spec_dict(sampler={**DEMO_SMC, "n_particles": particles}))
-    console.print(f"demo: SMC with {particles} particles (~{35 * particles} FE simulations ({spec.mesh} mesh, dt={spec.dt} s) against "
+    console.print(f"demo: SMC with {particles} particles, ~{35 * particles} FE simulations ({spec.mesh} mesh, "
+                  f"dt={spec.dt} s) against "
                   f"{DEMO_GAW.name} (synthetic: the same model at Table 3 values + noise) "
                   f"on {workers} local workers")
     t0 = time.perf_counter()
