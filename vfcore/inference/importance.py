@@ -52,6 +52,22 @@ def batch_function(target) -> Callable:
     raise ValueError(f"target must be a Problem or a callable thetas -> logliks, got {type(target).__name__}")
 
 
+def resolve_target(target, prior: Prior | None) -> tuple[Prior, np.ndarray | None, float | None, Callable]:
+    """(prior, compared observation, fps, batch log-likelihood) of a sampler's target.
+
+    A ``Problem`` supplies its own prior (unless one is given) and observation; a plain
+    log-likelihood callable needs ``prior`` and has no observation.
+    """
+    if isinstance(target, Problem):
+        prior = target.prior if prior is None else prior
+        obs, fps = target.obs_compared, target.fps
+    else:
+        obs, fps = None, None
+    if prior is None:
+        raise ValueError("a prior is needed when the target is a plain log-likelihood function")
+    return prior, obs, fps, batch_function(target)
+
+
 def map_evaluate(fn: Callable, thetas: np.ndarray, map: Callable = map, chunk_size: int = 256) -> Evaluation:
     """Evaluate ``fn`` on ``thetas`` in chunks through the given ``map``; concatenated Evaluation."""
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
@@ -102,14 +118,7 @@ def importance_sample(target, prior: Prior | None = None, n: int = DEFAULT_DRAWS
     (then ``prior`` is required). ``map`` runs the chunks (builtin ``map``, a process pool's
     ``map``, or a Dask-backed callable). Deterministic for a given ``seed``.
     """
-    if isinstance(target, Problem):
-        prior = target.prior if prior is None else prior
-        obs, fps = target.obs_compared, target.fps
-    else:
-        obs, fps = None, None
-    if prior is None:
-        raise ValueError("a prior is needed when the target is a plain log-likelihood function")
-    fn = batch_function(target)
+    prior, obs, fps, fn = resolve_target(target, prior)
     thetas = draw_prior(prior, n, seed)
     ev = map_evaluate(fn, thetas, map=map, chunk_size=chunk_size)
     post = reduce_importance(thetas, ev, prior.names, seed, n_resample=n_resample, ess_min=ess_min,

@@ -32,10 +32,10 @@ from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 
 from .diagnostics import DegenerateEnsembleWarning, systematic_resample
-from .importance import batch_function, map_evaluate
+from .importance import map_evaluate, resolve_target
 from .posterior import Posterior
 from .prior import Prior
-from .problem import Evaluation, Problem
+from .problem import Evaluation
 
 _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL = 0, 1, 2, 3, 4
 
@@ -325,14 +325,7 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
     and ``log_evidence`` (its ``log_evidence_se`` is the delta-method error summed over
     generations, ignoring the particle dependence: a rough lower bound).
     """
-    if isinstance(target, Problem):
-        prior = target.prior if prior is None else prior
-        obs, fps = target.obs_compared, target.fps
-    else:
-        obs, fps = None, None
-    if prior is None:
-        raise ValueError("a prior is needed when the target is a plain log-likelihood function")
-    fn = batch_function(target)
+    prior, obs, fps, fn = resolve_target(target, prior)
     sampler = SMCSampler(prior, n_particles, seed, **options)
     while (th := sampler.ask()) is not None:
         sampler.tell(map_evaluate(fn, th, map=map, chunk_size=chunk_size))

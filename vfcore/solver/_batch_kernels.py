@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import contact_correct, surface_loads
+from ._kernels import contact_correct, step_coefficients, surface_loads
 
 
 @njit(cache=True, fastmath=True)
@@ -59,14 +59,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     """
     n, B = u.shape
     m = sdx.size
-    c0 = 1.0 / (beta * h * h)
-    c2 = 1.0 / (beta * h)
-    c3 = 0.5 / beta - 1.0
-    m_v = (1.0 - am) * c2
-    m_a = (1.0 - am) * c3 - am
-    d_v = -((1.0 - af) * (1.0 - gamma / beta) + af)
-    d_a = -(1.0 - af) * h * (1.0 - 0.5 * gamma / beta)
-    lam_scale = 1.0 / (1.0 - af)
+    c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, am, af, beta, gamma)
     y1 = np.empty((n, B))
     y2 = np.empty((n, B))
     r = np.empty((n, B))

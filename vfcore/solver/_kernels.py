@@ -200,6 +200,22 @@ def effective_scales(h: float, rho_inf: float) -> tuple[float, float, float]:
     return (1.0 - am) / (beta * h * h), (1.0 - af) * gamma / (beta * h), 1.0 - af
 
 
+@njit(cache=True)
+def step_coefficients(h, am, af, beta, gamma):
+    """Per-step constants of the incremental generalised-alpha update (see ``integrate``).
+
+    Returns (c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale): a_{n+1} = c0 du - c2 v - c3 a;
+    y1 = m_v v + m_a a (multiplies M), y2 = d_v v + d_a a (multiplies D); the contact
+    multiplier of the alpha-weighted equation divided by (1 - af) is the force at t_{n+1}.
+    """
+    c0 = 1.0 / (beta * h * h)
+    c2 = 1.0 / (beta * h)
+    c3 = 0.5 / beta - 1.0
+    return (c0, c2, c3, (1.0 - am) * c2, (1.0 - am) * c3 - am,
+            -((1.0 - af) * (1.0 - gamma / beta) + af), -(1.0 - af) * h * (1.0 - 0.5 * gamma / beta),
+            1.0 / (1.0 - af))
+
+
 @njit(cache=True, fastmath=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
               u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, blowup,
@@ -217,14 +233,7 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
     """
     n = u.size
     m = sdx.size
-    c0 = 1.0 / (beta * h * h)
-    c2 = 1.0 / (beta * h)
-    c3 = 0.5 / beta - 1.0
-    m_v = (1.0 - am) * c2
-    m_a = (1.0 - am) * c3 - am
-    d_v = -((1.0 - af) * (1.0 - gamma / beta) + af)
-    d_a = -(1.0 - af) * h * (1.0 - 0.5 * gamma / beta)
-    lam_scale = 1.0 / (1.0 - af)
+    c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, am, af, beta, gamma)
     y1 = np.empty(n)
     y2 = np.empty(n)
     r = np.empty(n)
