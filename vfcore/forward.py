@@ -14,7 +14,7 @@ from .config import SimConfig
 from .measures import estimate_f0
 from .observe import downsample
 from .params import PARAM_NAMES, Params
-from .result import CycleSummary, SimResult
+from .result import HR_OVERSAMPLE, CycleSummary, SimResult
 from .solver import _kernels as kern
 from .solver.system import System, get_system
 
@@ -161,6 +161,8 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
     keep = t_all >= config.discard - 1e-12
     cyc = _cycles(t_all[keep] - config.discard, gaw_full[keep], flow_full[keep], cp_full[keep].max(axis=1))
     tc, gaw = downsample(t_all, gaw_full, config.fps, config.discard)
+    _, gaw_hr = downsample(t_all, gaw_full, config.fps * HR_OVERSAMPLE, config.discard)
+    gaw_hr = gaw_hr[: HR_OVERSAMPLE * (gaw.size - 1) + 1]
     _, wd = downsample(t_all, width * 1e3, config.fps, config.discard)
     _, q = downsample(t_all, flow_full, config.fps, config.discard)
     _, cp = downsample(t_all, cp_full, config.fps, config.discard)
@@ -174,7 +176,7 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
         traj = tr.reshape(tr.shape[0], -1, 2) * 1e3
     return SimResult(ok=True, message="ok", params=p, config=config, fps=config.fps, t=tc, gaw=gaw, width=wd,
                      flow=q, contact_pressure=cp, contact_force=cf, surface_z=system.sZ * 1e3, cycles=cyc,
-                     trajectories=traj, wall_time=time.perf_counter() - t_wall)
+                     trajectories=traj, wall_time=time.perf_counter() - t_wall, gaw_hr=gaw_hr)
 
 
 def _simulate_rows(args):

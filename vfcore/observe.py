@@ -52,13 +52,24 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int) -> tuple[int, int]
 
 
 def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,
-          ) -> tuple[np.ndarray, np.ndarray, int]:
+          sim_hr: np.ndarray | None = None, oversample: int | None = None,
+          ) -> tuple[np.ndarray, np.ndarray, float]:
     """Phase-align a simulated GAW to an observed one.
 
-    The first two observed cycles are cross-correlated with the simulation over lags
-    0..max_lag; the best lag picks the simulated segment.
+    The first two observed cycles (the template) are cross-correlated with the simulation
+    over lags 0..max_lag frames; the best lag picks the simulated segment.
 
-    Returns (sim_segment, obs_segment, lag), both segments of length ``n_compare``.
+    Without ``sim_hr`` the lag is a whole number of frames. With ``sim_hr`` (the same
+    simulated GAW sampled ``oversample`` times faster from the same start, e.g.
+    :attr:`vfcore.result.SimResult.gaw_hr`) the lag is refined below one frame: the
+    correlation is evaluated on the fine grid within one frame of the best whole lag, its
+    maximum is refined by a parabola through the three best fine lags, and the segment is
+    read from ``sim_hr`` at the fractional lag by linear interpolation. The aligned segment
+    then varies continuously with the model parameters; a whole-frame lag jumps by 1/fps
+    (a twelfth of a cycle at 64 Hz and 2000 fps), which makes the likelihood of a narrow
+    posterior discontinuous (docs/inference.md, "Sub-frame alignment").
+
+    Returns (sim_segment, obs_segment, lag in frames), segments of length ``n_compare``.
     """
     sim = np.asarray(sim, dtype=float)
     obs = np.asarray(obs, dtype=float)
@@ -72,4 +83,29 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
         c = float(np.dot(seg - seg.mean(), tmpl))
         if c > best:
             best, best_lag = c, lag
-    return sim[best_lag:best_lag + n_cmp], obs[:n_cmp], best_lag
+    if sim_hr is None:
+        return sim[best_lag:best_lag + n_cmp], obs[:n_cmp], float(best_lag)
+    q = int(oversample) if oversample is not None else 0
+    hr = np.asarray(sim_hr, dtype=float)
+    if q < 1 or hr.size < q * (sim.size - 1) + 1:
+        raise ValueError(f"sim_hr ({hr.size} samples) does not hold {sim.size} frames at oversample {oversample!r}")
+    # fine lags j/q frames within one frame of the best whole lag, kept inside the record
+    j_lo = max(0, q * (best_lag - 1))
+    j_hi = min(q * (best_lag + 1), q * (sim.size - 1 - (n_cmp - 1)))
+    js = np.arange(j_lo, j_hi + 1)
+    idx = js[:, None] + q * np.arange(n_tmpl)[None, :]
+    segs = hr[idx]
+    cs = (segs - segs.mean(axis=1, keepdims=True)) @ tmpl
+    m = int(np.argmax(cs))
+    frac = 0.0
+    if 0 < m < cs.size - 1:
+        c0, c1, c2 = cs[m - 1], cs[m], cs[m + 1]
+        den = c0 - 2.0 * c1 + c2
+        if den < 0:
+            frac = float(np.clip(0.5 * (c0 - c2) / den, -0.5, 0.5))
+    pos = js[m] + frac                       # fine-grid position of the aligned start
+    x = pos + q * np.arange(n_cmp)
+    i0 = np.minimum(np.floor(x).astype(np.int64), hr.size - 2)
+    w = x - i0
+    seg = (1.0 - w) * hr[i0] + w * hr[i0 + 1]
+    return seg, obs[:n_cmp], pos / q

@@ -8,6 +8,9 @@ import numpy as np
 from .config import SimConfig
 from .params import Params
 
+#: Oversampling of ``SimResult.gaw_hr`` relative to the camera rate.
+HR_OVERSAMPLE = 10
+
 
 @dataclass(frozen=True)
 class CycleSummary:
@@ -47,6 +50,9 @@ class SimResult:
     surface_z : (m,) mm, undeformed height of each free-surface node.
     cycles : per-cycle summaries.
     trajectories : (n, n_nodes, 2) mm nodal displacements, when requested.
+    gaw_hr : (HR_OVERSAMPLE * (n - 1) + 1,) glottal area, mm^2, at ``HR_OVERSAMPLE * fps`` from the
+        same start: the waveform between frames, for sub-frame phase alignment
+        (:func:`vfcore.observe.align`).
     """
 
     ok: bool
@@ -64,6 +70,7 @@ class SimResult:
     cycles: CycleSummary | None = None
     trajectories: np.ndarray | None = None
     wall_time: float = 0.0
+    gaw_hr: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def f0(self) -> float:

@@ -279,7 +279,13 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None) -> E
                 raise RuntimeError(f"simulation yielded {sim.size} frames, {max_lag + n_cmp} needed to align")
             if not np.all(np.isfinite(sim)):
                 raise RuntimeError("simulated GAW is not finite")
-            seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp))
+            hr = getattr(r, "gaw_hr", None)
+            if hr is not None and np.size(hr) > 1:
+                from vfcore.result import HR_OVERSAMPLE
+                seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
+                                  oversample=HR_OVERSAMPLE)
+            else:
+                seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp))
             ll = gaussian_loglik(seg, obs, problem.sigma_e)
         except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble; counted
             messages.append(f"{i}: {type(exc).__name__}: {exc}")
