@@ -53,7 +53,8 @@ def main() -> None:
         kern.integrate(n_steps, cfg.dt, am, af, beta, gamma, system.indptr, system.indices, K_vals,
                        si["rho"] * system.m_vals, si["eta"] * system.d_vals, Lb, G, system.sdx, system.sdz,
                        system.sX, system.sZ, u, np.zeros(system.n), np.zeros(system.n), si["p_sub"], cfg.p_sup,
-                       cfg.sep_ratio, fw.midline(p, cfg), fw.CLOSED_TOL, fw.BLOWUP, np.zeros(n_steps),
+                       cfg.sep_ratio, fw.midline(p, cfg), fw.CLOSED_TOL, cfg.closure_gap_mm * 1e-3, fw.BLOWUP,
+                       np.zeros(n_steps),
                        np.zeros(n_steps), np.zeros((n_steps, m)), 0, np.zeros((0, system.n)),
                        np.zeros((0, system.n)))
         t2 = time.perf_counter()

@@ -75,7 +75,8 @@ def _simulate_block(ps: list[Params], config: SimConfig) -> list[SimResult]:
     status = np.zeros(B, dtype=np.int64)
     integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, Lb, G,
                    system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, config.sep_ratio,
-                   x_mid, CLOSED_TOL, BLOWUP, width, gsep, lam, traj_every, tu, tv, status)
+                   x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
+                   status)
     t_each = (time.perf_counter() - t_wall) / B
     out = []
     for b, p in enumerate(ps):

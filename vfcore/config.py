@@ -26,6 +26,9 @@ class SimConfig:
         acceleration (the paper), < 1 = generalised-alpha with numerical dissipation.
     half_gap_mm : prephonatory half gap, mm: the midline (contact plane) lies at x0 + half_gap_mm.
     keep_trajectories : also return nodal displacements at the camera rate.
+    closure_gap_mm : small-gap regularisation of the flow load, mm (0 = the paper's hard switch
+        between open-glottis Bernoulli and closed-glottis pressures; default 0.02). Below this minimum half
+        gap the two distributions are blended smoothly; see docs/model.md.
     """
 
     mesh: str = "medium"
@@ -40,6 +43,7 @@ class SimConfig:
     half_gap_mm: float = 0.05
     rho_inf: float = 1.0
     keep_trajectories: bool = False
+    closure_gap_mm: float = 0.02
 
     def __post_init__(self) -> None:
         if self.mesh not in MESHES:
@@ -58,6 +62,8 @@ class SimConfig:
             raise ValueError(f"config rho_inf must lie in [0, 1], got {self.rho_inf!r}")
         if not (math.isfinite(self.half_gap_mm) and self.half_gap_mm >= 0):
             raise ValueError(f"config half_gap_mm must be >= 0, got {self.half_gap_mm!r}")
+        if not (math.isfinite(self.closure_gap_mm) and 0.0 <= self.closure_gap_mm < 1.0):
+            raise ValueError(f"config closure_gap_mm must lie in [0, 1) mm, got {self.closure_gap_mm!r}")
         if not math.isfinite(self.p_sup):
             raise ValueError(f"config p_sup must be finite, got {self.p_sup!r}")
         if self.fps * self.dt > 1.0:

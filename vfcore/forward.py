@@ -134,7 +134,8 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals,
                             si["rho"] * system.m_vals,
                             si["eta"] * system.d_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
-                            u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL, BLOWUP,
+                            u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
+                            config.closure_gap_mm * 1e-3, BLOWUP,
                             width, gsep, lam, traj_every, tu, tv)
     del lam_static
     return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall)

@@ -51,51 +51,65 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int) -> tuple[int, int]
     return max_lag, n_cmp
 
 
-def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,
-          sim_hr: np.ndarray | None = None, oversample: int | None = None,
-          ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Phase-align a simulated GAW to an observed one.
+ALIGNMENTS = ("profile", "xcorr")
 
-    The first two observed cycles (the template) are cross-correlated with the simulation
-    over lags 0..max_lag frames; the best lag picks the simulated segment.
+
+def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,
+          sim_hr: np.ndarray | None = None, oversample: int | None = None, method: str = "xcorr",
+          ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Phase-align a simulated GAW to an observed one over lags 0..max_lag frames.
+
+    ``method="xcorr"`` (the paper, Section 4.1): the lag maximises the cross-correlation of
+    the simulation with the first two observed cycles. ``method="profile"``: the lag
+    minimises the squared residual over the whole compared window, i.e. it maximises the
+    Gaussian likelihood over the unknown phase (the profile likelihood of the phase
+    nuisance). For an exactly periodic simulation the two agree up to whole periods; when
+    cycles differ slightly the first-two-cycle correlation is nearly tied between lags one
+    period apart and flips between them as the parameters change, which makes the
+    likelihood jump (docs/inference.md, "Alignment").
 
     Without ``sim_hr`` the lag is a whole number of frames. With ``sim_hr`` (the same
     simulated GAW sampled ``oversample`` times faster from the same start, e.g.
-    :attr:`vfcore.result.SimResult.gaw_hr`) the lag is refined below one frame: the
-    correlation is evaluated on the fine grid within one frame of the best whole lag, its
-    maximum is refined by a parabola through the three best fine lags, and the segment is
-    read from ``sim_hr`` at the fractional lag by linear interpolation. The aligned segment
-    then varies continuously with the model parameters; a whole-frame lag jumps by 1/fps
-    (a twelfth of a cycle at 64 Hz and 2000 fps), which makes the likelihood of a narrow
-    posterior discontinuous (docs/inference.md, "Sub-frame alignment").
+    :attr:`vfcore.result.SimResult.gaw_hr`) it is refined below one frame: the criterion
+    is evaluated at every fine lag, its optimum is refined by a parabola through the three best fine lags, and the segment is read from
+    ``sim_hr`` at the fractional lag by linear interpolation, so the aligned segment varies
+    continuously with the simulation.
 
     Returns (sim_segment, obs_segment, lag in frames), segments of length ``n_compare``.
     """
+    if method not in ALIGNMENTS:
+        raise ValueError(f"alignment method must be one of {ALIGNMENTS}, got {method!r}")
     sim = np.asarray(sim, dtype=float)
     obs = np.asarray(obs, dtype=float)
     max_lag, n_cmp = window if window is not None else alignment_window(obs, fps, sim.size)
-    f0 = estimate_f0(obs, fps)
-    n_tmpl = min(n_cmp, int(math.ceil(2 * fps / f0)) if math.isfinite(f0) else n_cmp)
-    tmpl = obs[:n_tmpl] - obs[:n_tmpl].mean()
-    best, best_lag = -np.inf, 0
-    for lag in range(0, max_lag + 1):
-        seg = sim[lag:lag + n_tmpl]
-        c = float(np.dot(seg - seg.mean(), tmpl))
-        if c > best:
-            best, best_lag = c, lag
+    if method == "xcorr":
+        f0 = estimate_f0(obs, fps)
+        n_tmpl = min(n_cmp, int(math.ceil(2 * fps / f0)) if math.isfinite(f0) else n_cmp)
+        tmpl = obs[:n_tmpl] - obs[:n_tmpl].mean()
+
+        def score(segs):                       # larger is better
+            return (segs - segs.mean(axis=-1, keepdims=True)) @ tmpl
+    else:
+        n_tmpl = n_cmp
+        tmpl = obs[:n_cmp]
+
+        def score(segs):
+            d = segs - tmpl
+            return -np.einsum("...i,...i->...", d, d)
+    lags = np.arange(0, max_lag + 1)
+    segs = sim[lags[:, None] + np.arange(n_tmpl)[None, :]]
+    best_lag = int(lags[int(np.argmax(score(segs)))])
     if sim_hr is None:
         return sim[best_lag:best_lag + n_cmp], obs[:n_cmp], float(best_lag)
     q = int(oversample) if oversample is not None else 0
     hr = np.asarray(sim_hr, dtype=float)
     if q < 1 or hr.size < q * (sim.size - 1) + 1:
         raise ValueError(f"sim_hr ({hr.size} samples) does not hold {sim.size} frames at oversample {oversample!r}")
-    # fine lags j/q frames within one frame of the best whole lag, kept inside the record
-    j_lo = max(0, q * (best_lag - 1))
-    j_hi = min(q * (best_lag + 1), q * (sim.size - 1 - (n_cmp - 1)))
-    js = np.arange(j_lo, j_hi + 1)
-    idx = js[:, None] + q * np.arange(n_tmpl)[None, :]
-    segs = hr[idx]
-    cs = (segs - segs.mean(axis=1, keepdims=True)) @ tmpl
+    # every fine lag j/q frame over the whole lag range (a whole-frame pre-search can miss the
+    # right cycle: lags one period apart score almost alike), kept inside the record
+    js = np.arange(0, min(q * max_lag, q * (sim.size - n_cmp)) + 1)
+    cs = np.concatenate([score(hr[js[b:b + 64, None] + q * np.arange(n_tmpl)[None, :]])
+                         for b in range(0, js.size, 64)])
     m = int(np.argmax(cs))
     frac = 0.0
     if 0 < m < cs.size - 1:

@@ -60,7 +60,7 @@ class ToyEvaluator:
             if self.delay_s:
                 time.sleep(self.delay_s)
             g, flow[i], cmean[i], cmax[i] = toy_gaw(full[i], pb.fps, n)
-            seg, _, _ = align(g, pb.obs_gaw, pb.fps, (max_lag, n_cmp))
+            seg, _, _ = align(g, pb.obs_gaw, pb.fps, (max_lag, n_cmp), method=pb.alignment)
             ll[i] = gaussian_loglik(seg, pb.obs_compared, pb.sigma_e)
             ok[i] = True
             gaw[i] = seg

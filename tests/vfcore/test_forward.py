@@ -48,7 +48,7 @@ def _free_vibration(eta_si, rho_inf=1.0, n_steps=1500, h=5e-5):
     tu, tv = np.zeros((n_steps, s.n)), np.zeros((n_steps, s.n))
     u0, v0 = u.copy(), v.copy()
     st = kern.integrate(n_steps, h, am, af, beta, gamma, s.indptr, s.indices, K_vals, m_vals, d_vals, Lb, G,
-                        s.sdx, s.sdz, s.sX, s.sZ, u, v, a, 0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, fw.BLOWUP,
+                        s.sdx, s.sdz, s.sX, s.sZ, u, v, a, 0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, fw.BLOWUP,
                         np.zeros(n_steps), np.zeros(n_steps), np.zeros((n_steps, m)), 1, tu, tv)
     assert st == 0
     U = np.vstack([u0, tu])

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..config import SimConfig
 from ..measures import estimate_f0
-from ..observe import align, alignment_window
+from ..observe import ALIGNMENTS, align, alignment_window
 from .prior import Prior
 
 
@@ -80,6 +80,7 @@ class Problem:
     sigma_e: float = 1.0
     config: SimConfig = field(default_factory=SimConfig)
     model: str = "fe"
+    alignment: str = "profile"
 
     def __post_init__(self) -> None:
         y = validate_observation(self.obs_gaw, self.fps)
@@ -97,6 +98,8 @@ class Problem:
             raise ValueError(f"config must be a SimConfig, got {type(self.config).__name__}")
         if self.config.fps != self.fps:
             object.__setattr__(self, "config", self.config.replace(fps=self.fps))
+        if self.alignment not in ALIGNMENTS:
+            raise ValueError(f"alignment must be one of {ALIGNMENTS}, got {self.alignment!r}")
         if self.model != "fe":
             raise ValueError(f"unknown model {self.model!r}; only 'fe' is available")
         # fails (ValueError) here, before any simulation, if the simulation is too short
@@ -118,7 +121,8 @@ class Problem:
 
     def to_dict(self) -> dict:
         return {"obs_gaw": self.obs_gaw.tolist(), "fps": self.fps, "sigma_e": self.sigma_e,
-                "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model}
+                "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model,
+                "alignment": self.alignment}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Problem":
@@ -128,7 +132,8 @@ class Problem:
             raise ValueError(f"unknown Problem field(s): {sorted(unknown)}")
         return cls(obs_gaw=np.asarray(d["obs_gaw"], dtype=float), fps=d["fps"],
                    prior=Prior.from_dict(d["prior"]), sigma_e=d.get("sigma_e", 1.0),
-                   config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"))
+                   config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"),
+                   alignment=d.get("alignment", "profile"))
 
 
 # ---------------------------------------------------------------------------- likelihood
@@ -283,9 +288,9 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None) -> E
             if hr is not None and np.size(hr) > 1:
                 from vfcore.result import HR_OVERSAMPLE
                 seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
-                                  oversample=HR_OVERSAMPLE)
+                                  oversample=HR_OVERSAMPLE, method=problem.alignment)
             else:
-                seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp))
+                seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), method=problem.alignment)
             ll = gaussian_loglik(seg, obs, problem.sigma_e)
         except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble; counted
             messages.append(f"{i}: {type(exc).__name__}: {exc}")

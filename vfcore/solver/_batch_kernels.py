@@ -46,7 +46,7 @@ def band_solve_many(Lb: np.ndarray, r: np.ndarray, s: np.ndarray) -> None:
 
 @njit(cache=True, fastmath=True)
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
-                   u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, blowup,
+                   u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                    width, gsep_out, lam_out, traj_every, traj_u, traj_v, status):
     """Batched :func:`_kernels.integrate`.
 
@@ -98,7 +98,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
                     zs[j] = sZ[j]
                 g = xm - xs[j]
                 gap[j] = g if g > 0.0 else 0.0
-            surface_loads(xs, zs, sX, sZ, gap, p_sub[b], p_sup, sep_ratio, closed_tol, fx[b], fz[b], pres)
+            surface_loads(xs, zs, sX, sZ, gap, p_sub[b], p_sup, sep_ratio, closed_tol, g_reg, fx[b], fz[b], pres)
         for i in range(n):
             for b in range(B):
                 y1[i, b] = m_v * v[i, b] + m_a * a[i, b]

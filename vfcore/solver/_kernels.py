@@ -67,8 +67,14 @@ def csr_to_band(indptr, indices, data, n, bw, out):
 
 
 @njit(cache=True)
-def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, fx, fz, pres):
+def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres):
     """Bernoulli pressures along the free surface and the nodal forces they produce.
+
+    ``g_reg`` (m, 0 = off): small-gap regularisation. While the minimum half gap ``gmin`` is
+    below ``g_reg`` the open-glottis Bernoulli pressures are blended into the closed-glottis
+    distribution (p_sub upstream of the minimum, p_sup downstream) with the weight
+    ``w = s^2 (3 - 2 s)``, ``s = gmin / g_reg``, so the load is continuous through closure
+    (see docs/model.md, "Closure regularisation").
 
     xs, zs : (m,) current surface node coordinates (inferior -> superior), m.
     nxs, nzs : (m,) coordinates whose edges give the load directions (the reference
@@ -107,6 +113,12 @@ def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, fx
                 pres[i] = p_sub - dp * r * r
             else:
                 pres[i] = p_sup
+        if gmin < g_reg:
+            s = gmin / g_reg
+            w = s * s * (3.0 - 2.0 * s)
+            for i in range(m):
+                pc = p_sub if i < imin else p_sup
+                pres[i] = w * pres[i] + (1.0 - w) * pc
     for i in range(m):
         fx[i] = 0.0
         fz[i] = 0.0
@@ -218,7 +230,7 @@ def step_coefficients(h, am, af, beta, gamma):
 
 @njit(cache=True, fastmath=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
-              u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, blowup,
+              u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
 
@@ -256,7 +268,7 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
                 zs[j] = sZ[j]
             g = x_mid - xs[j]
             gap[j] = g if g > 0.0 else 0.0
-        surface_loads(xs, zs, sX, sZ, gap, p_sub, p_sup, sep_ratio, closed_tol, fx, fz, pres)
+        surface_loads(xs, zs, sX, sZ, gap, p_sub, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres)
         for i in range(n):
             y1[i] = m_v * v[i] + m_a * a[i]
             y2[i] = d_v * v[i] + d_a * a[i]
