@@ -41,6 +41,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--datasets", type=int, default=20)
     ap.add_argument("--mesh", default="coarse")
+    ap.add_argument("--duration", type=float, default=0.55, help="simulated time, s (0.25 s discarded)")
     ap.add_argument("--dt", type=float, default=1e-4)
     ap.add_argument("--estimate", default=",".join(PARAM_NAMES))
     ap.add_argument("--sampler", choices=("smc", "is"), default="smc")
@@ -57,7 +58,7 @@ def main(argv=None) -> int:
 
     est = [n.strip() for n in a.estimate.split(",") if n.strip()]
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in est})
-    cfg = SimConfig(mesh=a.mesh, dt=a.dt)
+    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=a.duration)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     pool = None

@@ -43,6 +43,7 @@ def _pool(workers: int):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mesh", default="medium")
+    ap.add_argument("--duration", type=float, default=0.55, help="simulated time, s (0.25 s discarded)")
     ap.add_argument("--dt", type=float, default=5e-5)
     ap.add_argument("--draws", type=int, default=50_000, help="prior IS draws (paper: 50,000)")
     ap.add_argument("--particles", type=int, default=300, help="SMC particles")
@@ -64,7 +65,7 @@ def main(argv=None) -> int:
     est = [n.strip() for n in a.estimate.split(",") if n.strip()]
     fixed = {n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in est}
     prior = Prior.default(fixed=fixed)
-    cfg = SimConfig(mesh=a.mesh, dt=a.dt)
+    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=a.duration)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
 
