@@ -1,0 +1,1 @@
+"""Benchmark scripts (importable as a package for benchmarks.concealed)."""

@@ -1,0 +1,1 @@
+"""Concealed-effect benchmark generator (see README.md)."""

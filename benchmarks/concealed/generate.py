@@ -1,0 +1,499 @@
+"""Concealed-effect benchmark: GAW data sets with a hidden physical or camera effect.
+
+The generator is deliberately separate from the fitting code (it imports nothing from
+``vfcore.diagnose``) and uses *richer* mechanisms than the fitted extensions of
+``vfcore/diagnose/extensions.py`` (see ``benchmarks/concealed/README.md`` for the mechanisms,
+their ranges and sources). Each case is one observation of ``N_OBS`` frames:
+
+    truth (E_body, E_cover, p_sub ~ U(Table 2 prior), rest at TABLE3)
+    -> base simulation (SimConfig(mesh="coarse", dt=1e-4))
+    -> effect (one of EFFECTS, or none for "control")
+    -> N(0, sigma^2) noise, sigma ~ U[0.3, 1.0] mm^2
+
+Output of :func:`write_suite` / the CLI::
+
+    python -m benchmarks.concealed.generate --out DIR --seed S
+
+- ``cases.json`` PUBLIC: fps, frame count, CSV name per case id (and the base model set-up),
+  nothing about the effect;
+- ``case_XX.csv`` PUBLIC: one column ``area_mm2``;
+- ``truth.json`` HIDDEN: per id the effect label and parameters, material truth, noise sigma,
+  the sub-frame offset, the clean waveform and the clean control-at-same-truth waveform;
+- ``truth.npz`` HIDDEN: the same arrays (``clean_XX``, ``base_XX``, ``noisy_XX``).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from vfcore import TABLE3, Params, SimConfig, simulate
+from vfcore.measures import estimate_f0
+from vfcore.result import HR_OVERSAMPLE
+
+__all__ = [
+    "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",
+    "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile", "zipper_area",
+    "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale", "oscillates",
+    "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
+]
+
+#: Forward-model settings of every case (the fit is expected to use the same).
+BASE_CONFIG = SimConfig(mesh="coarse", dt=1e-4)
+#: Frames per observation.
+N_OBS = 400
+#: Slices along the fold length for the 3D-like effects (leak, zipper).
+N_Y = 20
+#: Sub-frame start of the observation in the kept window, frames (uniform).
+OFFSET_RANGE = (60.0, 140.0)
+#: Noise standard deviation, mm^2 (uniform).
+SIGMA_RANGE = (0.3, 1.0)
+#: Material truth drawn uniformly in the default prior (vfcore.inference.prior.TABLE2_BOUNDS);
+#: the other parameters are at TABLE3. Copied here so the generator does not depend on the
+#: inference package (values: Hadwin et al. 2019, Table 2).
+TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)}
+#: Oscillation criterion of a usable case.
+MIN_PEAK_MM2 = 2.0
+
+PHYSICAL = ("leak", "sep_ratio", "epithelium", "zipper", "subglottal", "asymmetry")
+CAMERA = ("exposure", "frame_rate", "scale")
+EFFECTS = PHYSICAL + CAMERA
+LABELS = EFFECTS + ("control",)
+#: Cases per label in the default suite (physical and camera effects twice, 4 controls).
+SUITE_COUNTS = {**{e: 2 for e in EFFECTS}, "control": 4}
+
+# ------------------------------------------------------------------ effect ranges (README)
+LEAK_AREA_MM2 = (0.5, 3.0)          # total posterior chink area
+LEAK_START_FRAC = (0.4, 0.75)       # chink runs from y = frac*L to the posterior end y = L
+SEP_RATIO_RANGES = ((1.05, 1.2), (1.45, 1.6))
+EPI_E_KPA = (8.0, 30.0)
+EPI_H_MM = (0.03, 0.08)
+EPI_MEDIAL_RATIO = (2.0, 4.0)       # medial / inferior-superior stiffness multiplier
+EPI_MEDIAL_WIDTH_MM = (0.8, 1.5)    # Gaussian half-width (arc length) of the medial thickening
+ZIP_LAG_CYCLES = (0.1, 0.3)
+ZIP_POWER = (1.5, 3.0)
+ZIP_ENV_Q = (0.5, 1.5)
+SUB_TUBE_M = (0.15, 0.25)
+SUB_C = 350.0                       # m/s, speed of sound (warm humid air)
+SUB_Z1 = (0.5e6, 2.0e6)             # Pa s/m^3, first-mode peak impedance
+SUB_ZETA1 = (0.08, 0.15)
+ASYM_Q_RANGES = ((0.6, 0.8), (1.25, 1.5))
+ASYM_LAG_CYCLES = (0.05, 0.2)
+EXPOSURE_FRAC = (0.6, 1.0)
+EXPOSURE_JITTER = (0.02, 0.05)      # relative sd of the per-frame exposure time
+RATE_RANGES = ((0.93, 0.97), (1.03, 1.07))
+SCALE_RANGES = ((0.8, 0.9), (1.1, 1.2))
+PIXEL_MM = 0.02                     # width quantisation step
+
+
+def _uniform(rng, lo_hi) -> float:
+    return float(rng.uniform(*lo_hi))
+
+
+def _two_sided(rng, ranges) -> float:
+    return _uniform(rng, ranges[int(rng.integers(len(ranges)))])
+
+
+# ------------------------------------------------------------------ sampling helpers
+def hr_times(res) -> np.ndarray:
+    """Times (s, from the start of the kept window) of ``res.gaw_hr``."""
+    return np.arange(np.asarray(res.gaw_hr).size) / (res.fps * HR_OVERSAMPLE)
+
+
+def frame_times(n_obs: int, offset_frames: float, fps: float, rate_ratio: float = 1.0) -> np.ndarray:
+    """Camera instants: frame k at ``(offset + k / rate_ratio) / fps`` (true rate = ratio * fps)."""
+    return (float(offset_frames) + np.arange(n_obs) / float(rate_ratio)) / float(fps)
+
+
+def sample_hr(y_hr: np.ndarray, t_hr: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation of a high-rate signal at ``t``; ``t`` must lie inside ``t_hr``."""
+    t = np.asarray(t, dtype=float)
+    if t.min() < t_hr[0] - 1e-12 or t.max() > t_hr[-1] + 1e-12:
+        raise ValueError(f"sample times [{t.min():.4f}, {t.max():.4f}] s outside the simulated "
+                         f"window [{t_hr[0]:.4f}, {t_hr[-1]:.4f}] s")
+    return np.interp(t, t_hr, y_hr)
+
+
+def _cumint(y_hr, t_hr, t):
+    """Exact integral from t_hr[0] to t of the piecewise-linear interpolant of y_hr."""
+    h = t_hr[1] - t_hr[0]
+    c = np.concatenate([[0.0], np.cumsum(0.5 * h * (y_hr[1:] + y_hr[:-1]))])
+    j = np.clip(np.floor((t - t_hr[0]) / h).astype(int), 0, y_hr.size - 2)
+    s = t - t_hr[j]
+    return c[j] + y_hr[j] * s + (y_hr[j + 1] - y_hr[j]) * s * s / (2.0 * h)
+
+
+def boxcar_average(y_hr, t_hr, t, tau) -> np.ndarray:
+    """Mean of the (piecewise-linear) signal over ``[t - tau/2, t + tau/2]`` per frame (exact)."""
+    t = np.asarray(t, dtype=float)
+    tau = np.broadcast_to(np.asarray(tau, dtype=float), t.shape)
+    a, b = t - tau / 2, t + tau / 2
+    if a.min() < t_hr[0] or b.max() > t_hr[-1]:
+        raise ValueError("exposure window outside the simulated window")
+    out = np.empty_like(t)
+    pos = tau > 0
+    out[pos] = (_cumint(y_hr, t_hr, b[pos]) - _cumint(y_hr, t_hr, a[pos])) / tau[pos]
+    out[~pos] = np.interp(t[~pos], t_hr, y_hr)
+    return out
+
+
+def _slices(length_mm: float, n_y: int = N_Y):
+    dy = length_mm / n_y
+    return (np.arange(n_y) + 0.5) * dy, dy
+
+
+# ------------------------------------------------------------------ leak
+def gap_profile(chink_area_mm2: float, start_frac: float, length_mm: float, n_y: int = N_Y) -> np.ndarray:
+    """Posterior chink: full gap width g(y), mm, on ``n_y`` slices (y = 0 anterior, L posterior):
+    zero anterior of ``start_frac * L``, rising linearly to the posterior end, scaled so that
+    ``sum g dy = chink_area_mm2``."""
+    y, dy = _slices(length_mm, n_y)
+    shape = np.clip((y / length_mm - start_frac) / (1.0 - start_frac), 0.0, None)
+    if chink_area_mm2 == 0 or shape.sum() == 0:
+        return np.zeros(n_y)
+    return shape * chink_area_mm2 / (shape.sum() * dy)
+
+
+def leak_area(width_mm: np.ndarray, gap_mm: np.ndarray, env: np.ndarray | None = None,
+              length_mm: float = BASE_CONFIG.length_mm) -> np.ndarray:
+    """Area of a glottis whose membranous width ``W(t) env(y)`` cannot close below the chink
+    ``g(y)``: ``sum_y max(W(t) env(y), g(y)) dy`` (mm^2)."""
+    gap_mm = np.asarray(gap_mm, dtype=float)
+    n_y = gap_mm.size
+    env = np.ones(n_y) if env is None else np.asarray(env, dtype=float)
+    dy = length_mm / n_y
+    w = np.asarray(width_mm, dtype=float)
+    return np.maximum(w[..., None] * env, gap_mm).sum(axis=-1) * dy
+
+
+# ------------------------------------------------------------------ zipper
+def zipper_area(width_hr: np.ndarray, t_hr: np.ndarray, t_eval: np.ndarray, lag_s: float, power: float,
+                env_q: float, length_mm: float = BASE_CONFIG.length_mm, n_y: int = N_Y,
+                normalise: bool = True) -> np.ndarray:
+    """A-P stack: ``width(y, t) = env(y) W(t - tau(y))`` with ``tau(y) = lag_s (y/L)^power`` and
+    ``env(y) = sin(pi y/L)^env_q`` (normalised to mean 1 when ``normalise``; env_q = 0 -> 1);
+    area ``sum_y max(width, 0) dy`` at the times ``t_eval``."""
+    y, dy = _slices(length_mm, n_y)
+    tau = lag_s * (y / length_mm) ** power
+    env = np.sin(np.pi * y / length_mm) ** env_q
+    if normalise:
+        env = env / env.mean()
+    tt = np.asarray(t_eval, dtype=float)[:, None] - tau[None, :]
+    w = sample_hr(width_hr, t_hr, tt.ravel()).reshape(tt.shape)
+    return np.maximum(w * env, 0.0).sum(axis=1) * dy
+
+
+# ------------------------------------------------------------------ asymmetry
+def _anchor(res, t_ref):
+    """Cycle start (s) of ``res`` nearest ``t_ref``."""
+    ts = np.asarray(res.cycles.t_start) if res.cycles is not None else np.empty(0)
+    if ts.size == 0:
+        raise ValueError("no cycles to anchor the entrainment")
+    return float(ts[np.argmin(np.abs(ts - t_ref))])
+
+
+def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre: float) -> np.ndarray:
+    """Glottal area of a left fold (SimResult ``left``) and a right fold (``right``, simulated with
+    scaled stiffness) each contributing half its symmetric glottal width. The right fold is
+    entrained 1:1 to the left fold's f0 by a linear time warp anchored at cycle starts near
+    ``t_centre`` and lags it by ``lag_cycles`` of the left cycle:
+    ``t_R = tR0 + (t - tL0 - lag/f0_L) f0_R/f0_L``; width ``max(W_L/2 + W_R(t_R)/2, 0)``."""
+    L = left.config.length_mm
+    t_hr = hr_times(left)
+    wl = sample_hr(np.asarray(left.gaw_hr) / L, t_hr, t_eval)
+    if right is left:
+        f_l = f_r = left.f0
+    else:
+        f_l, f_r = left.f0, right.f0
+    ratio = f_r / f_l
+    tl0 = _anchor(left, t_centre)
+    tr0 = tl0 if right is left else _anchor(right, t_centre)
+    t_r = tr0 + (np.asarray(t_eval) - tl0 - lag_cycles / f_l) * ratio
+    wr = sample_hr(np.asarray(right.gaw_hr) / right.config.length_mm, hr_times(right), t_r)
+    return np.maximum(0.5 * wl + 0.5 * wr, 0.0) * L
+
+
+# ------------------------------------------------------------------ forward-model extensions
+def forward_extensions_available() -> dict[str, bool]:
+    """Whether this vfcore's SimConfig has the epithelium / subglottal fields (issue 5 forward work)."""
+    names = {f.name for f in dataclasses.fields(SimConfig)}
+    return {"epithelium": {"epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile"} <= names,
+            "subglottal": "subglottal_modes" in names}
+
+
+def epithelium_profile(medial_ratio: float, width_mm: float, mesh: str = BASE_CONFIG.mesh) -> tuple:
+    """Per free-surface edge stiffness multipliers, 1 on the inferior/superior surfaces rising to
+    ``medial_ratio`` on the medial surface (Gaussian in arc length about the most medial node)."""
+    from vfcore.mesh import load_mesh
+    m = load_mesh(mesh)
+    p = np.asarray(m.points)[np.asarray(m.surface)] * 1e3        # mm, (x, z)
+    seg = np.hypot(*np.diff(p, axis=0).T)
+    s_node = np.concatenate([[0.0], np.cumsum(seg)])
+    s_mid = 0.5 * (s_node[1:] + s_node[:-1])
+    s_med = s_node[int(np.argmax(p[:, 0]))]
+    prof = 1.0 + (medial_ratio - 1.0) * np.exp(-((s_mid - s_med) / width_mm) ** 2)
+    return tuple(float(x) for x in prof)
+
+
+def subglottal_modes(tube_m: float, z1: float, zeta1: float, n_modes: int = 3, c: float = SUB_C) -> tuple:
+    """Modes of a uniform tube closed at the lung end and open at the glottis (quarter-wave):
+    ``f_k = (2k-1) c / (4 L)``, ``Z_k = Z1 / (2k-1)``, ``zeta_k = zeta1 (1 + 0.5 (k-1))``."""
+    return tuple(((2 * k - 1) * c / (4.0 * tube_m), min(1.0, zeta1 * (1 + 0.5 * (k - 1))), z1 / (2 * k - 1))
+                 for k in range(1, n_modes + 1))
+
+
+# ------------------------------------------------------------------ camera
+def quantise_scale(area_mm2: np.ndarray, scale: float, length_mm: float = BASE_CONFIG.length_mm,
+                   pixel_mm: float = PIXEL_MM) -> np.ndarray:
+    """Scale error ``s`` on the area, then the width (area / L) quantised to ``pixel_mm``."""
+    w = scale * np.asarray(area_mm2, dtype=float) / length_mm
+    if pixel_mm > 0:
+        w = np.round(w / pixel_mm) * pixel_mm
+    return w * length_mm
+
+
+# ------------------------------------------------------------------ cases
+def oscillates(gaw, fps: float) -> bool:
+    g = np.asarray(gaw, dtype=float)
+    return bool(g.size > 0 and np.all(np.isfinite(g)) and g.max() > MIN_PEAK_MM2
+                and math.isfinite(estimate_f0(g, fps)))
+
+
+def _ok(res) -> bool:
+    return bool(res.ok and oscillates(res.gaw, res.fps))
+
+
+def draw_truth(rng) -> Params:
+    d = TABLE3.as_dict()
+    for k, b in TRUTH_BOUNDS.items():
+        d[k] = _uniform(rng, b)
+    return Params(**d)
+
+
+@dataclass
+class Case:
+    id: str
+    label: str
+    effect: dict
+    truth: dict
+    offset_frames: float
+    sigma: float
+    fps: float
+    clean: np.ndarray
+    base: np.ndarray                 # clean control-at-same-truth (same offset, no effect)
+    gaw: np.ndarray                  # clean + noise: the public observation
+    attempts: int = 1
+    notes: list = field(default_factory=list)
+
+    @property
+    def effect_rms(self) -> float:
+        return float(np.sqrt(np.mean((self.clean - self.base) ** 2)))
+
+    @property
+    def effect_loglik(self) -> float:
+        """``sum (clean - base)^2 / (2 sigma^2)``: log-likelihood gap between the effect and the
+        base model at the truth (an upper bound on what a fit could gain; the base fit absorbs part)."""
+        return float(np.sum((self.clean - self.base) ** 2) / (2.0 * self.sigma ** 2))
+
+
+def apply_effect(label: str, base, truth: Params, offset: float, rng, config: SimConfig = BASE_CONFIG,
+                 n_obs: int = N_OBS, sim=simulate):
+    """Draw the effect parameters and return ``(clean, effect_params)``; ``None`` when the
+    effect's simulation does not oscillate (caller redraws)."""
+    fps = config.fps
+    t_hr = hr_times(base)
+    t = frame_times(n_obs, offset, fps)
+    gaw_hr = np.asarray(base.gaw_hr, dtype=float)
+    L = config.length_mm
+    if label == "control":
+        return sample_hr(gaw_hr, t_hr, t), {}
+    if label == "leak":
+        area = _uniform(rng, LEAK_AREA_MM2)
+        start = _uniform(rng, LEAK_START_FRAC)
+        g = gap_profile(area, start, L)
+        w = sample_hr(gaw_hr / L, t_hr, t)
+        return leak_area(w, g, length_mm=L), {"chink_area_mm2": area, "start_frac": start,
+                                               "posterior_gap_mm": float(g.max()), "n_y": N_Y,
+                                               "env": "uniform"}
+    if label == "zipper":
+        lag = _uniform(rng, ZIP_LAG_CYCLES)
+        pw = _uniform(rng, ZIP_POWER)
+        q = _uniform(rng, ZIP_ENV_Q)
+        clean = zipper_area(gaw_hr / L, t_hr, t, lag / base.f0, pw, q, L)
+        return clean, {"lag_cycles": lag, "lag_s": lag / base.f0, "power": pw, "env_q": q, "n_y": N_Y,
+                       "env_normalised": True}
+    if label == "exposure":
+        e = _uniform(rng, EXPOSURE_FRAC)
+        j = _uniform(rng, EXPOSURE_JITTER)
+        ek = np.clip(e * (1.0 + j * rng.standard_normal(n_obs)), 0.05, 1.0)
+        return boxcar_average(gaw_hr, t_hr, t, ek / fps), {"exposure_fraction": e, "jitter_rel_sd": j}
+    if label == "frame_rate":
+        r = _two_sided(rng, RATE_RANGES)
+        return sample_hr(gaw_hr, t_hr, frame_times(n_obs, offset, fps, r)), {"rate_ratio": r}
+    if label == "scale":
+        s = _two_sided(rng, SCALE_RANGES)
+        return quantise_scale(sample_hr(gaw_hr, t_hr, t), s, L), {"scale": s, "pixel_mm": PIXEL_MM}
+    if label == "sep_ratio":
+        r = _two_sided(rng, SEP_RATIO_RANGES)
+        res = sim(truth, config.replace(sep_ratio=r))
+        if not _ok(res):
+            return None
+        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), {"sep_ratio": r}
+    if label == "epithelium":
+        if not forward_extensions_available()["epithelium"]:
+            raise NotImplementedError("SimConfig has no epithelium fields in this vfcore")
+        E = _uniform(rng, EPI_E_KPA)
+        h = _uniform(rng, EPI_H_MM)
+        mr = _uniform(rng, EPI_MEDIAL_RATIO)
+        wd = _uniform(rng, EPI_MEDIAL_WIDTH_MM)
+        prof = epithelium_profile(mr, wd, config.mesh)
+        res = sim(truth, config.replace(epithelium_E_kpa=E, epithelium_h_mm=h, epithelium_profile=prof))
+        if not _ok(res):
+            return None
+        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), {
+            "epithelium_E_kpa": E, "epithelium_h_mm": h, "medial_ratio": mr, "medial_width_mm": wd,
+            "epithelium_profile": list(prof)}
+    if label == "subglottal":
+        if not forward_extensions_available()["subglottal"]:
+            raise NotImplementedError("SimConfig has no subglottal_modes field in this vfcore")
+        tube = _uniform(rng, SUB_TUBE_M)
+        z1 = _uniform(rng, SUB_Z1)
+        zeta = _uniform(rng, SUB_ZETA1)
+        modes = subglottal_modes(tube, z1, zeta)
+        res = sim(truth, config.replace(subglottal_modes=modes))
+        if not _ok(res):
+            return None
+        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), {
+            "tube_length_m": tube, "c_m_s": SUB_C, "Z1_pa_s_m3": z1, "zeta1": zeta,
+            "subglottal_modes": [list(m) for m in modes]}
+    if label == "asymmetry":
+        Q = _two_sided(rng, ASYM_Q_RANGES)
+        lag = _uniform(rng, ASYM_LAG_CYCLES)
+        d = truth.as_dict()
+        for k in ("E_body", "E_cover", "E_lig"):
+            d[k] *= Q
+        right = sim(Params(**d), config)
+        if not _ok(right) or right.cycles is None or not math.isfinite(right.f0):
+            return None
+        t_c = (offset + n_obs / 2) / fps
+        try:
+            clean = asymmetric_area(base, right, t, lag, t_c)
+        except ValueError:
+            return None
+        return clean, {"Q": Q, "lag_cycles": lag, "f0_left_hz": base.f0, "f0_right_hz": right.f0,
+                       "right_params": d}
+    raise ValueError(f"unknown label {label!r}; known: {LABELS}")
+
+
+def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config: SimConfig = BASE_CONFIG,
+              n_obs: int = N_OBS, max_attempts: int = 20, sim=simulate) -> Case:
+    """One case, deterministic in ``seed_seq``: draw truth until the base oscillates, draw the
+    offset and the effect (redrawn when its simulation does not oscillate), add noise."""
+    rng = np.random.default_rng(seed_seq)
+    for attempt in range(1, max_attempts + 1):
+        truth = draw_truth(rng)
+        base = sim(truth, config)
+        if not _ok(base) or base.cycles is None or not math.isfinite(base.f0):
+            continue
+        offset = _uniform(rng, OFFSET_RANGE)
+        out = None
+        for _ in range(3):
+            out = apply_effect(label, base, truth, offset, rng, config, n_obs, sim)
+            if out is not None and oscillates(out[0], config.fps):
+                break
+            out = None
+        if out is None:
+            continue
+        clean, eff = out
+        base_clean = sample_hr(np.asarray(base.gaw_hr), hr_times(base), frame_times(n_obs, offset, config.fps))
+        sigma = _uniform(rng, SIGMA_RANGE)
+        noisy = clean + sigma * rng.standard_normal(n_obs)
+        return Case(case_id, label, eff, truth.as_dict(), offset, sigma, config.fps, clean, base_clean, noisy,
+                    attempts=attempt)
+    raise RuntimeError(f"case {case_id} ({label}): no oscillating draw in {max_attempts} attempts")
+
+
+def suite_labels(counts: dict | None = None) -> list[str]:
+    counts = dict(SUITE_COUNTS if counts is None else counts)
+    avail = forward_extensions_available()
+    for k, ok in avail.items():
+        if not ok and counts.get(k):
+            print(f"[concealed] skipping {k!r}: SimConfig lacks its fields (forward-model work not present)",
+                  file=sys.stderr)
+            counts[k] = 0
+    return [lab for lab in LABELS for _ in range(counts.get(lab, 0))]
+
+
+def generate_suite(seed: int, counts: dict | None = None, config: SimConfig = BASE_CONFIG,
+                   n_obs: int = N_OBS, sim=simulate) -> list[Case]:
+    """The benchmark suite: each label ``counts[label]`` times (default :data:`SUITE_COUNTS`),
+    in an order shuffled by ``seed`` (ids carry no label information). Case i uses the i-th
+    child of ``SeedSequence(seed)`` (the last child shuffles the order)."""
+    labels = suite_labels(counts)
+    children = np.random.SeedSequence(seed).spawn(len(labels) + 1)
+    order = np.random.default_rng(children[-1]).permutation(len(labels))
+    return [make_case(f"{i:02d}", labels[j], children[i], config, n_obs, sim=sim)
+            for i, j in enumerate(order)]
+
+
+# ------------------------------------------------------------------ output
+def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = None,
+                config: SimConfig = BASE_CONFIG) -> None:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    public = {
+        "description": "GAW observations (mm^2) for model diagnosis; fit the base model to each case",
+        "model": {"mesh": config.mesh, "dt": config.dt, "duration": config.duration,
+                  "discard": config.discard},
+        "estimated": list(TRUTH_BOUNDS), "fixed": {k: v for k, v in TABLE3.as_dict().items()
+                                                    if k not in TRUTH_BOUNDS},
+        "cases": [{"id": c.id, "file": f"case_{c.id}.csv", "fps": c.fps, "n_frames": int(c.gaw.size)}
+                  for c in cases],
+    }
+    (out / "cases.json").write_text(json.dumps(public, indent=1))
+    for c in cases:
+        np.savetxt(out / f"case_{c.id}.csv", c.gaw, fmt="%.6f", header="area_mm2", comments="")
+    hidden = {"seed": seed, "n_obs": int(cases[0].gaw.size) if cases else 0, "cases": {
+        c.id: {"label": c.label, "effect": c.effect, "truth": c.truth, "offset_frames": c.offset_frames,
+               "sigma_mm2": c.sigma, "effect_rms_mm2": c.effect_rms,
+               "effect_loglik": c.effect_loglik, "attempts": c.attempts,
+               "clean": c.clean.tolist(), "base_clean": c.base.tolist()} for c in cases}}
+    (out / "truth.json").write_text(json.dumps(hidden, indent=1, default=float))
+    arrays = {}
+    for c in cases:
+        arrays[f"clean_{c.id}"] = c.clean
+        arrays[f"base_{c.id}"] = c.base
+        arrays[f"noisy_{c.id}"] = c.gaw
+    np.savez(out / "truth.npz", **arrays)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    cases = generate_suite(a.seed)
+    write_suite(cases, a.out, a.seed)
+    dt = time.perf_counter() - t0
+    counts: dict[str, int] = {}
+    for c in cases:
+        counts[c.label] = counts.get(c.label, 0) + 1
+    print(f"{len(cases)} cases in {dt:.1f} s -> {a.out}")
+    print("labels:", counts)
+    for c in sorted(cases, key=lambda c: c.label):
+        print(f"  {c.id} {c.label:11s} effect RMS {c.effect_rms:6.2f} mm^2  sigma {c.sigma:.2f}  "
+              f"loglik gap {c.effect_loglik:8.1f}  peak {c.clean.max():5.1f}  attempts {c.attempts}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
