@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from .config import SimConfig
-from .forward import BLOWUP, CLOSED_TOL, _params, _result, midline, prestress
+from .forward import BLOWUP, CLOSED_TOL, _params, _result, midline, prestress, simulate
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .solver import _kernels as kern
@@ -90,12 +90,19 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 8)
 
     Rows are advanced ``block`` at a time in lock-step; results equal ``simulate`` row by
     row (a sample that blows up gets ``ok=False`` without stopping its block).
+
+    The lock-step kernel does not implement the forward-model extensions: when
+    ``config.has_extensions`` (epithelium membrane or subglottal coupling) each row is
+    simulated with the scalar :func:`vfcore.forward.simulate` instead (same results, no
+    batching speed-up).
     """
     config = config or SimConfig()
     arr = _as_rows(params_array)
     if block < 1:
         raise ValueError(f"block must be >= 1, got {block}")
     ps = [Params.from_array(r) for r in arr]
+    if config.has_extensions:
+        return [simulate(p, config) for p in ps]
     out: list[SimResult] = []
     for s in range(0, len(ps), block):
         out.extend(_simulate_block(ps[s:s + block], config))

@@ -29,6 +29,19 @@ class SimConfig:
     closure_gap_mm : small-gap regularisation of the flow load, mm (0 = the paper's hard switch
         between open-glottis Bernoulli and closed-glottis pressures; default 0.02). Below this minimum half
         gap the two distributions are blended smoothly; see docs/model.md.
+
+    Model extensions (off by default; docs/model.md, "Model extensions (issue 5)"):
+
+    epithelium_E_kpa : Young's modulus of a thin epithelium membrane along the free surface, kPa
+        (0 = off). Each free-surface edge of reference length l_e becomes a 2-node bar of axial
+        stiffness E' h / l_e per unit fold length, E' = E / (1 - nu^2) (plane strain, nu = ``nu``).
+    epithelium_h_mm : epithelium thickness h, mm, in (0, 1).
+    epithelium_profile : per free-surface edge stiffness multipliers (>= 0), inferior -> superior;
+        () = uniform. Its length must equal the number of surface edges of the mesh
+        (``len(mesh.surface) - 1``); checked in :func:`vfcore.forward.simulate`.
+    subglottal_modes : subglottal input-impedance modes ((f_hz, zeta, Z_peak), ...): f_hz > 0 Hz,
+        zeta in (0, 1], Z_peak > 0 Pa s/m^3. The glottal inlet pressure is p_sub - sum_k p_k with
+        p_k'' + 2 zeta w p_k' + w^2 p_k = 2 zeta w Z_peak dQ/dt (w = 2 pi f_hz). () = off.
     """
 
     mesh: str = "medium"
@@ -44,6 +57,10 @@ class SimConfig:
     rho_inf: float = 1.0
     keep_trajectories: bool = False
     closure_gap_mm: float = 0.02
+    epithelium_E_kpa: float = 0.0
+    epithelium_h_mm: float = 0.05
+    epithelium_profile: tuple[float, ...] = ()
+    subglottal_modes: tuple[tuple[float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.mesh not in MESHES:
@@ -68,6 +85,64 @@ class SimConfig:
             raise ValueError(f"config p_sup must be finite, got {self.p_sup!r}")
         if self.fps * self.dt > 1.0:
             raise ValueError(f"config fps={self.fps} exceeds the simulation rate 1/dt={1/self.dt:.0f}")
+        self._check_extensions()
+
+    def _check_extensions(self) -> None:
+        E, hh = self.epithelium_E_kpa, self.epithelium_h_mm
+        if not (isinstance(E, (int, float)) and math.isfinite(E) and E >= 0):
+            raise ValueError(f"config epithelium_E_kpa must be a finite number >= 0 (kPa), got {E!r}")
+        if not (isinstance(hh, (int, float)) and math.isfinite(hh) and 0.0 < hh < 1.0):
+            raise ValueError(f"config epithelium_h_mm must lie in (0, 1) mm, got {hh!r}")
+        try:
+            prof = tuple(float(x) for x in self.epithelium_profile)
+        except (TypeError, ValueError):
+            raise ValueError("config epithelium_profile must be a sequence of numbers, "
+                             f"got {self.epithelium_profile!r}") from None
+        if not all(math.isfinite(x) and x >= 0 for x in prof):
+            raise ValueError(f"config epithelium_profile multipliers must be finite and >= 0, got {prof!r}")
+        object.__setattr__(self, "epithelium_profile", prof)
+        if prof:
+            from .mesh import load_mesh
+            n_edges = len(load_mesh(self.mesh).surface) - 1
+            if len(prof) != n_edges:
+                raise ValueError(f"config epithelium_profile must have one multiplier per free-surface edge of mesh "
+                                 f"{self.mesh!r}: expected length {n_edges}, got {len(prof)}")
+        modes = []
+        try:
+            raw = tuple(self.subglottal_modes)
+        except TypeError:
+            raise ValueError(f"config subglottal_modes must be a sequence of (f_hz, zeta, Z_peak), "
+                             f"got {self.subglottal_modes!r}") from None
+        for k, md in enumerate(raw):
+            try:
+                f, z, Zp = (float(x) for x in md)
+            except (TypeError, ValueError):
+                raise ValueError(f"config subglottal_modes[{k}] must be (f_hz, zeta, Z_peak), got {md!r}") from None
+            if not (math.isfinite(f) and f > 0):
+                raise ValueError(f"config subglottal_modes[{k}] f_hz must be finite and > 0, got {f!r}")
+            if not (math.isfinite(f) and f < 0.5 / self.dt):
+                raise ValueError(f"config subglottal_modes[{k}] f_hz={f} must lie below the Nyquist rate "
+                                 f"1/(2 dt) = {0.5 / self.dt:.0f} Hz")
+            if not (math.isfinite(z) and 0.0 < z <= 1.0):
+                raise ValueError(f"config subglottal_modes[{k}] zeta must lie in (0, 1], got {z!r}")
+            if not (math.isfinite(Zp) and Zp > 0):
+                raise ValueError(f"config subglottal_modes[{k}] Z_peak must be finite and > 0 (Pa s/m^3), "
+                                 f"got {Zp!r}")
+            modes.append((f, z, Zp))
+        object.__setattr__(self, "subglottal_modes", tuple(modes))
+
+    @property
+    def has_epithelium(self) -> bool:
+        return self.epithelium_E_kpa > 0
+
+    @property
+    def has_subglottal(self) -> bool:
+        return len(self.subglottal_modes) > 0
+
+    @property
+    def has_extensions(self) -> bool:
+        """True when any forward-model extension (epithelium, subglottal coupling) is on."""
+        return self.has_epithelium or self.has_subglottal
 
     def as_dict(self) -> dict:
         return asdict(self)

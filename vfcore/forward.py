@@ -112,9 +112,17 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     L = config.length_mm * 1e-3
 
     K_vals = system.stiffness_values((si["E_body"], si["E_lig"], si["E_cover"]))
+    D_vals = si["eta"] * system.d_vals
+    if config.has_epithelium:
+        # membrane on the free surface: enters K (prestress, K_eff, contact columns G, the
+        # K u product of the time loop) and D alike
+        K_ep, D_ep = system.epithelium_values(config.epithelium_E_kpa, config.epithelium_h_mm,
+                                              config.epithelium_profile, si["eta"])
+        K_vals = K_vals + K_ep
+        D_vals = D_vals + D_ep
     u, lam_static = prestress(system, K_vals, x_mid)
     cM, cD, cK = kern.effective_scales(h, config.rho_inf)
-    eff = cK * K_vals + cD * si["eta"] * system.d_vals + cM * si["rho"] * system.m_vals
+    eff = cK * K_vals + cD * D_vals + cM * si["rho"] * system.m_vals
     Lb = system.factor(eff)
     G = system.contact_columns(Lb)
     v = np.zeros(system.n)
@@ -131,19 +139,34 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     tu = np.zeros((n_traj, system.n))
     tv = np.zeros((n_traj, system.n))
     am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
-    status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals,
-                            si["rho"] * system.m_vals,
-                            si["eta"] * system.d_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
-                            u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
-                            config.closure_gap_mm * 1e-3, BLOWUP,
-                            width, gsep, lam, traj_every, tu, tv)
+    if not config.has_subglottal:
+        p_in = None
+        status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals,
+                                si["rho"] * system.m_vals,
+                                D_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
+                                u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
+                                config.closure_gap_mm * 1e-3, BLOWUP,
+                                width, gsep, lam, traj_every, tu, tv)
+    else:
+        p_in = np.full(n_steps, si["p_sub"])
+        status = kern.integrate_coupled(
+            n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, si["rho"] * system.m_vals,
+            D_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
+            u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
+            config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
+            kern.subglottal_coefficients(config.subglottal_modes, h), 2.0 * L * math.sqrt(2.0 / RHO_AIR), p_in)
     del lam_static
-    return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall)
+    return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall, p_in)
 
 
 def _result(p: Params, config: SimConfig, system: System, status: int, width: np.ndarray, gsep: np.ndarray,
-            lam: np.ndarray, traj_every: int, tu: np.ndarray, t_wall: float) -> SimResult:
-    """SimResult from the per-step arrays of one integration (status 0 = ok, else failing step)."""
+            lam: np.ndarray, traj_every: int, tu: np.ndarray, t_wall: float,
+            p_in: np.ndarray | None = None) -> SimResult:
+    """SimResult from the per-step arrays of one integration (status 0 = ok, else failing step).
+
+    ``p_in`` (n_steps,): glottal inlet pressure after each step (subglottal coupling), or None
+    (then it is ``p_sub`` throughout and ``SimResult.p_in`` stays empty).
+    """
     si = p.si()
     h = config.dt
     n_steps = width.size
@@ -156,7 +179,12 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
     dp = max(si["p_sub"] - config.p_sup, 0.0)
     t_all = h * np.arange(1, n_steps + 1)
     gaw_full = config.length_mm * width * 1e3                    # mm * mm
-    flow_full = 2.0 * L * gsep * math.sqrt(2.0 * dp / RHO_AIR)    # m^3/s
+    if p_in is None:
+        flow_full = 2.0 * L * gsep * math.sqrt(2.0 * dp / RHO_AIR)    # m^3/s
+    else:
+        # exactly the flow that drove the resonators: step k uses p_in after step k - 1 (explicit coupling)
+        p_prev = np.concatenate([[si["p_sub"]], p_in[:-1]])
+        flow_full = 2.0 * L * gsep * np.sqrt(2.0 * np.maximum(p_prev - config.p_sup, 0.0) / RHO_AIR)
     w_share = system.mesh.surface_weights()
     cp_full = lam / np.where(w_share > 0, w_share, np.inf)       # Pa
     keep = t_all >= config.discard - 1e-12
@@ -168,6 +196,9 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
     _, q = downsample(t_all, flow_full, config.fps, config.discard)
     _, cp = downsample(t_all, cp_full, config.fps, config.discard)
     _, cf = downsample(t_all, lam, config.fps, config.discard)
+    p_in_cam = np.empty(0)
+    if p_in is not None:
+        _, p_in_cam = downsample(t_all, p_in, config.fps, config.discard)
     traj = None
     if config.keep_trajectories:
         t_tr = h * traj_every * np.arange(1, n_traj + 1)
@@ -177,7 +208,8 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
         traj = tr.reshape(tr.shape[0], -1, 2) * 1e3
     return SimResult(ok=True, message="ok", params=p, config=config, fps=config.fps, t=tc, gaw=gaw, width=wd,
                      flow=q, contact_pressure=cp, contact_force=cf, surface_z=system.sZ * 1e3, cycles=cyc,
-                     trajectories=traj, wall_time=time.perf_counter() - t_wall, gaw_hr=gaw_hr)
+                     trajectories=traj, wall_time=time.perf_counter() - t_wall, gaw_hr=gaw_hr,
+                     p_in=p_in_cam)
 
 
 def _simulate_rows(args):

@@ -53,6 +53,8 @@ class SimResult:
     gaw_hr : (HR_OVERSAMPLE * (n - 1) + 1,) glottal area, mm^2, at ``HR_OVERSAMPLE * fps`` from the
         same start: the waveform between frames, for sub-frame phase alignment
         (:func:`vfcore.observe.align`).
+    p_in : (n,) glottal inlet pressure, Pa, p_sub minus the subglottal resonator pressures, when
+        ``SimConfig.subglottal_modes`` is set; empty otherwise (the inlet pressure is then p_sub).
     """
 
     ok: bool
@@ -71,6 +73,7 @@ class SimResult:
     trajectories: np.ndarray | None = None
     wall_time: float = 0.0
     gaw_hr: np.ndarray = field(default_factory=lambda: np.empty(0))
+    p_in: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def f0(self) -> float:

@@ -86,3 +86,32 @@ def assemble_unit(mesh: FoldMesh, nu: float, n_layers: int = 3) -> UnitMatrices:
     D1 = sp.csr_matrix(asm(_shear, full))[perm][:, perm]
     M1 = sp.csr_matrix(asm(_mass, full))[perm][:, perm]
     return UnitMatrices(K_layers=tuple(K_layers), D1=D1, M1=M1, nu=nu)
+
+
+def membrane_unit(mesh: FoldMesh) -> tuple[sp.csr_matrix, ...]:
+    """Unit stiffness of a membrane (2-node bar) on each free-surface edge (full dofs).
+
+    Edge e joins surface nodes ``mesh.surface[e]`` and ``mesh.surface[e + 1]`` (inferior ->
+    superior), reference length l_e and unit tangent t. Its matrix, for axial rigidity
+    E' h = 1 N/m (per unit depth), is the linear (small-strain) bar
+
+        k_e = (1 / l_e) [[t t^T, -t t^T], [-t t^T, t t^T]]
+
+    so a uniform in-plane stretch eps of the edge gives the axial force E' h eps. The
+    epithelium stiffness is ``E' h * sum_e c_e k_e`` (see docs/model.md, "Model extensions").
+    """
+    s = mesh.surface
+    out = []
+    n_full = 2 * mesh.n_nodes
+    for e in range(len(s) - 1):
+        a, b = int(s[e]), int(s[e + 1])
+        d = mesh.points[b] - mesh.points[a]
+        le = float(np.hypot(d[0], d[1]))
+        t = d / le
+        tt = np.outer(t, t) / le
+        ke = np.block([[tt, -tt], [-tt, tt]])
+        idx = np.array([2 * a, 2 * a + 1, 2 * b, 2 * b + 1])
+        rows = np.repeat(idx, 4)
+        cols = np.tile(idx, 4)
+        out.append(sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n_full, n_full)))
+    return tuple(out)

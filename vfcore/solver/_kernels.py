@@ -228,10 +228,73 @@ def step_coefficients(h, am, af, beta, gamma):
             1.0 / (1.0 - af))
 
 
+def subglottal_coefficients(modes, h: float) -> np.ndarray:
+    """(n_modes, 3) coefficients (b0, a1, a2) of the discrete subglottal resonators.
+
+    Each mode (f_hz, zeta, Z_peak) is the parallel resonance
+    ``P(s) / Q(s) = 2 zeta w Z s / (s^2 + 2 zeta w s + w^2)`` (w = 2 pi f_hz; |P/Q| = Z_peak at w),
+    i.e. p'' + 2 zeta w p' + w^2 p = 2 zeta w Z dQ/dt, discretised with the bilinear (trapezoidal)
+    transform prewarped at w, ``s -> c (1 - z^-1) / (1 + z^-1)``, c = w / tan(w h / 2):
+    unconditionally stable, second order, and exact in peak value and frequency. The recursion is
+    ``p[n] = b0 (Q[n] - Q[n-2]) - a1 p[n-1] - a2 p[n-2]`` (see :func:`subglottal_step`).
+    """
+    out = np.zeros((len(modes), 3))
+    for i, (f, zeta, Z) in enumerate(modes):
+        w = 2.0 * np.pi * f
+        c = w / np.tan(0.5 * w * h)
+        d1, d0 = 2.0 * zeta * w, w * w
+        D = c * c + d1 * c + d0
+        out[i] = (d1 * Z * c / D, 2.0 * (d0 - c * c) / D, (c * c - d1 * c + d0) / D)
+    return out
+
+
+@njit(cache=True)
+def subglottal_step(coef, p1, p2, q, q2):
+    """Advance every resonator by one step with input flow q = Q[n] (Q[n-2] = q2).
+
+    coef : (n_modes, 3) from :func:`subglottal_coefficients`; p1, p2 : (n_modes,) p[n-1], p[n-2]
+    (updated in place to p[n], p[n-1]). Returns sum_k p_k[n], Pa.
+    """
+    tot = 0.0
+    for i in range(coef.shape[0]):
+        pk = coef[i, 0] * (q - q2) - coef[i, 1] * p1[i] - coef[i, 2] * p2[i]
+        p2[i] = p1[i]
+        p1[i] = pk
+        tot += pk
+    return tot
+
+
+@njit(cache=True)
+def subglottal_response(q, coef):
+    """Summed resonator pressure (Pa) for a prescribed flow series ``q`` (m^3/s) from rest."""
+    nm = coef.shape[0]
+    p1 = np.zeros(nm)
+    p2 = np.zeros(nm)
+    out = np.empty(q.size)
+    q1 = 0.0
+    q2 = 0.0
+    for n in range(q.size):
+        out[n] = subglottal_step(coef, p1, p2, q[n], q2)
+        q2 = q1
+        q1 = q[n]
+    return out
+
+
 @njit(cache=True, fastmath=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
               u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
+    """:func:`integrate_coupled` without subglottal resonators (the inlet pressure is ``p_sub``)."""
+    return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G,
+                             sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                             width, gsep_out, lam_out, traj_every, traj_u, traj_v,
+                             np.zeros((0, 3)), 0.0, np.zeros(0))
+
+
+@njit(cache=True, fastmath=True)
+def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
+                      u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                      width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
 
     Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
@@ -242,6 +305,13 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
     ``traj_every`` steps (0 = never) u and v are stored in traj_u/v.
     Returns 0 on success, the (1-based) step at which the state became non-finite or
     exceeded ``blowup`` metres, or minus the step at which contact did not settle.
+
+    Subglottal coupling (``sub_coef`` (n_modes, 3) from :func:`subglottal_coefficients`; 0 rows =
+    off, then the loads use ``p_sub`` and nothing else is done per step): the loads of step k use
+    the inlet pressure p_in(t_{k-1}) = p_sub - sum_k p_k(t_{k-1}); after step k the flow
+    Q(t_k) = flow_coef * gsep(t_k) * sqrt(max(p_in(t_{k-1}) - p_sup, 0)) (explicit: the previous
+    p_in; flow_coef = 2 L sqrt(2 / rho_air)) drives the resonators, which give p_in(t_k), written
+    to ``p_in_out[k-1]``. Before t = 0 the flow and the resonators are at rest (p_in(t_0) = p_sub).
     """
     n = u.size
     m = sdx.size
@@ -258,6 +328,12 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
     lam = np.empty(m)
     active = np.zeros(m, dtype=np.bool_)
     ntr = 0
+    nmod = sub_coef.shape[0]
+    sub_p1 = np.zeros(nmod)
+    sub_p2 = np.zeros(nmod)
+    q1 = 0.0
+    q2 = 0.0
+    p_in = p_sub
     for k in range(1, n_steps + 1):
         for j in range(m):
             if sdx[j] >= 0:
@@ -268,7 +344,7 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
                 zs[j] = sZ[j]
             g = x_mid - xs[j]
             gap[j] = g if g > 0.0 else 0.0
-        surface_loads(xs, zs, sX, sZ, gap, p_sub, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres)
+        surface_loads(xs, zs, sX, sZ, gap, p_in, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres)
         for i in range(n):
             y1[i] = m_v * v[i] + m_a * a[i]
             y2[i] = d_v * v[i] + d_a * a[i]
@@ -313,6 +389,13 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
             lam_out[k - 1, j] = -lam[j] * lam_scale
         width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
         gsep_out[k - 1] = sep_ratio * gmin if gmin > closed_tol else 0.0
+        if nmod > 0:
+            dpq = p_in - p_sup
+            q = flow_coef * gsep_out[k - 1] * np.sqrt(dpq) if dpq > 0.0 else 0.0
+            p_in = p_sub - subglottal_step(sub_coef, sub_p1, sub_p2, q, q2)
+            q2 = q1
+            q1 = q
+            p_in_out[k - 1] = p_in
         if traj_every > 0 and k % traj_every == 0 and ntr < traj_u.shape[0]:
             traj_u[ntr, :] = u
             traj_v[ntr, :] = v

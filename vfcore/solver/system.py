@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from ..fem.assemble import assemble_unit
+from ..fem.assemble import assemble_unit, membrane_unit
 from ..mesh import FoldMesh, load_mesh
 from . import _kernels as kern
 
@@ -31,6 +31,8 @@ class System:
     bw : half bandwidth.
     sdx, sdz : (m,) solver dof of x / z of each surface node (-1 if fixed).
     sX, sZ : (m,) reference surface coordinates, m.
+    ep_vals : (m - 1, nnz) unit membrane (epithelium) stiffness of each free-surface edge on the
+        shared pattern (axial rigidity 1 N/m; :func:`vfcore.fem.assemble.membrane_unit`).
     """
 
     mesh: FoldMesh
@@ -46,6 +48,7 @@ class System:
     sdz: np.ndarray
     sX: np.ndarray
     sZ: np.ndarray
+    ep_vals: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -56,6 +59,23 @@ class System:
 
     def stiffness_values(self, E_layers) -> np.ndarray:
         return np.tensordot(np.asarray(E_layers, dtype=float), self.k_vals, axes=1)
+
+    def epithelium_values(self, E_kpa: float, h_mm: float, profile=(), eta: float = 0.0
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """CSR values (on the shared pattern) of the epithelium membrane: (stiffness, damping).
+
+        Stiffness ``E' h sum_e c_e k_e`` with E' = E / (1 - nu^2) (plane strain), h in m and c_e the
+        ``profile`` multipliers (() = all 1). Damping: Kelvin-Voigt as in the bulk (mu -> mu + eta d/dt at
+        fixed nu, E' = 2 mu / (1 - nu)), i.e. ``(2 / (1 - nu)) eta h sum_e c_e k_e``; eta in Pa s.
+        """
+        n_edges = self.ep_vals.shape[0]
+        c = np.ones(n_edges) if len(profile) == 0 else np.asarray(profile, dtype=float)
+        if c.shape != (n_edges,):
+            raise ValueError(f"epithelium_profile must have one multiplier per free-surface edge of mesh "
+                             f"{self.mesh.name!r}: expected length {n_edges}, got {c.size}")
+        unit = c @ self.ep_vals
+        h = h_mm * 1e-3
+        return (E_kpa * 1e3 / (1.0 - self.nu ** 2) * h) * unit, (2.0 / (1.0 - self.nu) * eta * h) * unit
 
     def factor(self, vals: np.ndarray) -> np.ndarray:
         """Band Cholesky factor of the symmetric matrix with CSR values ``vals``."""
@@ -101,6 +121,7 @@ def build_system(mesh: FoldMesh, nu: float) -> System:
     m_vals = _on_pattern(perm(M1), pattern)
     coo = pattern.tocoo()
     bw = int(np.max(np.abs(coo.row - coo.col)))
+    ep_vals = np.stack([_on_pattern(perm(restrict(Ke)), pattern) for Ke in membrane_unit(mesh)])
     dofs = free_full[order]
     where = -np.ones(2 * mesh.n_nodes, dtype=np.int64)
     where[dofs] = np.arange(dofs.size)
@@ -108,7 +129,8 @@ def build_system(mesh: FoldMesh, nu: float) -> System:
     return System(
         mesh=mesh, nu=nu, dofs=dofs, indptr=pattern.indptr.astype(np.int64),
         indices=pattern.indices.astype(np.int64), k_vals=k_vals, d_vals=d_vals, m_vals=m_vals, bw=bw,
-        sdx=where[2 * s], sdz=where[2 * s + 1], sX=mesh.points[s, 0].copy(), sZ=mesh.points[s, 1].copy())
+        sdx=where[2 * s], sdz=where[2 * s + 1], sX=mesh.points[s, 0].copy(), sZ=mesh.points[s, 1].copy(),
+        ep_vals=ep_vals)
 
 
 @lru_cache(maxsize=16)
