@@ -62,6 +62,10 @@ SIGMA_RANGE = (0.3, 1.0)
 TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)}
 #: Oscillation criterion of a usable case.
 MIN_PEAK_MM2 = 2.0
+#: Detectability floor: an effect draw whose clean waveform differs from the control at the same
+#: truth by less than this RMS (mm^2) is redrawn. Exposure has none: at 2000 fps its low-pass is
+#: intrinsically weak on a 60-200 Hz GAW (README), so its cases are near-null by construction.
+MIN_EFFECT_RMS = {"default": 0.5, "control": 0.0, "exposure": 0.0}
 
 PHYSICAL = ("leak", "sep_ratio", "epithelium", "zipper", "subglottal", "asymmetry")
 CAMERA = ("exposure", "frame_rate", "scale")
@@ -404,16 +408,18 @@ def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config
         if not _ok(base) or base.cycles is None or not math.isfinite(base.f0):
             continue
         offset = _uniform(rng, OFFSET_RANGE)
+        base_clean = sample_hr(np.asarray(base.gaw_hr), hr_times(base), frame_times(n_obs, offset, config.fps))
+        floor = MIN_EFFECT_RMS.get(label, MIN_EFFECT_RMS["default"])
         out = None
         for _ in range(3):
             out = apply_effect(label, base, truth, offset, rng, config, n_obs, sim)
-            if out is not None and oscillates(out[0], config.fps):
+            if (out is not None and oscillates(out[0], config.fps)
+                    and np.sqrt(np.mean((out[0] - base_clean) ** 2)) >= floor):
                 break
             out = None
         if out is None:
             continue
         clean, eff = out
-        base_clean = sample_hr(np.asarray(base.gaw_hr), hr_times(base), frame_times(n_obs, offset, config.fps))
         sigma = _uniform(rng, SIGMA_RANGE)
         noisy = clean + sigma * rng.standard_normal(n_obs)
         return Case(case_id, label, eff, truth.as_dict(), offset, sigma, config.fps, clean, base_clean, noisy,

@@ -1,0 +1,192 @@
+"""Concealed-effect benchmark generator (benchmarks/concealed/generate.py)."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from benchmarks.concealed import generate as G  # noqa: E402
+from vfcore import TABLE3, Params, simulate  # noqa: E402
+
+CFG = G.BASE_CONFIG
+L = CFG.length_mm
+
+
+@pytest.fixture(scope="module")
+def base():
+    r = simulate(TABLE3, CFG)
+    assert r.ok and G.oscillates(r.gaw, r.fps)
+    return r
+
+
+def _window(base, offset=77.3):
+    t_hr = G.hr_times(base)
+    t = G.frame_times(G.N_OBS, offset, CFG.fps)
+    return t_hr, t, G.sample_hr(np.asarray(base.gaw_hr), t_hr, t)
+
+
+def test_generator_does_not_import_diagnose():
+    src = Path(G.__file__).read_text()
+    assert "diagnose" not in "".join(l for l in src.splitlines() if l.lstrip().startswith(("import", "from")))
+
+
+def test_suite_covers_every_label():
+    labels = G.suite_labels()
+    avail = G.forward_extensions_available()
+    for lab in G.LABELS:
+        if lab in avail and not avail[lab]:
+            continue
+        assert labels.count(lab) >= (4 if lab == "control" else 1), lab
+    for lab in G.PHYSICAL:
+        if avail.get(lab, True):
+            assert labels.count(lab) >= 2, lab
+    assert sum(lab != "control" for lab in labels) >= 16 - 2 * (not all(avail.values()))
+
+
+SMALL = {"leak": 1, "sep_ratio": 1, "control": 1}
+
+
+def test_determinism_and_public_files(tmp_path):
+    a = G.generate_suite(5, counts=SMALL)
+    b = G.generate_suite(5, counts=SMALL)
+    c = G.generate_suite(6, counts=SMALL)
+    assert [x.label for x in a] == [x.label for x in b]
+    for x, y in zip(a, b):
+        assert np.array_equal(x.gaw, y.gaw) and np.array_equal(x.clean, y.clean)
+        assert x.truth == y.truth and x.effect == y.effect and x.offset_frames == y.offset_frames
+    assert not any(np.array_equal(x.gaw, y.gaw) for x in a for y in c)
+    assert sorted(x.label for x in a) == sorted(SMALL)
+
+    G.write_suite(a, tmp_path, seed=5)
+    text = (tmp_path / "cases.json").read_text()
+    pub = json.loads(text)
+    for entry in pub["cases"]:
+        assert set(entry) == {"id", "file", "fps", "n_frames"}
+        assert entry["n_frames"] == G.N_OBS and entry["fps"] == CFG.fps
+        col = np.loadtxt(tmp_path / entry["file"], skiprows=1)
+        assert col.shape == (G.N_OBS,)
+        assert (tmp_path / entry["file"]).read_text().splitlines()[0] == "area_mm2"
+    low = text.lower()
+    for word in G.LABELS + ("effect", "label", "sigma", "truth", "offset", "chink", "lag"):
+        assert word not in low, word
+    hidden = json.loads((tmp_path / "truth.json").read_text())
+    for x in a:
+        h = hidden["cases"][x.id]
+        assert h["label"] == x.label and h["sigma_mm2"] == x.sigma
+        assert np.allclose(h["clean"], x.clean, atol=1e-12)
+        obs = np.loadtxt(tmp_path / f"case_{x.id}.csv", skiprows=1)
+        assert np.allclose(obs, x.gaw, atol=1e-6)
+    npz = np.load(tmp_path / "truth.npz")
+    assert np.array_equal(npz[f"noisy_{a[0].id}"], a[0].gaw)
+
+
+def test_control_is_base_window_plus_noise():
+    c = G.make_case("c", "control", np.random.SeedSequence(11))
+    assert c.effect == {} and G.SIGMA_RANGE[0] <= c.sigma <= G.SIGMA_RANGE[1]
+    for k, (lo, hi) in G.TRUTH_BOUNDS.items():
+        assert lo <= c.truth[k] <= hi
+    r = simulate(Params(**c.truth), CFG)
+    t = G.frame_times(G.N_OBS, c.offset_frames, CFG.fps)
+    direct = np.interp(t, np.arange(r.gaw_hr.size) / (CFG.fps * 10), r.gaw_hr)
+    assert np.max(np.abs(c.clean - direct)) < 1e-9
+    assert np.array_equal(c.clean, c.base)
+    res = c.gaw - c.clean
+    assert 0.8 * c.sigma < res.std() < 1.2 * c.sigma and abs(res.mean()) < 4 * c.sigma / np.sqrt(G.N_OBS)
+    # an integer offset reproduces the camera-rate GAW itself
+    t_int = G.frame_times(G.N_OBS, 100, CFG.fps)
+    assert np.allclose(G.sample_hr(r.gaw_hr, G.hr_times(r), t_int), r.gaw[100:100 + G.N_OBS], atol=1e-9)
+
+
+def test_leak_identity_and_floor(base):
+    t_hr, t, a = _window(base)
+    w = a / L
+    assert np.allclose(G.leak_area(w, np.zeros(G.N_Y), np.ones(G.N_Y)), a, rtol=1e-12, atol=1e-12)
+    g = G.gap_profile(2.0, 0.6, L)
+    assert np.isclose(g.sum() * L / G.N_Y, 2.0) and g[0] == 0 and np.argmax(g) == G.N_Y - 1
+    la = G.leak_area(w, g)
+    assert np.all(la >= a - 1e-12) and np.all(la >= 2.0 - 1e-9)
+    closed = a < 0.05
+    assert closed.any() and np.allclose(la[closed], 2.0 + 0 * la[closed], atol=0.05)
+    # not an additive constant: at the peak the chink is (partly) hidden by the open membranous glottis
+    assert la.max() - a.max() < 1.0
+
+
+def test_zipper_identity(base):
+    t_hr, t, a = _window(base)
+    z = G.zipper_area(np.asarray(base.gaw_hr) / L, t_hr, t, 0.0, 2.0, 0.0, L)
+    assert np.max(np.abs(z - a)) < 1e-9
+    z2 = G.zipper_area(np.asarray(base.gaw_hr) / L, t_hr, t, 0.2 / base.f0, 2.0, 1.0, L)
+    assert np.sqrt(np.mean((z2 - a) ** 2)) > 0.3
+
+
+def test_asymmetry_identity(base):
+    t_hr, t, a = _window(base)
+    twin = simulate(TABLE3, CFG)                      # a separate but identical right fold
+    tc = t[G.N_OBS // 2]
+    assert np.max(np.abs(G.asymmetric_area(base, twin, t, 0.0, tc) - a)) < 1e-9
+    assert np.max(np.abs(G.asymmetric_area(base, base, t, 0.0, tc) - a)) < 1e-9
+    lagged = G.asymmetric_area(base, twin, t, 0.15, tc)
+    assert np.sqrt(np.mean((lagged - a) ** 2)) > 0.3 and lagged.min() >= 0
+
+
+def test_camera_operators(base):
+    t_hr, t, a = _window(base)
+    # boxcar: exact on a linear signal, and the mean of a sine is scaled by sinc(f tau)
+    lin = 3.0 + 2.0 * t_hr
+    assert np.allclose(G.boxcar_average(lin, t_hr, t, 0.8 / CFG.fps), 3.0 + 2.0 * t, atol=1e-12)
+    f = 150.0
+    s_hr = np.sin(2 * np.pi * f * t_hr)
+    tau = 1.0 / CFG.fps
+    got = G.boxcar_average(s_hr, t_hr, t, tau)
+    assert np.allclose(got, np.sinc(f * tau) * np.sin(2 * np.pi * f * t), atol=2e-3)
+    assert np.array_equal(G.boxcar_average(a, t, t[5:-5], 0.0), a[5:-5])
+    # frame rate: true interval 1/(r fps)
+    ft = G.frame_times(10, 3.5, CFG.fps, 1.05)
+    assert np.allclose(np.diff(ft), 1 / (1.05 * CFG.fps)) and np.isclose(ft[0], 3.5 / CFG.fps)
+    # scale + pixel quantisation
+    q = G.quantise_scale(a, 1.15, L)
+    step = G.PIXEL_MM * L
+    assert np.allclose(q / step, np.round(q / step), atol=1e-9)
+    assert np.max(np.abs(q - 1.15 * a)) <= step / 2 + 1e-9
+
+
+def test_forward_extension_inputs():
+    avail = G.forward_extensions_available()
+    modes = G.subglottal_modes(0.2, 1e6, 0.1)
+    f = [m[0] for m in modes]
+    assert np.allclose(f, [437.5, 1312.5, 2187.5])
+    assert modes[0][2] > modes[1][2] > modes[2][2] and modes[0][1] < modes[1][1] < modes[2][1]
+    if not avail["epithelium"]:
+        pytest.skip("SimConfig has no epithelium fields")
+    from vfcore.mesh import load_mesh
+    prof = np.array(G.epithelium_profile(3.0, 1.0))
+    m = load_mesh(CFG.mesh)
+    assert prof.size == len(m.surface) - 1 and prof.min() >= 1.0 - 1e-12 and prof.max() > 2.5
+    x_mid = 0.5 * (m.points[m.surface][1:, 0] + m.points[m.surface][:-1, 0])
+    assert x_mid[np.argmax(prof)] > np.percentile(x_mid, 75)       # thickest on the medial surface
+    CFG.replace(epithelium_E_kpa=10.0, epithelium_profile=tuple(prof))   # accepted by SimConfig
+
+
+@pytest.mark.parametrize("label", G.EFFECTS)
+def test_each_effect_changes_the_waveform(label):
+    avail = G.forward_extensions_available()
+    if label in avail and not avail[label]:
+        pytest.skip(f"{label}: SimConfig lacks the forward-model fields")
+    c = G.make_case("e", label, np.random.SeedSequence([3, G.EFFECTS.index(label)]))
+    assert c.label == label and c.effect
+    assert G.oscillates(c.clean, CFG.fps)
+    # exposure at 2000 fps on a ~60-150 Hz GAW is a weak low-pass (documented in the README)
+    assert c.effect_rms > (0.02 if label == "exposure" else 0.3), c.effect_rms
+    ranges = {"sep_ratio": ("sep_ratio", G.SEP_RATIO_RANGES), "asymmetry": ("Q", G.ASYM_Q_RANGES),
+              "frame_rate": ("rate_ratio", G.RATE_RANGES), "scale": ("scale", G.SCALE_RANGES)}
+    if label in ranges:
+        k, rr = ranges[label]
+        assert any(lo <= c.effect[k] <= hi for lo, hi in rr)
+    if label == "leak":
+        assert G.LEAK_AREA_MM2[0] <= c.effect["chink_area_mm2"] <= G.LEAK_AREA_MM2[1]
+        assert c.clean.min() >= c.effect["chink_area_mm2"] - 1e-9
