@@ -69,6 +69,9 @@ class Extension:
         """Extended observation of ``base`` (SimResult or GAW array) for parameters ``theta``
         (mapping name -> value, or a sequence in ``param_names`` order)."""
         if not self.implemented or self._apply is None:
+            if self.implemented:
+                raise NotImplementedError(f"extension {self.name!r} is fitted through vfcore.diagnose.fit "
+                                          "(observe_extended / extended_config), not apply()")
             raise NotImplementedError(
                 f"extension {self.name!r} ({self.kind}) is catalogued but not implemented: it needs a change to "
                 "the forward model (see docs/diagnose.md)")
@@ -208,19 +211,37 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
                   "(Pelorson et al. 1994, JASA); default 1.3 here; JASA-EL 2021 flow-model selection"),),
         ("opening", "closing"), ("speed_quotient", "closing_quotient", "naq", "f0_hz", "amplitude_mm2"),
         "GAW skew (opening vs closing asymmetry) and amplitude; driving-pressure timing", True, _sep),
-    _structural("epithelium", ("closing", "closed"), ("closing_quotient", "naq", "hrf_db"),
-                "stiffer thin surface layer: sharper closure, more high-frequency energy",
-                (ExtParam("E_epith_kpa", 10.0, 100.0, "kPa", "epithelium stiffness (literature range, TBD)"),
-                 ExtParam("h_epith_mm", 0.02, 0.1, "mm", "epithelium thickness (literature range, TBD)"))),
-    _structural("zipper", ("opening", "closing"), ("speed_quotient", "closing_quotient", "glottal_gap_index"),
-                "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
-                (ExtParam("ap_phase_lag", 0.0, 0.3, "cycles", "A-P phase difference (TBD)"),)),
-    _structural("subglottal", ("opening", "peak", "closing"), ("hrf_db", "f0_hz", "shr"),
-                "ripple at the subglottal resonance (~500-700 Hz) superposed on the GAW; f0 entrainment",
-                (ExtParam("f_sub_hz", 400.0, 800.0, "Hz", "first subglottal resonance (TBD)"),)),
-    _structural("asymmetry", ("opening", "closing", "closed"), ("shr", "shimmer", "jitter", "glottal_gap_index"),
-                "left-right tension imbalance: phase lag between folds, subharmonics / cycle modulation",
-                (ExtParam("Q_asym", 0.5, 1.5, "-", "left/right stiffness ratio (TBD)"),)),
+    Extension(
+        "epithelium", "forward",
+        (ExtParam("E_epith_kpa", 5.0, 200.0, "kPa",
+                  "membrane stiffness of a 0.05-mm surface layer; vocal-fold epithelium is 0.03-0.1 mm thick "
+                  "and much stiffer than the SLP (chosen bounds, docs/diagnose.md)"),),
+        ("closing", "closed", "opening"), ("closing_quotient", "naq", "hrf_db", "f0_hz", "amplitude_mm2"),
+        "stiffer thin surface layer: higher f0 for the same bulk moduli, sharper closure, more HF energy",
+        True, None),
+    Extension(
+        "zipper", "observation",
+        (ExtParam("ap_phase_lag", 0.0, 0.4, "cycles",
+                  "anterior-posterior phase difference of high-speed recordings (zipper-like closure; chosen bounds)"),
+         ExtParam("end_fraction", 0.0, 0.5, "-", "fraction of the length over which the ends are held (taper)")),
+        ("opening", "closing", "peak"), ("speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
+        "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
+        True, None),
+    Extension(
+        "subglottal", "forward",
+        (ExtParam("f_sub_hz", 200.0, 900.0, "Hz",
+                  "first subglottal resonance: ~500-700 Hz in humans, lower in rigs with long subglottal tubes"),
+         ExtParam("log10_Z_sub", 5.0, 7.0, "log10(Pa s/m^3)", "peak input impedance of the resonance (chosen bounds)")),
+        ("opening", "peak", "closing"), ("hrf_db", "f0_hz", "shr", "amplitude_mm2"),
+        "ripple at the subglottal resonance superposed on the GAW; f0 and amplitude change (p_in varies)",
+        True, None),
+    Extension(
+        "asymmetry", "observation",
+        (ExtParam("lr_phase", 0.0, 0.25, "cycles", "left-right phase difference (chosen bounds)"),
+         ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)")),
+        ("opening", "closing", "closed"), ("open_quotient", "speed_quotient", "glottal_gap_index"),
+        "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
+        True, None),
 ]}
 
 

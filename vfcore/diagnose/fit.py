@@ -1,0 +1,243 @@
+"""Fit extended models: the base forward model plus one catalogued extension.
+
+An extended fit estimates the base model's parameters (those of the base ``Problem``'s prior)
+*jointly* with the extension's parameters, with the same likelihood (Eq. 15, sigma_e, the same
+compared frames and the same alignment) as the base fit, so the log-evidences of base and
+extended fits are comparable (docs/diagnose.md, "Refits").
+
+Extensions act in one of two ways (``Extension.kind``):
+
+- **observation** (leak, scale, exposure, frame_rate, zipper, asymmetry): the simulation is the
+  base model's; the extension maps its glottal area, at 10x the camera rate
+  (:attr:`vfcore.result.SimResult.gaw_hr`), to what the camera records, before alignment.
+  These operators are defined here, on the oversampled waveform, so that they stay continuous
+  in their parameters (a frame-rate grid would quantise time shifts).
+- **forward** (sep_ratio, epithelium, subglottal): a ``SimConfig`` field of the forward model,
+  so each draw re-simulates.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..measures import estimate_f0
+from ..observe import align
+from ..result import HR_OVERSAMPLE
+from ..inference.prior import Prior
+from ..inference.problem import Evaluation, Problem, _cycle_means, gaussian_loglik
+from .extensions import Extension, get
+
+__all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "extended_config", "fit_extended"]
+
+
+# ------------------------------------------------------------------------------------ prior
+@dataclass(frozen=True, eq=False)
+class ExtendedPrior(Prior):
+    """Uniform prior over the base prior's parameters followed by an extension's parameters.
+
+    ``names`` lists the base names (in ``PARAM_NAMES`` order) then the extension's.
+    ``split(theta)`` returns (base theta, {extension name: value}).
+    """
+
+    base: Prior | None = None
+    extension: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.base, Prior):
+            raise ValueError("ExtendedPrior needs a base Prior")
+        ext = get(self.extension)
+        b = dict(self.base.bounds)
+        for p in ext.params:
+            if p.name in b:
+                raise ValueError(f"extension parameter {p.name!r} clashes with a base parameter")
+            b[p.name] = (float(p.lo), float(p.hi))
+        object.__setattr__(self, "bounds", b)
+        object.__setattr__(self, "fixed", dict(self.base.fixed))
+
+    @property
+    def n_base(self) -> int:
+        return self.base.ndim
+
+    def split(self, theta) -> tuple[np.ndarray, dict[str, float]]:
+        theta = np.asarray(theta, dtype=float)
+        nb = self.n_base
+        return theta[:nb], dict(zip(self.names[nb:], map(float, theta[nb:])))
+
+    def to_params(self, theta):
+        return self.base.to_params(self.split(theta)[0])
+
+    def to_dict(self) -> dict:
+        return {"base": self.base.to_dict(), "extension": self.extension}
+
+    def __repr__(self) -> str:
+        return f"ExtendedPrior({self.base!r} + {self.extension})"
+
+
+# ------------------------------------------------------------------- observation operators
+def _shift(y: np.ndarray, rate: float, delay_s) -> np.ndarray:
+    """``y(t - delay)`` on the same grid (linear interpolation; ends held)."""
+    t = np.arange(y.size) / rate
+    return np.interp(t - delay_s, t, y)
+
+
+def _period_s(hr: np.ndarray, fps: float) -> float:
+    f0 = estimate_f0(hr[::HR_OVERSAMPLE], fps)
+    if not (math.isfinite(f0) and f0 > 0):
+        raise RuntimeError("the simulation does not oscillate: the extension needs its period")
+    return 1.0 / f0
+
+
+def observe_extended(name: str, hr: np.ndarray, fps: float, phi: dict, length_mm: float = 17.0) -> np.ndarray:
+    """What the camera records of an oversampled simulated area ``hr`` (mm^2, rate
+    ``HR_OVERSAMPLE * fps``) under observation-level extension ``name`` with parameters ``phi``.
+
+    - leak: ``A + leak_mm2`` (a parallel, rigid posterior gap).
+    - scale: ``scale * A`` (pixel-size / viewing-angle calibration error).
+    - exposure: centred boxcar average over ``exposure_fraction / fps`` s (exact integral of the
+      piecewise-linear waveform, continuous in the fraction).
+    - frame_rate: ``A(t / rate_ratio)`` (the camera's true rate is ``rate_ratio * fps``).
+    - zipper: the fold length split into 24 strips; strip ``y`` moves like the section delayed by
+      ``ap_phase_lag * T0 * (y / L - 1/2)`` and scaled by the end-constraint taper
+      ``min(1, y / (e L), (L - y) / (e L))`` with ``e = end_fraction``; area = sum of strips.
+    - asymmetry: two folds with the section's motion, the second delayed by
+      ``lr_phase * T0`` and scaled by ``lr_amp``: ``A/2 + lr_amp * A(t - lr_phase T0)/2``.
+    """
+    rate = HR_OVERSAMPLE * fps
+    y = np.asarray(hr, dtype=float)
+    if name == "leak":
+        return y + phi["leak_mm2"]
+    if name == "scale":
+        return y * phi["scale"]
+    if name == "exposure":
+        tau = phi["exposure_fraction"] / fps
+        if tau <= 0:
+            return y.copy()
+        t = np.arange(y.size) / rate
+        c = np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) / rate)])
+        lo = np.clip(t - tau / 2, 0, t[-1])
+        hi = np.clip(t + tau / 2, 0, t[-1])
+        w = hi - lo
+        return np.where(w > 0, (np.interp(hi, t, c) - np.interp(lo, t, c)) / np.where(w > 0, w, 1), y)
+    if name == "frame_rate":
+        t = np.arange(y.size) / rate
+        return np.interp(t / phi["rate_ratio"], t, y)
+    if name == "zipper":
+        T0 = _period_s(y, fps)
+        n = 24
+        ys = (np.arange(n) + 0.5) / n                    # strip centres, fraction of length
+        e = phi["end_fraction"]
+        taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
+        out = np.zeros_like(y)
+        for yk, wk in zip(ys, taper):
+            out += wk * _shift(y, rate, phi["ap_phase_lag"] * T0 * (yk - 0.5))
+        return out / n
+    if name == "asymmetry":
+        T0 = _period_s(y, fps)
+        return 0.5 * y + 0.5 * phi["lr_amp"] * _shift(y, rate, phi["lr_phase"] * T0)
+    raise ValueError(f"{name!r} is not an observation-level extension")
+
+
+def extended_config(config, name: str, phi: dict):
+    """The ``SimConfig`` of a forward-level extension ``name`` with parameters ``phi``."""
+    if name == "sep_ratio":
+        return dataclasses.replace(config, sep_ratio=phi["sep_ratio"])
+    if name == "epithelium":
+        return dataclasses.replace(config, epithelium_E_kpa=phi["E_epith_kpa"],
+                                   epithelium_h_mm=phi.get("h_epith_mm", 0.05))
+    if name == "subglottal":
+        return dataclasses.replace(config, subglottal_modes=(
+            (phi["f_sub_hz"], phi.get("zeta_sub", 0.1), 10.0 ** phi["log10_Z_sub"]),))
+    raise ValueError(f"{name!r} is not a forward-level extension")
+
+
+# -------------------------------------------------------------------------------- evaluator
+class ExtendedEvaluator:
+    """Picklable batch function ``thetas (k, d_base + d_ext) -> Evaluation`` for an extended
+    model; the likelihood, compared frames and alignment are the base ``problem``'s."""
+
+    def __init__(self, problem: Problem, extension: str):
+        self.problem = problem
+        self.name = extension
+        if not get(extension).implemented:
+            raise NotImplementedError(f"extension {extension!r} is not implemented")
+        self.prior = ExtendedPrior(bounds={}, base=problem.prior, extension=extension)
+
+    @property
+    def extension(self) -> Extension:
+        return get(self.name)            # looked up, not stored: catalogue entries hold closures
+
+    def _simulate(self, base_params, phis):
+        ext = self.extension
+        cfg = self.problem.config
+        if ext.kind == "observation":
+            from ..batch import simulate_many
+            return simulate_many(base_params, cfg, block=16)
+        from ..forward import simulate
+        out = []
+        for p, phi in zip(base_params, phis):
+            try:
+                out.append(simulate(p, extended_config(cfg, ext.name, phi)))
+            except Exception as exc:  # noqa: BLE001 - reported per draw
+                out.append(exc)
+        return out
+
+    def __call__(self, thetas) -> Evaluation:
+        pb = self.problem
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        k = thetas.shape[0]
+        max_lag, n_cmp = pb.window
+        obs = pb.obs_compared
+        loglik = np.full(k, -np.inf)
+        ok = np.zeros(k, dtype=bool)
+        gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
+        flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
+        messages = []
+        splits = [self.prior.split(th) for th in thetas]
+        params = [pb.prior.to_params(b) for b, _ in splits]
+        results = self._simulate(params, [phi for _, phi in splits])
+        for i, r in enumerate(results):
+            try:
+                if isinstance(r, BaseException):
+                    raise r
+                if not r.ok:
+                    raise RuntimeError(r.message or "simulation failed")
+                hr = np.asarray(r.gaw_hr, dtype=float)
+                if self.extension.kind == "observation":
+                    hr = observe_extended(self.extension.name, hr, pb.fps, splits[i][1], pb.config.length_mm)
+                sim = hr[::HR_OVERSAMPLE]
+                if sim.size < max_lag + n_cmp or not np.all(np.isfinite(hr)):
+                    raise RuntimeError("extended simulation too short or not finite")
+                seg, _, _ = align(sim, pb.obs_gaw, pb.fps, (max_lag, n_cmp), sim_hr=hr,
+                                  oversample=HR_OVERSAMPLE, method=pb.alignment)
+                ll = gaussian_loglik(seg, obs, pb.sigma_e)
+            except Exception as exc:  # noqa: BLE001
+                messages.append(f"{i}: {type(exc).__name__}: {exc}")
+                continue
+            loglik[i], ok[i], gaw[i] = ll, True, seg
+            flow[i], cmean[i], cmax[i] = _cycle_means(r)
+        return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean,
+                          max_contact=cmax, messages=tuple(messages))
+
+
+def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, seed: int = 0, map=map,
+                 chunk_size: int = 40, **smc_options):
+    """Tempered-SMC fit of the base model + ``extension`` (joint in all parameters).
+
+    Returns a :class:`vfcore.inference.Posterior` whose ``names`` are the base names followed by
+    the extension's, with ``log_evidence`` comparable to the base fit's.
+    """
+    from ..inference.smc import smc
+    ev = ExtendedEvaluator(problem, extension)
+    post = smc(ev, prior=ev.prior, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
+               **smc_options)
+    post.obs_gaw = problem.obs_compared
+    post.fps = problem.fps
+    post.info["extension"] = extension
+    return post
+
+
+def _ext(name: str) -> Extension:
+    return get(name)

@@ -1,0 +1,246 @@
+"""The whole diagnosis: fit, locate, screen the catalogue, refit the promising extensions, name one.
+
+``diagnose(problem)`` (docs/diagnose.md, "Pipeline"):
+
+1. **Base fit** — tempered SMC of the base model (``problem``'s prior).
+2. **Locate** — phase-folded residual and posterior-predictive p-values of the GAW measures.
+3. **Screen** — every implemented extension is tried at a few base-posterior particles: for
+   observation-level extensions at ``screen_obs`` parameter draws each (no new simulation: the
+   operators act on the stored oversampled waveform); for forward-level extensions at
+   ``screen_fwd`` scrambled-Sobol draws of their parameters, re-simulated. The screening score is
+   the best log-likelihood reached minus the best base log-likelihood at the same particles: an
+   optimistic bound on what the extension can gain at the base's material parameters. It only
+   decides which extensions are worth a full refit; it is never used to name one.
+4. **Refit** — the ``max_refits`` best-screened extensions whose score exceeds ``screen_min`` get a
+   joint SMC fit (base + extension parameters) with the same likelihood.
+5. **Name** — :func:`.rank.rank_extensions`: an extension is found when its log-evidence gain over
+   the base exceeds ``min_gain`` nats and ``k_se`` Monte Carlo standard errors; otherwise
+   "no missing physics found".
+
+Everything that costs simulations goes through ``map`` (a process pool's or a Dask client's), so
+the same function runs on a laptop and on a cluster.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..inference.posterior import Posterior
+from ..inference.problem import Problem, gaussian_loglik
+from ..observe import align
+from ..result import HR_OVERSAMPLE
+from .extensions import CATALOGUE, get
+from .fit import ExtendedEvaluator, fit_extended, observe_extended
+from .locate import LocateReport, locate, measure_pvalues
+from .rank import NO_FINDING, RankReport, rank_extensions, residual_removed
+
+__all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary"]
+
+
+def _pred(post: Posterior) -> np.ndarray:
+    rp = post.resampled_predictive()
+    if rp is None:
+        raise ValueError("the posterior carries no predictions (not an FE fit)")
+    g = np.asarray(rp.gaw, dtype=float)
+    return g[np.asarray(rp.ok, dtype=bool)]
+
+
+def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float) -> dict:
+    """Residual RMS, phase location, measure p-values and parameter summary of one fit."""
+    g = _pred(post)
+    y = np.asarray(obs, dtype=float)[: g.shape[1]]
+    loc = locate(y, g, fps)
+    pv = measure_pvalues(g, y, fps, sigma_e=sigma_e)
+    return {
+        "residual_rms": float(np.sqrt(np.mean((y - g.mean(axis=0)) ** 2))),
+        "phase_rms": loc.phase_rms, "dominant_phase": loc.dominant_phase,
+        "concentration": loc.concentration(),
+        "pvalues": {k: v.p_two_sided for k, v in pv.items()},
+        "params": {n: {"mean": float(m), "sd": float(s)} for n, m, s in zip(post.names, post.mean, post.sd)},
+        "log_evidence": float(post.log_evidence), "log_evidence_se": float(post.log_evidence_se),
+        "n_simulations": int(post.n_simulations),
+    }
+
+
+def _best_particles(post: Posterior, m: int) -> np.ndarray:
+    """Up to ``m`` distinct particles of the base posterior, heaviest first."""
+    w = np.exp(post.log_weights)
+    order = np.argsort(-w, kind="stable")
+    out, seen = [], set()
+    for i in order:
+        key = tuple(np.round(post.samples[i], 12))
+        if key in seen or w[i] <= 0:
+            continue
+        seen.add(key)
+        out.append(post.samples[i])
+        if len(out) == m:
+            break
+    return np.array(out)
+
+
+def _sobol(d: int, n: int, seed: int) -> np.ndarray:
+    from scipy.stats import qmc
+    return qmc.Sobol(d, scramble=True, seed=seed).random(n)
+
+
+def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, screen_obs: int = 200,
+           screen_fwd: int = 8, n_theta_fwd: int = 2, seed: int = 0, map=map) -> dict[str, dict]:
+    """Screening scores (see module docstring), name -> {"score", "best_phi", "n_simulations"}."""
+    from ..batch import simulate_many
+    thetas = _best_particles(base, n_theta)
+    params = [problem.prior.to_params(t) for t in thetas]
+    res = simulate_many(params, problem.config, block=max(1, len(params)))
+    max_lag, n_cmp = problem.window
+    obs = problem.obs_compared
+
+    def ll_of(hr):
+        sim = hr[::HR_OVERSAMPLE]
+        seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
+                          oversample=HR_OVERSAMPLE, method=problem.alignment)
+        return gaussian_loglik(seg, obs, problem.sigma_e)
+
+    base_ll = np.array([ll_of(np.asarray(r.gaw_hr, float)) if r.ok else -np.inf for r in res])
+    best_base = float(np.max(base_ll))
+    out: dict[str, dict] = {}
+    for k, name in enumerate(candidates):
+        ext = get(name)
+        lo = np.array([p.lo for p in ext.params])
+        hi = np.array([p.hi for p in ext.params])
+        if ext.kind == "observation":
+            u = _sobol(len(lo), screen_obs, seed + 17 * k)
+            phis = lo + u * (hi - lo)
+            best, best_phi = -np.inf, None
+            for r in res:
+                if not r.ok:
+                    continue
+                hr0 = np.asarray(r.gaw_hr, float)
+                for ph in phis:
+                    phi = dict(zip(ext.param_names, ph))
+                    try:
+                        ll = ll_of(observe_extended(name, hr0, problem.fps, phi, problem.config.length_mm))
+                    except Exception:  # noqa: BLE001 - a draw that cannot be observed scores -inf
+                        continue
+                    if ll > best:
+                        best, best_phi = ll, phi
+            out[name] = {"score": best - best_base, "best_phi": best_phi, "n_simulations": 0}
+        else:
+            ev = ExtendedEvaluator(problem, name)
+            u = _sobol(len(lo), screen_fwd, seed + 17 * k)
+            phis = lo + u * (hi - lo)
+            rows = np.array([np.concatenate([t, ph]) for t in thetas[:n_theta_fwd] for ph in phis])
+            parts = list(map(ev, np.array_split(rows, max(1, min(len(rows), 2)))))
+            lls = np.concatenate([p.loglik for p in parts])
+            j = int(np.argmax(lls))
+            out[name] = {"score": float(lls[j] - best_base),
+                         "best_phi": dict(zip(ext.param_names, rows[j, len(thetas[0]):])) if np.isfinite(lls[j])
+                         else None, "n_simulations": int(rows.shape[0])}
+    out["_base"] = {"best_base_loglik": best_base, "n_simulations": len(params)}
+    return out
+
+
+@dataclass
+class DiagnoseReport:
+    base: Posterior
+    before: dict
+    screening: dict
+    refits: dict[str, Posterior]
+    after: dict[str, dict]
+    ranking: RankReport
+    n_simulations: int
+    wall_s: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def verdict(self) -> str:
+        return self.ranking.verdict
+
+    @property
+    def winner(self) -> str | None:
+        return self.ranking.winner
+
+    def to_dict(self) -> dict:
+        rows = self.ranking.table()
+        return {
+            "verdict": self.verdict, "winner": self.winner,
+            "base": self.before,
+            "screening": {k: {kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
+                              for kk, vv in v.items()} for k, v in self.screening.items()},
+            "refits": self.after, "ranking": rows,
+            "n_simulations": self.n_simulations, "wall_s": self.wall_s, "notes": self.notes,
+        }
+
+
+def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: int = 0, map=map,
+             chunk_size: int = 40, max_refits: int = 2, screen_min: float = 3.0, min_gain: float = 3.0,
+             k_se: float = 3.0, base: Posterior | None = None, smc_options: dict | None = None,
+             screen_options: dict | None = None) -> DiagnoseReport:
+    """Run the whole diagnosis on ``problem`` (see the module docstring)."""
+    from ..inference.smc import smc
+    t0 = time.perf_counter()
+    opts = dict(smc_options or {})
+    cand = [n for n in (candidates or CATALOGUE) if get(n).implemented]
+    notes = []
+    if base is None:
+        base = smc(problem, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, **opts)
+    before = fit_summary(base, problem.obs_compared, problem.fps, problem.sigma_e)
+    scr = screen(problem, base, cand, seed=seed, map=map, **(screen_options or {}))
+    n_sims = int(base.n_simulations) + sum(int(v["n_simulations"]) for v in scr.values())
+    ranked = sorted((n for n in cand if np.isfinite(scr[n]["score"])), key=lambda n: -scr[n]["score"])
+    chosen = [n for n in ranked if scr[n]["score"] > screen_min][:max_refits]
+    if not chosen:
+        notes.append(f"no extension raised the best log-likelihood by more than {screen_min} nats at the "
+                     "base posterior; nothing refitted")
+    refits, after = {}, {}
+    loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
+    for i, name in enumerate(chosen):
+        post = fit_extended(problem, name, n_particles=n_particles, seed=seed + 101 * (i + 1), map=map,
+                            chunk_size=chunk_size, **opts)
+        refits[name] = post
+        n_sims += int(post.n_simulations)
+        s = fit_summary(post, problem.obs_compared, problem.fps, problem.sigma_e)
+        g = _pred(post)
+        s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
+        s["rms_improvement"] = 1.0 - s["residual_rms"] / before["residual_rms"]
+        after[name] = s
+    ranking = rank_extensions(base, refits, residual={n: after[n]["residual_removed"] for n in after},
+                              n_extra={n: len(get(n).params) for n in refits}, min_gain=min_gain, k_se=k_se)
+    return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
+                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)
+
+
+def plot_diagnosis(report: DiagnoseReport, problem: Problem, path, level: float = 0.9):
+    """Recording, base and extended fits with their bands, and the residual by cycle phase."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    y = problem.obs_compared
+    t = np.arange(y.size) / problem.fps * 1e3
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 7), constrained_layout=True)
+    a1.plot(t, y, "k.", ms=2.5, label="recording")
+    fits = [("base", report.base, "tab:blue")]
+    if report.winner:
+        fits.append((report.winner, report.refits[report.winner], "tab:red"))
+    q = (1 - level) / 2
+    for label, post, c in fits:
+        g = _pred(post)
+        n = g.shape[1]
+        a1.fill_between(t[:n], np.quantile(g, q, axis=0), np.quantile(g, 1 - q, axis=0), color=c, alpha=0.25)
+        rms = math.sqrt(float(np.mean((y[:n] - g.mean(axis=0)) ** 2)))
+        a1.plot(t[:n], g.mean(axis=0), color=c, lw=1, label=f"{label} fit (RMS {rms:.2f} mm$^2$)")
+        loc = locate(y[:n], g, problem.fps)
+        a2.plot(loc.fold_phase, loc.fold_mean, color=c, marker="o", ms=3, label=f"{label}: residual, "
+                f"dominant phase {loc.dominant_phase}")
+    a1.set_xlabel("time (ms)")
+    a1.set_ylabel("glottal area (mm$^2$)")
+    a1.set_title(report.verdict)
+    a1.legend(fontsize=8)
+    a2.axhline(0, color="grey", lw=0.8)
+    a2.set_xlabel("cycle phase (0 = area minimum)")
+    a2.set_ylabel("mean residual, recording - fit (mm$^2$)")
+    a2.legend(fontsize=8)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
