@@ -82,8 +82,12 @@ def _best_particles(post: Posterior, m: int) -> np.ndarray:
 
 
 def _sobol(d: int, n: int, seed: int) -> np.ndarray:
+    import warnings
+
     from scipy.stats import qmc
-    return qmc.Sobol(d, scramble=True, seed=seed).random(n)
+    with warnings.catch_warnings():      # balance is best at powers of 2; any n is still a valid design
+        warnings.simplefilter("ignore", UserWarning)
+        return qmc.Sobol(d, scramble=True, seed=seed).random(n)
 
 
 def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, screen_obs: int = 200,
