@@ -61,7 +61,7 @@ def run(a) -> None:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 rep = diagnose(pb, n_particles=a.particles, seed=a.seed, map=mapper, chunk_size=a.chunk,
-                               max_refits=a.max_refits)
+                               max_refits=a.max_refits, refit_particles=a.refit_particles)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
             path.write_text(json.dumps(d, indent=1, default=float))
@@ -115,7 +115,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--score", action="store_true", help="score existing reports against truth.json")
     ap.add_argument("--particles", type=int, default=40)
-    ap.add_argument("--max-refits", type=int, default=2)
+    ap.add_argument("--max-refits", type=int, default=1, help="observation-level refits (forward-level: all)")
+    ap.add_argument("--refit-particles", type=int, default=24)
     ap.add_argument("--duration", type=float, default=0.45)
     ap.add_argument("--sigma-e", type=float, default=1.0)
     ap.add_argument("--workers", type=int, default=2)
