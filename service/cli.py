@@ -276,6 +276,10 @@ from .cli_gaw import gaw as _gaw  # noqa: E402  (video -> GAW lives in its own m
 
 app.command("gaw")(_gaw)
 
+from .cli_diagnose import diagnose_cmd as _diagnose  # noqa: E402  (model diagnosis)
+
+app.command("diagnose")(_diagnose)
+
 
 def _check_demo_truth(summary: dict) -> None:
     """Say whether the 90% intervals cover the values the demo GAW was made with."""

@@ -11,7 +11,7 @@ from . import errors
 from .db import JobDB
 from .limits import BodySizeLimit
 from .manager import JobManager
-from .routers import gaw, health, jobs
+from .routers import diagnose, gaw, health, jobs
 from .settings import Settings
 
 
@@ -41,5 +41,6 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(jobs.router)
     app.include_router(gaw.router)
+    app.include_router(diagnose.router)
     app.add_middleware(BodySizeLimit, max_bytes=(settings or Settings.from_env()).max_body_bytes)
     return app

@@ -1,0 +1,184 @@
+"""``vfinfer diagnose GAW``: which physics is the model missing? (vfcore.diagnose on this machine)."""
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+console = Console()
+
+
+def _fail(msg: str) -> typer.Exit:
+    console.print(f"[red]error:[/red] {msg}", highlight=False)
+    return typer.Exit(2)
+
+
+def _names(text: str | None) -> list[str]:
+    return [n.strip() for n in (text or "").split(",") if n.strip()]
+
+
+def _f(x, fmt: str = ".4g") -> str:
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
+                  duration: float, discard: float, sigma_e: float):
+    """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line."""
+    from vfcore.config import MESHES, SimConfig
+    from vfcore.inference import Prior
+    from vfcore.inference.problem import Problem
+    from vfcore.params import PARAM_NAMES, TABLE3
+    from vfvideo.io import read_gaw
+
+    est = list(dict.fromkeys(_names(estimate)))
+    bad = [n for n in est if n not in PARAM_NAMES]
+    if bad:
+        raise _fail(f"--estimate: unknown parameter(s) {bad}; known: {list(PARAM_NAMES)}")
+    if not est:
+        raise _fail("--estimate: no parameter to estimate")
+    fixed = TABLE3.as_dict()
+    for item in fix or []:
+        k, sep, v = item.partition("=")
+        k = k.strip()
+        if not sep:
+            raise _fail(f"--fix must look like NAME=VALUE, got {item!r}")
+        if k not in PARAM_NAMES:
+            raise _fail(f"--fix: unknown parameter {k!r}; known: {list(PARAM_NAMES)}")
+        if k in est:
+            raise _fail(f"--fix: {k!r} is also in --estimate")
+        try:
+            val = float(v)
+        except ValueError:
+            raise _fail(f"--fix {k}: {v.strip()!r} is not a number") from None
+        if not math.isfinite(val):
+            raise _fail(f"--fix {k}: value must be finite")
+        fixed[k] = val
+    for k in est:
+        fixed.pop(k)
+    if mesh not in MESHES:
+        raise _fail(f"--mesh must be one of {list(MESHES)}, got {mesh!r}")
+    if not (dt > 0 and duration > 0 and 0 <= discard < duration):
+        raise _fail(f"need dt > 0, duration > 0 and 0 <= discard < duration "
+                    f"(got dt={dt}, duration={duration}, discard={discard})")
+    if not sigma_e > 0:
+        raise _fail(f"--sigma-e must be > 0, got {sigma_e}")
+    try:
+        g = read_gaw(gaw, fps=fps)
+    except (ValueError, OSError) as exc:     # GawFileError is a ValueError
+        raise _fail(f"GAW {gaw}: {exc}") from None
+    if g.fps * dt > 1.0:
+        raise _fail(f"--dt: camera fps {g.fps:g} exceeds the simulation rate 1/dt={1 / dt:.0f}")
+    try:
+        prior = Prior.default(fixed=fixed)
+        return Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e),
+                       config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps)))
+    except ValueError as exc:
+        raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
+
+
+def print_report(d: dict) -> None:
+    """Rich tables of a ``DiagnoseReport.to_dict()`` (after :func:`jsonable`)."""
+    b = d["base"]
+    t = Table(title="Base fit")
+    for col in ("residual RMS (mm^2)", "log-evidence", "dominant phase", "simulations"):
+        t.add_column(col, justify="right")
+    t.add_row(_f(b["residual_rms"]), f"{_f(b['log_evidence'], '.2f')} +- {_f(b['log_evidence_se'], '.2f')}",
+              str(b["dominant_phase"]), str(b["n_simulations"]))
+    console.print(t)
+    s = Table(title="Screening (best log-likelihood gain at base particles, nats)")
+    s.add_column("candidate")
+    s.add_column("score", justify="right")
+    s.add_column("best parameters")
+    s.add_column("simulations", justify="right")
+    scr = {k: v for k, v in d["screening"].items() if not k.startswith("_")}
+    for name, v in sorted(scr.items(), key=lambda kv: -(kv[1]["score"] if kv[1]["score"] is not None else -1e300)):
+        phi = ", ".join(f"{k}={_f(x)}" for k, x in (v.get("best_phi") or {}).items()) or "-"
+        s.add_row(name, _f(v["score"], ".2f"), phi, str(v["n_simulations"]))
+    console.print(s)
+    if d["refits"]:
+        rows = {r["name"]: r for r in d["ranking"]}
+        r = Table(title="Refits (base + extension, joint SMC)")
+        for col in ("extension", "dlogZ", "residual RMS", "RMS improvement", "extension parameters", "found"):
+            r.add_column(col, justify="left" if col in ("extension", "extension parameters") else "right")
+        from vfcore.diagnose.extensions import get
+        for name, a in d["refits"].items():
+            rk = rows.get(name, {})
+            ext = set(get(name).param_names)
+            pars = ", ".join(f"{k}={_f(v['mean'])} +- {_f(v['sd'], '.2g')}"
+                             for k, v in a["params"].items() if k in ext) or "-"
+            imp = a.get("rms_improvement")
+            r.add_row(name, f"{_f(rk.get('delta'), '.2f')} +- {_f(rk.get('delta_se'), '.2f')}",
+                      _f(a["residual_rms"]), "-" if imp is None else f"{100 * imp:.1f} %", pars,
+                      "yes" if rk.get("found") else "no")
+        console.print(r)
+    for n in d.get("notes") or []:
+        console.print(f"[yellow]note[/yellow] {n}", highlight=False)
+    colour = "green" if d.get("winner") else "bold"
+    console.print(f"[{colour}]{d['verdict']}[/{colour}]", highlight=False)
+    console.print(f"{d['n_simulations']} simulations, wall time {d['wall_s']:.1f} s")
+
+
+def diagnose_cmd(
+        gaw: Annotated[Path, typer.Argument(help="GAW file (CSV as written by 'vfinfer simulate'/'gaw', NPY, NPZ)")],
+        out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png)")],
+        fps: Annotated[Optional[float], typer.Option(help="frame rate, if the file does not say")] = None,
+        estimate: Annotated[str, typer.Option(help="comma-separated parameters to estimate")] = "E_body,E_cover,p_sub",
+        fix: Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable; "
+                                                         "parameters neither estimated nor fixed take Table 3 values")] = None,
+        mesh: Annotated[str, typer.Option(help="coarse | medium | fine")] = "coarse",
+        dt: Annotated[float, typer.Option(help="time step, s")] = 1e-4,
+        duration: Annotated[float, typer.Option(help="simulated time, s")] = 0.45,
+        discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = 0.25,
+        sigma_e: Annotated[float, typer.Option(help="observation noise sd, mm^2")] = 1.0,
+        particles: Annotated[int, typer.Option(help="SMC particles of each fit")] = 40,
+        max_refits: Annotated[int, typer.Option(help="most extensions refitted jointly")] = 2,
+        candidates: Annotated[Optional[str], typer.Option(
+            help="comma-separated extensions to screen (default: every implemented one)")] = None,
+        workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
+        seed: int = 0) -> None:
+    """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
+    from .routers.diagnose import check_candidates, jsonable
+
+    cand = None
+    if candidates is not None:
+        try:
+            cand = check_candidates(_names(candidates))
+        except ValueError as exc:
+            raise _fail(f"--candidates: {exc}") from None
+    if particles < 4:
+        raise _fail(f"--particles must be >= 4, got {particles}")
+    if max_refits < 0:
+        raise _fail(f"--max-refits must be >= 0, got {max_refits}")
+    if workers < 1:
+        raise _fail(f"--workers must be >= 1, got {workers}")
+    problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e)
+
+    from vfcore.diagnose.pipeline import diagnose, plot_diagnosis
+    console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {particles} particles, "
+                  f"candidates {cand or 'all implemented'}, {workers} worker(s)")
+    t0 = time.perf_counter()
+    try:
+        if workers == 1:
+            report = diagnose(problem, candidates=cand, n_particles=particles, max_refits=max_refits, seed=seed)
+        else:
+            from concurrent.futures import ProcessPoolExecutor
+            chunk = max(1, math.ceil(particles / (2 * workers)))
+            with ProcessPoolExecutor(workers) as pool:
+                report = diagnose(problem, candidates=cand, n_particles=particles, max_refits=max_refits,
+                                  seed=seed, map=pool.map, chunk_size=chunk)
+    except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
+        console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)
+        raise typer.Exit(1) from None
+    d = jsonable(report.to_dict())
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "diagnosis.json").write_text(json.dumps(d, indent=1))
+    plot_diagnosis(report, problem, out / "diagnosis.png")
+    print_report(d)
+    console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
+                  f"({time.perf_counter() - t0:.1f} s)")

@@ -1,0 +1,246 @@
+"""Model diagnosis of a finished job: ``POST /jobs/{id}/diagnose`` starts
+:func:`vfcore.diagnose.pipeline.diagnose` on the job's problem in a background thread (its
+simulations run on the service's Dask cluster); ``GET /jobs/{id}/diagnosis`` and
+``GET /jobs/{id}/diagnosis/figure`` read the result.
+
+Ownership rules are those of the other job endpoints (another user's job answers 404).  The
+result lies next to the job's store (``<id>.diagnosis.json`` / ``.png``; a failure leaves
+``<id>.diagnosis.error``), each written to a temporary file and renamed, so a half-written result
+is never served.  One diagnosis per job at a time.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import secrets
+import threading
+from pathlib import Path
+
+import numpy as np
+from fastapi import APIRouter, Body, HTTPException, Request, Response, status
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from worker.jobspec import JobSpec
+
+from ..deps import JobIdDep, ManagerDep, UserDep
+from .jobs import _done, _own
+
+log = logging.getLogger("vfinfer.diagnose")
+
+router = APIRouter(tags=["diagnosis"])
+
+#: matplotlib's pyplot is not thread-safe: one figure at a time in this process.
+_PLOT_LOCK = threading.Lock()
+_REG_LOCK = threading.Lock()
+
+
+# ------------------------------------------------------------------------------------ helpers
+def jsonable(obj):
+    """A strict-JSON copy of a report: numpy scalars/arrays to Python, non-finite floats to None."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        x = float(obj)
+        return x if math.isfinite(x) else None
+    if obj is None or isinstance(obj, str):
+        return obj
+    return str(obj)
+
+
+def check_candidates(names) -> list[str]:
+    """Unknown or not-implemented extension names raise ValueError naming them."""
+    from vfcore.diagnose.extensions import CATALOGUE
+    names = list(dict.fromkeys(n.strip() for n in names))
+    unknown = [n for n in names if n not in CATALOGUE]
+    if unknown:
+        raise ValueError(f"unknown candidate(s) {unknown}; known: {sorted(CATALOGUE)}")
+    unimpl = [n for n in names if not CATALOGUE[n].implemented]
+    if unimpl:
+        impl = sorted(n for n, e in CATALOGUE.items() if e.implemented)
+        raise ValueError(f"candidate(s) {unimpl} are catalogued but not implemented; fittable: {impl}")
+    if not names:
+        raise ValueError("no candidates given")
+    return names
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def plot_atomic(report, problem, path: Path) -> None:
+    from vfcore.diagnose.pipeline import plot_diagnosis
+    tmp = path.with_name(f".{path.stem}.{secrets.token_hex(6)}.tmp.png")
+    try:
+        with _PLOT_LOCK:
+            plot_diagnosis(report, problem, tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def dask_map(client):
+    """A builtin-map-like callable running every call on the Dask cluster (results in order)."""
+    if client is None:
+        return map
+
+    def _map(fn, xs):
+        return client.gather(client.map(fn, list(xs), pure=False))
+    return _map
+
+
+def _n_workers(client) -> int:
+    if client is None:
+        return 1
+    try:
+        return max(1, len(client.scheduler_info()["workers"]))
+    except Exception:  # noqa: BLE001 - only used to size chunks
+        return 1
+
+
+# ------------------------------------------------------------------------------------ state
+class _Registry:
+    """Diagnoses running in this process (job id -> thread); results live on disk."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.running: dict[str, threading.Thread] = {}
+
+
+def _registry(request: Request) -> _Registry:
+    st = request.app.state
+    with _REG_LOCK:
+        reg = getattr(st, "diagnoses", None)
+        if reg is None:
+            reg = st.diagnoses = _Registry()
+    return reg
+
+
+def _paths(manager, job_id: str) -> tuple[Path, Path, Path]:
+    # job_id comes from the table row (see _own), never from request text
+    base = manager.store_path(job_id).parent
+    return (base / f"{job_id}.diagnosis.json", base / f"{job_id}.diagnosis.png",
+            base / f"{job_id}.diagnosis.error")
+
+
+# ------------------------------------------------------------------------------------ models
+class DiagnoseRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    candidates: list[str] | None = Field(
+        default=None, min_length=1, max_length=50,
+        description="catalogued, implemented extensions to screen (default: all implemented ones)")
+    n_particles: int = Field(default=40, ge=10, le=400, description="SMC particles of each fit")
+    max_refits: int = Field(default=2, ge=0, le=5, description="most extensions refitted jointly")
+    seed: int = Field(default=0, ge=0, lt=2**63)
+
+    @field_validator("candidates")
+    @classmethod
+    def _known(cls, v):
+        return None if v is None else check_candidates(v)
+
+
+class DiagnoseStarted(BaseModel):
+    id: str
+    state: str
+    status_url: str
+
+
+class DiagnosisStatus(BaseModel):
+    state: str
+    error: str | None = None
+    report: dict | None = None
+
+
+# ------------------------------------------------------------------------------------ worker
+def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseRequest) -> None:
+    from vfcore.diagnose.pipeline import diagnose
+    js, png, err = _paths(manager, job_id)
+    try:
+        problem = spec.to_problem()
+        client = manager.client
+        chunk = max(1, math.ceil(req.n_particles / (2 * _n_workers(client))))
+        report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
+                          map=dask_map(client), chunk_size=chunk, max_refits=req.max_refits)
+        d = jsonable(report.to_dict())
+        d["request"] = req.model_dump()
+        plot_atomic(report, problem, png)
+        write_atomic(js, json.dumps(d).encode())       # the JSON's presence means "done"
+    except BaseException as exc:  # noqa: BLE001 - recorded as the diagnosis' failure
+        log.exception("diagnosis of job %s failed", job_id)
+        try:
+            write_atomic(err, f"{type(exc).__name__}: {exc}"[:4000].encode())
+        except OSError:
+            pass
+    finally:
+        with reg.lock:
+            reg.running.pop(job_id, None)
+
+
+# ------------------------------------------------------------------------------------ routes
+@router.post("/jobs/{job_id}/diagnose", status_code=status.HTTP_202_ACCEPTED, response_model=DiagnoseStarted)
+def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request,
+                    req: DiagnoseRequest | None = Body(default=None)) -> DiagnoseStarted:
+    rec = _done(manager, job_id, user)
+    spec = JobSpec.from_json(rec["spec"])
+    if spec.model != "fe":
+        raise HTTPException(422, [{"loc": ["path", "job_id"], "type": "value_error",
+                                   "msg": f"diagnosis needs a job of the finite-element model ('fe'), "
+                                          f"this one is {spec.model!r}"}])
+    req = req or DiagnoseRequest()
+    reg = _registry(request)
+    jid = rec["id"]
+    with reg.lock:
+        if jid in reg.running:
+            raise HTTPException(status.HTTP_409_CONFLICT, "a diagnosis of this job is already running")
+        js, png, err = _paths(manager, jid)
+        for p in (js, png, err):        # a new diagnosis replaces the previous result
+            p.unlink(missing_ok=True)
+        t = threading.Thread(target=_run, args=(manager, reg, jid, spec, req), name=f"vfinfer-diagnose-{jid[:8]}",
+                             daemon=True)
+        reg.running[jid] = t
+        t.start()
+    return DiagnoseStarted(id=jid, state="running", status_url=f"/jobs/{jid}/diagnosis")
+
+
+@router.get("/jobs/{job_id}/diagnosis", response_model=DiagnosisStatus)
+def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> DiagnosisStatus:
+    rec = _own(manager, job_id, user)
+    jid = rec["id"]
+    reg = _registry(request)
+    with reg.lock:
+        if jid in reg.running:
+            return DiagnosisStatus(state="running")
+    js, _, err = _paths(manager, jid)
+    if js.exists():
+        return DiagnosisStatus(state="done", report=json.loads(js.read_text()))
+    if err.exists():
+        return DiagnosisStatus(state="failed", error=err.read_text())
+    return DiagnosisStatus(state="none")
+
+
+@router.get("/jobs/{job_id}/diagnosis/figure", responses={200: {"content": {"image/png": {}}}})
+def get_diagnosis_figure(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> Response:
+    rec = _own(manager, job_id, user)
+    jid = rec["id"]
+    reg = _registry(request)
+    with reg.lock:
+        running = jid in reg.running
+    js, png, _ = _paths(manager, jid)
+    if running or not (js.exists() and png.exists()):
+        raise HTTPException(status.HTTP_404_NOT_FOUND, "diagnosis figure not available")
+    return Response(png.read_bytes(), media_type="image/png")
