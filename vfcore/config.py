@@ -5,6 +5,7 @@ import math
 from dataclasses import asdict, dataclass
 
 MESHES = ("coarse", "medium", "fine")  # ~172, ~205, ~263 triangles; "medium" is the paper's default
+ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
 
 
 @dataclass(frozen=True)
@@ -26,6 +27,9 @@ class SimConfig:
         acceleration (the paper), < 1 = generalised-alpha with numerical dissipation.
     half_gap_mm : prephonatory half gap, mm: the midline (contact plane) lies at x0 + half_gap_mm.
     keep_trajectories : also return nodal displacements at the camera rate.
+    element : displacement element, one of ``ELEMENTS``: "p1" (the paper's linear triangle) or
+        "anp" (P1 with nodally averaged volumetric part, locking-free as nu -> 1/2; docs/model.md,
+        "Locking and mesh convergence").
     """
 
     mesh: str = "medium"
@@ -40,10 +44,13 @@ class SimConfig:
     half_gap_mm: float = 0.05
     rho_inf: float = 1.0
     keep_trajectories: bool = False
+    element: str = "p1"
 
     def __post_init__(self) -> None:
         if self.mesh not in MESHES:
             raise ValueError(f"mesh must be one of {MESHES}, got {self.mesh!r}")
+        if self.element not in ELEMENTS:
+            raise ValueError(f"config element must be one of {ELEMENTS}, got {self.element!r}")
         for name in ("dt", "duration", "fps", "length_mm", "sep_ratio"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
