@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from vfcore import TABLE3, SimConfig, simulate  # noqa: E402
 from vfcore.config import ELEMENTS, MESHES  # noqa: E402
-from vfcore.measures import estimate_f0  # noqa: E402
+from vfcore.measures import cycle_boundaries, estimate_f0  # noqa: E402
 
 P_SUB = np.linspace(400.0, 1800.0, 8)       # Pa
 E_COVER = np.linspace(250.0, 950.0, 8)      # Pa
@@ -37,6 +37,14 @@ SYMBOL = {"osc": "O", "open": ".", "closed": "c", "failed": "x"}
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 
 
+def peak_area(gaw: np.ndarray, fps: float, f0: float) -> float:
+    """Mean over cycles (minimum to minimum at the autocorrelation f0) of the cycle maximum, mm^2."""
+    b = cycle_boundaries(gaw, fps, f0)
+    if b.size < 2:
+        return float(gaw.max())
+    return float(np.mean([gaw[i:j + 1].max() for i, j in zip(b[:-1], b[1:])]))
+
+
 def classify(r) -> tuple[str, float, float]:
     """(class, f0 Hz, mean cycle peak area mm^2) of one SimResult."""
     if not r.ok:
@@ -45,8 +53,7 @@ def classify(r) -> tuple[str, float, float]:
     last = r.gaw[-n_last:]
     f0 = estimate_f0(r.gaw, r.fps)
     if np.ptp(last) > P2P_MIN and np.isfinite(f0):
-        pk = r.cycles.peak_area
-        return "osc", f0, float(pk.mean()) if pk.size else float(last.max())
+        return "osc", f0, peak_area(r.gaw, r.fps, f0)
     return ("open" if last.min() > 0.0 else "closed"), float("nan"), float("nan")
 
 
@@ -98,9 +105,9 @@ def figure(results, element: str, path: Path) -> None:
         ax.set_title(f"{mesh} ({int(np.sum(cls == 'osc'))}/{cls.size} osc.)")
         ax.set_xlabel("E_cover (Pa)")
     axes[0].set_ylabel("p_sub (Pa)")
-    fig.colorbar(im, ax=axes, label="mean peak area (mm$^2$); text: f0 (Hz), '.' steady open, x failed")
-    fig.suptitle(f"Self-oscillation at Table 3 except p_sub, E_cover (element {element}, dt 0.05 ms); "
-                 "+ = Table 3")
+    fig.colorbar(im, ax=axes, label="mean peak area (mm$^2$)")
+    fig.suptitle(f"Self-oscillation, Table 3 except p_sub, E_cover (element {element}, dt 0.05 ms). "
+                 "Text: f0 (Hz); '.' steady open, c closed, x failed; + Table 3", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     print(f"\nfigure: {path}")
