@@ -83,6 +83,22 @@ def print_map(mesh: str, element: str, cls, f0, pk) -> None:
         print(f"{ps:16.0f} " + " ".join(cells))
 
 
+def agreement(results) -> None:
+    """Cross-mesh agreement: same class everywhere, and f0 / peak spread where all meshes oscillate."""
+    cls = np.stack([r[0] for r in results.values()])
+    f0 = np.stack([r[1] for r in results.values()])
+    pk = np.stack([r[2] for r in results.values()])
+    same = np.all(cls == cls[0], axis=0)
+    osc = np.all(cls == "osc", axis=0)
+    print(f"\ncross-mesh ({', '.join(results)}): same class at {same.sum()}/{same.size} points; "
+          f"all oscillate at {osc.sum()} points")
+    if osc.any():
+        for name, q in (("f0", f0), ("peak", pk)):
+            spread = (q.max(axis=0) - q.min(axis=0))[osc] / q.mean(axis=0)[osc]
+            print(f"  {name} spread (max - min) / mean over meshes at those points: median {np.median(spread):.3f}, "
+                  f"max {spread.max():.3f}")
+
+
 def figure(results, element: str, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -126,6 +142,8 @@ def main() -> None:
         results[mesh] = run_map(mesh, a.element)
         print_map(mesh, a.element, *results[mesh])
         print(f"({P_SUB.size * E_COVER.size} simulations in {time.perf_counter() - t0:.1f} s)")
+    if len(results) > 1:
+        agreement(results)
     if not a.no_figure:
         name = "oscillation_map.png" if a.element == "p1" else f"oscillation_map_{a.element}.png"
         figure(results, a.element, IMG / name)
