@@ -4,8 +4,9 @@ For each mesh (coarse, medium, fine) at dt = 5e-5 s, 550 ms simulated, the last 
 every grid point is classified from the kept camera-rate GAW:
 
   O  oscillating   peak-to-peak of the last 100 ms > 0.5 mm^2 and a finite f0 (vfcore.measures.estimate_f0)
-  .  steady open   not oscillating, minimum area of the last 100 ms > 0
-  c  closed        not oscillating, the glottis stays (partly) closed
+  i  irregular     peak-to-peak of the last 100 ms > 0.5 mm^2 but no f0 (aperiodic motion)
+  .  steady open   peak-to-peak <= 0.5 mm^2, minimum area of the last 100 ms > 0
+  c  closed        peak-to-peak <= 0.5 mm^2, the glottis stays closed
   x  failed        the run diverged (displacement > 1 cm or non-finite)
 
 Prints a text map per mesh (rows p_sub, columns E_cover) and the f0 (Hz) / mean cycle peak area
@@ -33,7 +34,7 @@ E_COVER = np.linspace(250.0, 950.0, 8)      # Pa
 P2P_MIN = 0.5                               # mm^2
 LAST = 0.1                                  # s
 HEAD = "p_sub \\ E_cover"
-SYMBOL = {"osc": "O", "open": ".", "closed": "c", "failed": "x"}
+SYMBOL = {"osc": "O", "irregular": "i", "open": ".", "closed": "c", "failed": "x"}
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 
 
@@ -52,8 +53,10 @@ def classify(r) -> tuple[str, float, float]:
     n_last = int(round(LAST * r.fps))
     last = r.gaw[-n_last:]
     f0 = estimate_f0(r.gaw, r.fps)
-    if np.ptp(last) > P2P_MIN and np.isfinite(f0):
-        return "osc", f0, peak_area(r.gaw, r.fps, f0)
+    if np.ptp(last) > P2P_MIN:
+        if np.isfinite(f0):
+            return "osc", f0, peak_area(r.gaw, r.fps, f0)
+        return "irregular", float("nan"), float("nan")
     return ("open" if last.min() > 0.0 else "closed"), float("nan"), float("nan")
 
 
@@ -71,7 +74,7 @@ def run_map(mesh: str, element: str, dt: float = 5e-5):
 def print_map(mesh: str, element: str, cls, f0, pk) -> None:
     n_osc = int(np.sum(cls == "osc"))
     print(f"\nmesh {mesh}, element {element}: {n_osc}/{cls.size} oscillating   "
-          f"(O oscillating, . steady open, c closed, x failed)")
+          f"(O oscillating, i irregular, . steady open, c closed, x failed)")
     print(f"{HEAD:>16s} " + " ".join(f"{e:6.0f}" for e in E_COVER))
     for i, ps in enumerate(P_SUB):
         print(f"{ps:16.0f} " + " ".join(f"{SYMBOL[c]:>6s}" for c in cls[i]))
@@ -123,7 +126,7 @@ def figure(results, element: str, path: Path) -> None:
     axes[0].set_ylabel("p_sub (Pa)")
     fig.colorbar(im, ax=axes, label="mean peak area (mm$^2$)")
     fig.suptitle(f"Self-oscillation, Table 3 except p_sub, E_cover (element {element}, dt 0.05 ms). "
-                 "Text: f0 (Hz); '.' steady open, c closed, x failed; + Table 3", fontsize=10)
+                 "Text: f0 (Hz); i irregular, '.' steady open, c closed, x failed; + Table 3", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     print(f"\nfigure: {path}")
