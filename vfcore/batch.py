@@ -31,7 +31,7 @@ def _as_rows(params) -> np.ndarray:
 
 def _simulate_block(ps: list[Params], config: SimConfig) -> list[SimResult]:
     t_wall = time.perf_counter()
-    system = get_system(config.mesh, config.nu)
+    system = get_system(config.mesh, config.nu, config.element)
     B = len(ps)
     n, m, nnz = system.n, system.sdx.size, system.indices.size
     h = config.dt

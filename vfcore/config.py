@@ -5,6 +5,7 @@ import math
 from dataclasses import asdict, dataclass
 
 MESHES = ("coarse", "medium", "fine")  # ~172, ~205, ~263 triangles; "medium" is the paper's default
+ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,9 @@ class SimConfig:
     subglottal_modes : subglottal input-impedance modes ((f_hz, zeta, Z_peak), ...): f_hz > 0 Hz,
         zeta in (0, 1], Z_peak > 0 Pa s/m^3. The glottal inlet pressure is p_sub - sum_k p_k with
         p_k'' + 2 zeta w p_k' + w^2 p_k = 2 zeta w Z_peak dQ/dt (w = 2 pi f_hz). () = off.
+    element : displacement element, one of ``ELEMENTS``: "p1" (the paper's linear triangle) or
+        "anp" (P1 with nodally averaged volumetric part, locking-free as nu -> 1/2; docs/model.md,
+        "Locking and mesh convergence").
     """
 
     mesh: str = "medium"
@@ -61,10 +65,13 @@ class SimConfig:
     epithelium_h_mm: float = 0.05
     epithelium_profile: tuple[float, ...] = ()
     subglottal_modes: tuple[tuple[float, float, float], ...] = ()
+    element: str = "p1"
 
     def __post_init__(self) -> None:
         if self.mesh not in MESHES:
             raise ValueError(f"mesh must be one of {MESHES}, got {self.mesh!r}")
+        if self.element not in ELEMENTS:
+            raise ValueError(f"config element must be one of {ELEMENTS}, got {self.element!r}")
         for name in ("dt", "duration", "fps", "length_mm", "sep_ratio"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):

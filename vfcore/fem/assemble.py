@@ -5,6 +5,23 @@ Kelvin-Voigt viscosity by replacing mu with mu + eta d/dt. Because lambda and mu
 both proportional to E at fixed nu, K = sum_layers E_layer * K_layer(E = 1), and the
 damping matrix is D = eta * D1 where D1 is the shear (mu-) part with mu = 1. The mass
 matrix is M = rho * M1. All matrices are per unit depth (N/m, SI).
+
+Elements (``ELEMENTS``):
+
+* ``"p1"`` (default, the paper's): linear triangles, lambda-part int lam div u div v.
+* ``"anp"``: the same P1 displacement space with the lambda- (volumetric) part built from
+  nodally averaged dilatations -- the average-nodal-pressure idea of Bonet & Burton (1998),
+  Commun. Numer. Meth. Engng 14:437-449, applied to the 2D plane-strain triangle. With
+  phi_a the P1 hat function of node a,
+
+      V_a = int phi_a dx,   d_a . u = (1/V_a) int phi_a div u dx   (nodal dilatation),
+      K_vol = sum_a lam_a V_a d_a d_a^T,  lam_a V_a = int phi_a lam dx,
+
+  i.e. K_vol = C^T diag(V^lam / V^2) C with C_aj = int phi_a div(psi_j) dx. The shear part
+  2 mu eps(u):eps(v) stays element-wise (it keeps the element free of zero-energy modes, and the
+  Kelvin-Voigt damping D = eta * D1, the mu-part, is unchanged). Only lambda -> infinity
+  causes locking, so only the lambda-part is averaged: n_nodes constraints on 2 dofs per node
+  instead of one per triangle (~2 per node), which removes the over-constraint.
 """
 from __future__ import annotations
 
@@ -12,10 +29,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import Basis, BilinearForm, ElementTriP1, ElementVector, MeshTri, asm
+from skfem import Basis, BilinearForm, ElementTriP1, ElementVector, LinearForm, MeshTri, asm
 from skfem.helpers import ddot, div, dot, sym_grad
 
 from ..mesh import FoldMesh
+
+#: Displacement elements: "p1" = the paper's linear triangle, "anp" = P1 with a nodally
+#: averaged volumetric (lambda) part (Bonet & Burton 1998), locking-free as nu -> 1/2.
+ELEMENTS = ("p1", "anp")
 
 
 @BilinearForm
@@ -34,6 +55,17 @@ def _mass(u, v, w):
     return dot(u, v)
 
 
+@BilinearForm
+def _nodal_div(u, q, w):
+    # trial: vector P1 displacement, test: scalar P1 hat function -> C_aj = int phi_a div psi_j
+    return div(u) * q
+
+
+@LinearForm
+def _nodal_volume(q, w):
+    return q
+
+
 def lame(E: float, nu: float) -> tuple[float, float]:
     """Lame parameters (lambda, mu) of Young's modulus E and Poisson ratio nu."""
     return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
@@ -50,6 +82,7 @@ class UnitMatrices:
     D1: sp.csr_matrix
     M1: sp.csr_matrix
     nu: float
+    element: str = "p1"
 
 
 def skfem_mesh(mesh: FoldMesh) -> MeshTri:
@@ -65,10 +98,29 @@ def _interleave_perm(basis: Basis) -> np.ndarray:
     return perm
 
 
-def assemble_unit(mesh: FoldMesh, nu: float, n_layers: int = 3) -> UnitMatrices:
-    """Assemble the unit matrices of ``mesh`` at Poisson ratio ``nu``."""
+def nodal_volumetric(m: MeshTri, elements: np.ndarray | None = None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Nodally averaged volumetric form of the P1 vector space on ``m`` (skfem dof order).
+
+    Returns (Kbar, C): Kbar = C^T diag(V_sub / V^2) C, the form sum_a V_sub_a (d_a.u)(d_a.v)
+    with the nodal dilatation d_a.u = (C u)_a / V_a averaged over the whole patch of node a
+    (all elements), weighted by the part V_sub_a = int_{elements} phi_a of its nodal volume
+    that lies in ``elements`` (all if None). Summing Kbar over a partition of the elements
+    gives C^T diag(1/V) C. C (n_nodes x n_dofs): C_aj = int phi_a div psi_j.
+    """
+    vec = Basis(m, ElementVector(ElementTriP1()))
+    sca = Basis(m, ElementTriP1())
+    C = sp.csr_matrix(asm(_nodal_div, vec, sca))
+    V = asm(_nodal_volume, sca)
+    Vsub = V if elements is None else asm(_nodal_volume, Basis(m, ElementTriP1(), elements=elements))
+    return sp.csr_matrix(C.T @ sp.diags(Vsub / V ** 2) @ C), C
+
+
+def assemble_unit(mesh: FoldMesh, nu: float, n_layers: int = 3, element: str = "p1") -> UnitMatrices:
+    """Assemble the unit matrices of ``mesh`` at Poisson ratio ``nu`` with ``element`` (see ELEMENTS)."""
     if not (-1.0 < nu < 0.5):
         raise ValueError(f"Poisson ratio nu must lie in (-1, 0.5), got {nu}")
+    if element not in ELEMENTS:
+        raise ValueError(f"element must be one of {ELEMENTS}, got {element!r}")
     m = skfem_mesh(mesh)
     e = ElementVector(ElementTriP1())
     full = Basis(m, e)
@@ -81,11 +133,14 @@ def assemble_unit(mesh: FoldMesh, nu: float, n_layers: int = 3) -> UnitMatrices:
             K_layers.append(sp.csr_matrix((2 * mesh.n_nodes, 2 * mesh.n_nodes)))
             continue
         b = Basis(m, e, elements=idx)
-        Kk = lam1 * asm(_volumetric, b) + mu1 * asm(_shear, b)
+        if element == "p1":
+            Kk = lam1 * asm(_volumetric, b) + mu1 * asm(_shear, b)
+        else:
+            Kk = lam1 * nodal_volumetric(m, idx)[0] + mu1 * asm(_shear, b)
         K_layers.append(sp.csr_matrix(Kk)[perm][:, perm])
     D1 = sp.csr_matrix(asm(_shear, full))[perm][:, perm]
     M1 = sp.csr_matrix(asm(_mass, full))[perm][:, perm]
-    return UnitMatrices(K_layers=tuple(K_layers), D1=D1, M1=M1, nu=nu)
+    return UnitMatrices(K_layers=tuple(K_layers), D1=D1, M1=M1, nu=nu, element=element)
 
 
 def membrane_unit(mesh: FoldMesh) -> tuple[sp.csr_matrix, ...]:

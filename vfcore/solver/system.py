@@ -1,6 +1,6 @@
 """The discrete system of one mesh: free dofs, bandwidth-reducing order, matrices.
 
-Built once per (mesh, nu) and cached; per parameter vector only the values of the
+Built once per (mesh, nu, element) and cached; per parameter vector only the values of the
 effective stiffness change (K = sum E_l K_l, D = eta D1, M = rho M1 share one sparsity
 pattern), so a simulation costs one band Cholesky plus the time loop.
 """
@@ -49,6 +49,7 @@ class System:
     sX: np.ndarray
     sZ: np.ndarray
     ep_vals: np.ndarray | None = None
+    element: str = "p1"
 
     @property
     def n(self) -> int:
@@ -105,8 +106,8 @@ def _on_pattern(A: sp.spmatrix, pattern: sp.csr_matrix) -> np.ndarray:
     return np.asarray(A[rows, pattern.indices]).ravel()
 
 
-def build_system(mesh: FoldMesh, nu: float) -> System:
-    U = assemble_unit(mesh, nu)
+def build_system(mesh: FoldMesh, nu: float, element: str = "p1") -> System:
+    U = assemble_unit(mesh, nu, element=element)
     free_full = np.nonzero(np.repeat(~mesh.fixed, 2))[0]
     restrict = lambda A: sp.csr_matrix(A)[free_full][:, free_full]  # noqa: E731
     Ks = [restrict(K) for K in U.K_layers]
@@ -130,9 +131,9 @@ def build_system(mesh: FoldMesh, nu: float) -> System:
         mesh=mesh, nu=nu, dofs=dofs, indptr=pattern.indptr.astype(np.int64),
         indices=pattern.indices.astype(np.int64), k_vals=k_vals, d_vals=d_vals, m_vals=m_vals, bw=bw,
         sdx=where[2 * s], sdz=where[2 * s + 1], sX=mesh.points[s, 0].copy(), sZ=mesh.points[s, 1].copy(),
-        ep_vals=ep_vals)
+        ep_vals=ep_vals, element=element)
 
 
 @lru_cache(maxsize=16)
-def get_system(mesh_name: str, nu: float) -> System:
-    return build_system(load_mesh(mesh_name), nu)
+def get_system(mesh_name: str, nu: float, element: str = "p1") -> System:
+    return build_system(load_mesh(mesh_name), nu, element)
