@@ -173,7 +173,7 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
     try:
         problem = spec.to_problem()
         client = manager.client
-        chunk = max(1, math.ceil(req.n_particles / (2 * _n_workers(client))))
+        chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
                           map=dask_map(client), chunk_size=chunk, max_refits=req.max_refits)
         d = jsonable(report.to_dict())

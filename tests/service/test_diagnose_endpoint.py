@@ -94,6 +94,7 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert d["state"] == "done", d
     rep = d["report"]
     assert isinstance(rep["verdict"], str) and rep["verdict"]
+    assert rep["winner"] == "leak", rep["verdict"]          # the hidden 1.5 mm^2 leak is found
     assert rep["n_simulations"] > 0 and rep["base"]["residual_rms"] > 0
     assert set(rep["screening"]) >= {"leak"} and rep["request"]["n_particles"] == 12
     assert rep["wall_s"] <= wall + 1.0
