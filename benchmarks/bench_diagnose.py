@@ -48,6 +48,9 @@ def run(a) -> None:
     out.mkdir(parents=True, exist_ok=True)
     meta = json.loads((cases_dir / "cases.json").read_text())
     cases = meta["cases"][: a.max_cases] if a.max_cases else meta["cases"]
+    if a.ids:
+        by_id = {c["id"]: c for c in meta["cases"]}
+        cases = [by_id[i.strip()] for i in a.ids.split(",") if i.strip()]
     import multiprocessing as mp
     pool = mp.get_context("spawn").Pool(a.workers) if a.workers > 1 else None
     mapper = pool.imap if pool is not None else map
@@ -123,6 +126,7 @@ def main(argv=None) -> int:
     ap.add_argument("--chunk", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--max-cases", type=int, default=0)
+    ap.add_argument("--ids", default="", help="comma-separated case ids, in the order to run them")
     a = ap.parse_args(argv)
     score(a) if a.score else run(a)
     return 0
