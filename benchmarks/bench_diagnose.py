@@ -59,7 +59,12 @@ def run(a) -> None:
             path = out / f"case_{case['id']}.json"
             if path.exists():
                 continue
-            pb = _problem(meta, case, cases_dir, a.duration, a.sigma_e)
+            try:
+                pb = _problem(meta, case, cases_dir, a.duration, a.sigma_e)
+            except ValueError as exc:          # the recording is rejected before any simulation
+                path.write_text(json.dumps({"error": str(exc), "winner": None, "verdict": "rejected input"}))
+                print(f"case {case['id']}: rejected input: {exc}", flush=True)
+                continue
             t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -89,6 +94,10 @@ def score(a) -> None:
             continue
         d = json.loads(p.read_text())
         label = t.get("label") or t.get("effect")
+        if "error" in d:
+            rows.append((cid, label, "rejected", False, float("nan"), float("nan"), 0, 0.0,
+                         t.get("effect_loglik", float("nan"))))
+            continue
         win = d["winner"]
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), float("nan")) if win else float("nan")
         imp = d["refits"][win]["rms_improvement"] if win else float("nan")
@@ -102,7 +111,7 @@ def score(a) -> None:
               f"{el:11.1f}")
     eff = [r for r in rows if r[1] != "control"]
     ctl = [r for r in rows if r[1] == "control"]
-    named = [r for r in rows if r[2] is not None]
+    named = [r for r in rows if r[2] is not None and r[2] != "rejected"]
     print(f"\neffect cases named correctly: {sum(r[3] for r in eff)}/{len(eff)}")
     print(f"false alarms in controls: {sum(not r[3] for r in ctl)}/{len(ctl)}")
     if named:
