@@ -24,10 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..measures import estimate_f0
-from ..observe import align
 from ..result import HR_OVERSAMPLE
 from ..inference.prior import Prior
-from ..inference.problem import Evaluation, Problem, _cycle_means, gaussian_loglik
+from ..inference.problem import Evaluation, Problem, score_results
 from .extensions import Extension, get
 
 __all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "extended_config", "fit_extended"]
@@ -187,39 +186,13 @@ class ExtendedEvaluator:
     def __call__(self, thetas) -> Evaluation:
         pb = self.problem
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-        k = thetas.shape[0]
-        max_lag, n_cmp = pb.window
-        obs = pb.obs_compared
-        loglik = np.full(k, -np.inf)
-        ok = np.zeros(k, dtype=bool)
-        gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
-        flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
-        messages = []
         splits = [self.prior.split(th) for th in thetas]
-        params = [pb.prior.to_params(b) for b, _ in splits]
-        results = self._simulate(params, [phi for _, phi in splits])
-        for i, r in enumerate(results):
-            try:
-                if isinstance(r, BaseException):
-                    raise r
-                if not r.ok:
-                    raise RuntimeError(r.message or "simulation failed")
-                hr = np.asarray(r.gaw_hr, dtype=float)
-                if self.extension.kind == "observation":
-                    hr = observe_extended(self.extension.name, hr, pb.fps, splits[i][1], pb.config.length_mm)
-                sim = hr[::HR_OVERSAMPLE]
-                if sim.size < max_lag + n_cmp or not np.all(np.isfinite(hr)):
-                    raise RuntimeError("extended simulation too short or not finite")
-                seg, _, _ = align(sim, pb.obs_gaw, pb.fps, (max_lag, n_cmp), sim_hr=hr,
-                                  oversample=HR_OVERSAMPLE, method=pb.alignment)
-                ll = gaussian_loglik(seg, obs, pb.sigma_e)
-            except Exception as exc:  # noqa: BLE001
-                messages.append(f"{i}: {type(exc).__name__}: {exc}")
-                continue
-            loglik[i], ok[i], gaw[i] = ll, True, seg
-            flow[i], cmean[i], cmax[i] = _cycle_means(r)
-        return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean,
-                          max_contact=cmax, messages=tuple(messages))
+        results = self._simulate([pb.prior.to_params(b) for b, _ in splits], [phi for _, phi in splits])
+        observe = None
+        if self.extension.kind == "observation":
+            def observe(i, hr):
+                return observe_extended(self.name, hr, pb.fps, splits[i][1], pb.config.length_mm)
+        return score_results(results, pb, observe)
 
 
 def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, seed: int = 0, map=map,

@@ -296,7 +296,19 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None, bloc
     rows at a time in lock-step (``block=1``: one :func:`vfcore.forward.simulate` per row).
     """
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-    k = thetas.shape[0]
+    return score_results(_simulate_rows(thetas, problem, simulate_fn, block), problem)
+
+
+def score_results(results, problem: Problem, observe: Callable | None = None) -> Evaluation:
+    """Score simulation results (SimResults, or the exceptions their runs raised) against
+    ``problem``'s observation: alignment, Eq. 15 log-likelihood, predictions, flow and contact.
+
+    ``observe(i, gaw_hr) -> gaw_hr``, when given, maps result ``i``'s oversampled area to what the
+    camera records before alignment (the observation-level model extensions of
+    :mod:`vfcore.diagnose.fit`); the camera-rate series is then read from its output.
+    """
+    from vfcore.result import HR_OVERSAMPLE
+    k = len(results)
     max_lag, n_cmp = problem.window
     obs = problem.obs_compared
     loglik = np.full(k, -np.inf)
@@ -306,22 +318,28 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None, bloc
     cmean = np.full(k, np.nan)
     cmax = np.full(k, np.nan)
     messages = []
-    results = _simulate_rows(thetas, problem, simulate_fn, block)
-    for i in range(k):
+    for i, r in enumerate(results):
         try:
-            r = results[i]
             if isinstance(r, BaseException):
                 raise r
             if not r.ok:
                 raise RuntimeError(r.message or "simulation failed")
-            sim = np.asarray(r.gaw, dtype=float)
+            hr = getattr(r, "gaw_hr", None)
+            has_hr = hr is not None and np.size(hr) > 1
+            if observe is not None:
+                if not has_hr:
+                    raise RuntimeError("the result has no oversampled GAW to observe")
+                hr = observe(i, np.asarray(hr, dtype=float))
+                if not np.all(np.isfinite(hr)):
+                    raise RuntimeError("observed GAW is not finite")
+                sim = hr[::HR_OVERSAMPLE]
+            else:
+                sim = np.asarray(r.gaw, dtype=float)
             if sim.size < max_lag + n_cmp:
                 raise RuntimeError(f"simulation yielded {sim.size} frames, {max_lag + n_cmp} needed to align")
             if not np.all(np.isfinite(sim)):
                 raise RuntimeError("simulated GAW is not finite")
-            hr = getattr(r, "gaw_hr", None)
-            if hr is not None and np.size(hr) > 1:
-                from vfcore.result import HR_OVERSAMPLE
+            if has_hr:
                 seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
                                   oversample=HR_OVERSAMPLE, method=problem.alignment)
             else:
