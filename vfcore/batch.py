@@ -2,22 +2,31 @@
 
 ``simulate_many(params_array, config, block)`` returns the same SimResults as calling
 :func:`vfcore.forward.simulate` on each row (per-sample arithmetic follows the scalar
-kernel operation for operation), but the CSR products and band solves of a block run
+kernel operation for operation), but the CSR products and triangular solves of a block run
 with the sample index innermost (SIMD across samples).
+
+Rows may carry their own configurations (``configs=``): rows whose configurations differ
+only in the model extensions (separation ratio, epithelium membrane, subglottal resonators)
+share a block; the extensions are per-sample data of the lock-step kernel.
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 
 import numpy as np
 
 from .config import SimConfig
-from .forward import BLOWUP, CLOSED_TOL, _params, _result, midline, prestress, simulate
+from .forward import BLOWUP, CLOSED_TOL, RHO_AIR, _params, _result, midline, setup
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .solver import _kernels as kern
 from .solver._batch_kernels import integrate_many
 from .solver.system import get_system
+
+#: SimConfig fields that may differ between the rows of one lock-step block.
+PER_SAMPLE_FIELDS = ("sep_ratio", "epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile", "subglottal_modes")
 
 
 def _as_rows(params) -> np.ndarray:
@@ -29,42 +38,46 @@ def _as_rows(params) -> np.ndarray:
     return np.array([_params(x).as_array() for x in params]).reshape(-1, len(PARAM_NAMES))
 
 
-def _simulate_block(ps: list[Params], config: SimConfig) -> list[SimResult]:
+def block_key(config: SimConfig) -> SimConfig:
+    """The part of ``config`` that rows of one block must share (extensions reset to defaults)."""
+    d = SimConfig()
+    return dataclasses.replace(config, **{f: getattr(d, f) for f in PER_SAMPLE_FIELDS})
+
+
+def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResult]:
     t_wall = time.perf_counter()
+    config = configs[0]
     system = get_system(config.mesh, config.nu, config.element)
     B = len(ps)
-    n, m, nnz = system.n, system.sdx.size, system.indices.size
+    n, m, nnz, nl = system.n, system.sdx.size, system.indices.size, system.nnz_factor
     h = config.dt
     n_steps = int(round(config.duration / h))
-    cM, cD, cK = kern.effective_scales(h, config.rho_inf)
     am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
     kv = np.empty((nnz, B))
     mv = np.empty((nnz, B))
     dv = np.empty((nnz, B))
-    Lb = np.empty((n, system.bw + 1, B))
+    Lx = np.empty((nl, B))
     G = np.empty((B, n, m))
     u = np.empty((n, B))
     x_mid = np.empty(B)
     p_sub = np.empty(B)
+    sep = np.empty(B)
+    coefs = [kern.subglottal_coefficients(c.subglottal_modes, h) for c in configs]
+    nmod = max(c.shape[0] for c in coefs)
+    sub_coef = np.zeros((B, nmod, 3))            # zero rows: resonators that add exactly 0 Pa
     for b, p in enumerate(ps):
         # exactly the per-sample set-up of forward.simulate
-        si = p.si()
-        x_mid[b] = midline(p, config)
-        p_sub[b] = si["p_sub"]
-        K_vals = system.stiffness_values((si["E_body"], si["E_lig"], si["E_cover"]))
-        u[:, b], _ = prestress(system, K_vals, x_mid[b])
-        eff = cK * K_vals + cD * si["eta"] * system.d_vals + cM * si["rho"] * system.m_vals
-        Lb1 = system.factor(eff)
-        Lb[:, :, b] = Lb1
-        G[b] = system.contact_columns(Lb1)
-        kv[:, b] = K_vals
-        mv[:, b] = si["rho"] * system.m_vals
-        dv[:, b] = si["eta"] * system.d_vals
+        x_mid[b] = midline(p, configs[b])
+        p_sub[b] = p.si()["p_sub"]
+        sep[b] = configs[b].sep_ratio
+        kv[:, b], dv[:, b], mv[:, b], u[:, b], Lx[:, b], G[b] = setup(p, configs[b], system)
+        sub_coef[b, : coefs[b].shape[0]] = coefs[b]
     v = np.zeros((n, B))
     a = np.zeros((n, B))
     width = np.zeros((B, n_steps))
     gsep = np.zeros((B, n_steps))
     lam = np.zeros((B, n_steps, m))
+    p_in = np.repeat(p_sub[:, None], n_steps, axis=1) if nmod > 0 else np.zeros((B, 0))
     traj_every = 0
     n_traj = 0
     if config.keep_trajectories:
@@ -73,37 +86,50 @@ def _simulate_block(ps: list[Params], config: SimConfig) -> list[SimResult]:
     tu = np.zeros((B, n_traj, n))
     tv = np.zeros((B, n_traj, n))
     status = np.zeros(B, dtype=np.int64)
-    integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, Lb, G,
-                   system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, config.sep_ratio,
+    flow_coef = 2.0 * config.length_mm * 1e-3 * math.sqrt(2.0 / RHO_AIR)
+    integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, system.Lp, system.Lj,
+                   Lx, G, system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, sep,
                    x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-                   status)
+                   status, sub_coef, flow_coef, p_in)
     t_each = (time.perf_counter() - t_wall) / B
     out = []
     for b, p in enumerate(ps):
         t0 = time.perf_counter() - t_each   # wall_time: this sample's share of the block
-        out.append(_result(p, config, system, int(status[b]), width[b], gsep[b], lam[b], traj_every, tu[b], t0))
+        out.append(_result(p, configs[b], system, int(status[b]), width[b], gsep[b], lam[b], traj_every, tu[b], t0,
+                           p_in[b] if configs[b].has_subglottal else None))
     return out
 
 
-def simulate_many(params_array, config: SimConfig | None = None, block: int = 8) -> list[SimResult]:
+def simulate_many(params_array, config: SimConfig | None = None, block: int = 8,
+                  configs=None) -> list[SimResult]:
     """Simulate each row of ``params_array`` ((N, 7), ``PARAM_NAMES`` order, paper units).
 
     Rows are advanced ``block`` at a time in lock-step; results equal ``simulate`` row by
     row (a sample that blows up gets ``ok=False`` without stopping its block).
 
-    The lock-step kernel does not implement the forward-model extensions: when
-    ``config.has_extensions`` (epithelium membrane or subglottal coupling) each row is
-    simulated with the scalar :func:`vfcore.forward.simulate` instead (same results, no
-    batching speed-up).
+    ``configs`` (optional, one SimConfig per row) overrides ``config`` row by row. Rows are
+    grouped by :func:`block_key` (everything but the extensions in ``PER_SAMPLE_FIELDS``) and each
+    group is simulated in blocks; the results come back in row order.
     """
-    config = config or SimConfig()
     arr = _as_rows(params_array)
     if block < 1:
         raise ValueError(f"block must be >= 1, got {block}")
     ps = [Params.from_array(r) for r in arr]
-    if config.has_extensions:
-        return [simulate(p, config) for p in ps]
-    out: list[SimResult] = []
-    for s in range(0, len(ps), block):
-        out.extend(_simulate_block(ps[s:s + block], config))
-    return out
+    if configs is None:
+        configs = [config or SimConfig()] * len(ps)
+    else:
+        configs = list(configs)
+        if len(configs) != len(ps):
+            raise ValueError(f"configs must have one SimConfig per row: {len(configs)} configs for {len(ps)} rows")
+        if not all(isinstance(c, SimConfig) for c in configs):
+            raise ValueError("configs must be SimConfig instances")
+    groups: dict[SimConfig, list[int]] = {}
+    for i, c in enumerate(configs):
+        groups.setdefault(block_key(c), []).append(i)
+    out: list[SimResult | None] = [None] * len(ps)
+    for idx in groups.values():
+        for s in range(0, len(idx), block):
+            sel = idx[s:s + block]
+            for i, r in zip(sel, _simulate_block([ps[i] for i in sel], [configs[i] for i in sel])):
+                out[i] = r
+    return out  # type: ignore[return-value]

@@ -87,6 +87,30 @@ def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray
                         max_contact_pressure=np.array(cx))
 
 
+def setup(p: Params, config: SimConfig, system: System):
+    """Per-simulation set-up shared by :func:`simulate` and :mod:`vfcore.batch`.
+
+    Returns (K_vals, D_vals, M_vals) CSR values on the system's pattern (epithelium membrane
+    included when configured), the pre-stressed initial displacement u (n,), the Cholesky factor
+    values Lx of K_eff = cK K + cD D + cM M and the contact columns G = K_eff^-1 E (n, m).
+    """
+    si = p.si()
+    K_vals = system.stiffness_values((si["E_body"], si["E_lig"], si["E_cover"]))
+    D_vals = si["eta"] * system.d_vals
+    if config.has_epithelium:
+        # membrane on the free surface: enters K (prestress, K_eff, contact columns G, the
+        # K u product of the time loop) and D alike
+        K_ep, D_ep = system.epithelium_values(config.epithelium_E_kpa, config.epithelium_h_mm,
+                                              config.epithelium_profile, si["eta"])
+        K_vals = K_vals + K_ep
+        D_vals = D_vals + D_ep
+    M_vals = si["rho"] * system.m_vals
+    u, _ = prestress(system, K_vals, midline(p, config))
+    cM, cD, cK = kern.effective_scales(config.dt, config.rho_inf)
+    Lx = system.factor(cK * K_vals + cD * D_vals + cM * M_vals)
+    return K_vals, D_vals, M_vals, u, Lx, system.contact_columns(Lx)
+
+
 def simulate(params, config: SimConfig | None = None) -> SimResult:
     """Run one forward simulation.
 
@@ -111,20 +135,7 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     x_mid = midline(p, config)
     L = config.length_mm * 1e-3
 
-    K_vals = system.stiffness_values((si["E_body"], si["E_lig"], si["E_cover"]))
-    D_vals = si["eta"] * system.d_vals
-    if config.has_epithelium:
-        # membrane on the free surface: enters K (prestress, K_eff, contact columns G, the
-        # K u product of the time loop) and D alike
-        K_ep, D_ep = system.epithelium_values(config.epithelium_E_kpa, config.epithelium_h_mm,
-                                              config.epithelium_profile, si["eta"])
-        K_vals = K_vals + K_ep
-        D_vals = D_vals + D_ep
-    u, lam_static = prestress(system, K_vals, x_mid)
-    cM, cD, cK = kern.effective_scales(h, config.rho_inf)
-    eff = cK * K_vals + cD * D_vals + cM * si["rho"] * system.m_vals
-    Lb = system.factor(eff)
-    G = system.contact_columns(Lb)
+    K_vals, D_vals, M_vals, u, Lx, G = setup(p, config, system)
     v = np.zeros(system.n)
     a = np.zeros(system.n)
     m = system.sdx.size
@@ -141,21 +152,19 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
     if not config.has_subglottal:
         p_in = None
-        status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals,
-                                si["rho"] * system.m_vals,
-                                D_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
+        status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
+                                D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
                                 u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
                                 config.closure_gap_mm * 1e-3, BLOWUP,
                                 width, gsep, lam, traj_every, tu, tv)
     else:
         p_in = np.full(n_steps, si["p_sub"])
         status = kern.integrate_coupled(
-            n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, si["rho"] * system.m_vals,
-            D_vals, Lb, G, system.sdx, system.sdz, system.sX, system.sZ,
+            n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
+            D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
             u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
             config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
             kern.subglottal_coefficients(config.subglottal_modes, h), 2.0 * L * math.sqrt(2.0 / RHO_AIR), p_in)
-    del lam_static
     return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall, p_in)
 
 

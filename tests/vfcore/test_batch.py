@@ -48,3 +48,56 @@ def test_batch_reruns_bit_identical(rows, batched):
         assert a.ok == b.ok
         if a.ok:
             assert np.array_equal(a.gaw, b.gaw) and np.array_equal(a.flow, b.flow)
+
+
+def _close(s, b):
+    """The batch-versus-scalar agreement of test_batch_equals_scalar."""
+    assert s.ok == b.ok and s.message == b.message
+    if s.ok:
+        assert np.max(np.abs(s.gaw - b.gaw)) <= 1e-9 * np.max(np.abs(s.gaw)) + 1e-12
+        np.testing.assert_allclose(b.flow, s.flow, rtol=1e-8, atol=1e-12)
+
+
+def test_per_row_extensions_share_one_block():
+    """Rows with different model extensions (separation ratio, epithelium membrane, subglottal
+    resonators with different mode counts) run in one lock-step block and each equals the scalar
+    simulation with its own configuration."""
+    from vfcore import TABLE3
+    from vfcore.batch import block_key
+    short = dict(duration=0.12, discard=0.06)
+    cfgs = [SimConfig(**short),
+            SimConfig(**short, sep_ratio=1.1),
+            SimConfig(**short, epithelium_E_kpa=20.0),
+            SimConfig(**short, subglottal_modes=((600.0, 0.1, 1e5),)),
+            SimConfig(**short, subglottal_modes=((500.0, 0.1, 1e5), (1400.0, 0.05, 5e4)), sep_ratio=1.5,
+                      epithelium_E_kpa=40.0, epithelium_h_mm=0.03)]
+    assert len({block_key(c) for c in cfgs}) == 1
+    rows = np.array([TABLE3.as_array()] * 3 + [TABLE3.replace(p_sub=800.0).as_array()] * 2)
+    out = simulate_many(rows, block=8, configs=cfgs)
+    scal = [simulate(r, c) for r, c in zip(rows, cfgs)]
+    gaws = []
+    for c, s, b in zip(cfgs, scal, out):
+        _close(s, b)
+        assert b.config == c
+        if c.has_subglottal:
+            np.testing.assert_allclose(b.p_in, s.p_in, rtol=1e-9)
+            assert np.ptp(b.p_in) > 1.0                 # the resonators move the inlet pressure (Pa)
+        else:
+            assert b.p_in.size == 0
+        gaws.append(b.gaw)
+    # the extensions act: every row differs from the default row
+    for g in gaws[1:3]:
+        assert np.max(np.abs(g - gaws[0])) > 0.1
+
+
+def test_configs_of_different_numerics_are_grouped():
+    from vfcore import TABLE3
+    short = dict(duration=0.08, discard=0.04)
+    cfgs = [SimConfig(**short, mesh="coarse"), SimConfig(**short), SimConfig(**short, mesh="coarse", sep_ratio=1.2)]
+    rows = np.array([TABLE3.as_array()] * 3)
+    out = simulate_many(rows, configs=cfgs)
+    for c, b, r in zip(cfgs, out, rows):
+        assert b.config == c
+        _close(simulate(r, c), b)
+    with pytest.raises(ValueError, match="one SimConfig per row"):
+        simulate_many(rows, configs=cfgs[:2])

@@ -6,74 +6,83 @@ import pytest
 import scipy.sparse as sp
 
 from vfcore.solver import _kernels as kern
+from vfcore.solver._batch_kernels import chol_solve_many
+from vfcore.solver.system import cholesky_pattern, minimum_degree
 
 
-def _random_spd_band(n, bw, rng):
-    A = np.zeros((n, n))
-    for k in range(1, bw + 1):
-        d = rng.standard_normal(n - k)
-        A += np.diag(d, k) + np.diag(d, -k)
-    # strictly diagonally dominant -> SPD
+def _random_sparse_spd(n, density, rng):
+    """Random symmetric, strictly diagonally dominant (hence SPD) sparse matrix, as CSR."""
+    A = sp.random(n, n, density=density, random_state=rng, data_rvs=rng.standard_normal).toarray()
+    A = A + A.T
     A += np.diag(np.abs(A).sum(axis=1) + 0.1 + rng.random(n))
-    return A
-
-
-def _to_band(A, bw):
-    n = A.shape[0]
-    Ab = np.zeros((n, bw + 1))
-    for i in range(n):
-        for j in range(max(0, i - bw), i + 1):
-            Ab[i, j - i + bw] = A[i, j]
-    return Ab
-
-
-@pytest.mark.parametrize("n,bw", [(1, 0), (5, 1), (12, 4), (40, 7), (100, 29), (60, 59)])
-def test_band_cholesky_and_solve_vs_dense(n, bw):
-    rng = np.random.default_rng(n * 100 + bw)
-    A = _random_spd_band(n, bw, rng)
-    Lb = _to_band(A, bw)
-    assert kern.band_cholesky(Lb) == 0
-    L = np.zeros((n, n))
-    for i in range(n):
-        for j in range(max(0, i - bw), i + 1):
-            L[i, j] = Lb[i, j - i + bw]
-    np.testing.assert_allclose(L, np.linalg.cholesky(A), rtol=1e-12, atol=1e-12 * np.abs(A).max())
-    for _ in range(3):
-        b = rng.standard_normal(n)
-        x = b.copy()
-        kern.band_solve(Lb, x)
-        np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-10, atol=1e-12)
-
-
-def test_band_cholesky_reports_indefinite_minor():
-    A = np.diag([4.0, 1.0, -1.0, 2.0])
-    A[1, 0] = A[0, 1] = 0.5
-    Lb = _to_band(A, 1)
-    assert kern.band_cholesky(Lb) == 3      # leading minor of order 3 fails
-    Lb = _to_band(np.diag([1.0, 0.0]), 0)
-    assert kern.band_cholesky(Lb) == 2
-
-
-@pytest.mark.parametrize("n,bw", [(10, 2), (50, 9)])
-def test_csr_to_band_round_trip(n, bw):
-    rng = np.random.default_rng(7)
-    A = _random_spd_band(n, bw, rng)
-    A[np.abs(A) < 0.3] = 0.0                 # sparsify, keep symmetry
-    A = 0.5 * (A + A.T)
     C = sp.csr_matrix(A)
     C.sort_indices()
-    out = np.full((n, bw + 1), 123.0)        # garbage must be overwritten
-    kern.csr_to_band(C.indptr.astype(np.int64), C.indices.astype(np.int64), C.data, n, bw, out)
-    back = np.zeros((n, n))
+    return A, C
+
+
+@pytest.mark.parametrize("n,density", [(1, 1.0), (5, 0.3), (12, 0.2), (40, 0.08), (100, 0.03), (60, 0.5)])
+def test_sparse_cholesky_and_solve_vs_dense(n, density):
+    rng = np.random.default_rng(n * 100 + int(100 * density))
+    A, C = _random_sparse_spd(n, density, rng)
+    order = minimum_degree(C)
+    assert sorted(order.tolist()) == list(range(n))              # a permutation
+    Cp = sp.csr_matrix(C[order][:, order])
+    Cp.sort_indices()
+    Ap = A[np.ix_(order, order)]
+    Lp, Lj = cholesky_pattern(Cp)
+    L_dense = np.linalg.cholesky(Ap)
+    # the symbolic pattern holds every structural nonzero of the dense factor, diagonal last
+    S = np.zeros((n, n), dtype=bool)
     for i in range(n):
-        for k in range(bw + 1):
-            j = i - bw + k
-            if j >= 0:
-                back[i, j] = out[i, k]
-            else:
-                assert out[i, k] == 0.0
-    full = np.tril(back) + np.tril(back, -1).T
-    np.testing.assert_array_equal(full, A)
+        cols = Lj[Lp[i]:Lp[i + 1]]
+        assert cols[-1] == i and np.all(np.diff(cols) > 0)
+        S[i, cols] = True
+    assert not np.any((np.abs(L_dense) > 1e-14 * np.abs(L_dense).max()) & ~S)
+    Lx = np.empty(Lj.size)
+    ip, ix = Cp.indptr.astype(np.int64), Cp.indices.astype(np.int64)
+    assert kern.sparse_cholesky(ip, ix, Cp.data, Lp, Lj, Lx) == 0
+    L = np.zeros((n, n))
+    for i in range(n):
+        for q in range(Lp[i], Lp[i + 1]):
+            L[i, Lj[q]] = Lx[q] if Lj[q] != i else 1.0 / Lx[q]   # diagonal stored as 1 / L_ii
+    np.testing.assert_allclose(L, L_dense, rtol=1e-12, atol=1e-12 * np.abs(A).max())
+    B = 5
+    rhs = rng.standard_normal((n, B))
+    X = rhs.copy()
+    chol_solve_many(Lp, Lj, np.repeat(Lx[:, None], B, axis=1), X)       # batched: every column
+    for b in range(B):
+        x = rhs[:, b].copy()
+        kern.chol_solve(Lp, Lj, Lx, x)
+        np.testing.assert_allclose(x, np.linalg.solve(Ap, rhs[:, b]), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(X[:, b], x, rtol=1e-13, atol=1e-15)
+
+
+def test_sparse_cholesky_reports_indefinite_minor():
+    A = np.diag([4.0, 1.0, -1.0, 2.0])
+    A[1, 0] = A[0, 1] = 0.5
+    C = sp.csr_matrix(A)
+    Lp, Lj = cholesky_pattern(C)
+    Lx = np.empty(Lj.size)
+    args = (C.indptr.astype(np.int64), C.indices.astype(np.int64), C.data, Lp, Lj, Lx)
+    assert kern.sparse_cholesky(*args) == 3      # leading minor of order 3 fails
+    C = sp.csr_matrix(np.diag([1.0, 0.0]))
+    Lp, Lj = cholesky_pattern(C)
+    Lx = np.empty(Lj.size)
+    assert kern.sparse_cholesky(C.indptr.astype(np.int64), C.indices.astype(np.int64), C.data, Lp, Lj, Lx) == 2
+
+
+def test_minimum_degree_reduces_fill_on_the_fold_meshes():
+    """The factor pattern of the shipped meshes is smaller than the reverse Cuthill-McKee band."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    from vfcore.solver.system import get_system
+    for mesh in ("coarse", "medium", "fine"):
+        s = get_system(mesh, 0.4995)
+        pat = s.matrix(np.ones(s.indices.size))
+        rcm = reverse_cuthill_mckee(pat, symmetric_mode=True)
+        P = pat[rcm][:, rcm].tocoo()
+        band = s.n * (int(np.max(np.abs(P.row - P.col))) + 1)
+        assert s.nnz_factor < 0.6 * band
 
 
 def _loads(gap, p_sub, p_sup, sep=1.3, tol=1e-9, nx=None, nz=None):

@@ -11,7 +11,6 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from vfcore import TABLE3, SimConfig, simulate
-from vfcore.batch import simulate_many
 from vfcore.fem.assemble import membrane_unit
 from vfcore.mesh import load_mesh
 from vfcore.solver import _kernels as kern
@@ -212,11 +211,3 @@ def test_subglottal_coupling_shows_in_the_gaw():
     r2 = _sim(subglottal_modes=(MODE,))
     assert r2.ok, r2.message
     assert np.ptp(r0.gaw) > 20.0 and np.ptp(r2.gaw) < 1.0
-
-
-def test_batch_falls_back_to_scalar_with_extensions():
-    cfg = SimConfig(**SHORT, subglottal_modes=((600.0, 0.1, 1e5),), epithelium_E_kpa=20.0)
-    rows = np.array([TABLE3.as_array(), TABLE3.replace(p_sub=800.0).as_array()])
-    for r_b, row in zip(simulate_many(rows, cfg, block=2), rows):
-        _same(r_b, simulate(row, cfg))
-    assert math.isfinite(simulate_many(rows[:1], cfg)[0].p_in[0])

@@ -1,69 +1,73 @@
 """numba kernels of the time integration. Every constant is an argument.
 
-Banded storage: ``Lb[i, k]`` holds ``L[i, i - bw + k]`` for k = 0..bw (k = bw is the
-diagonal); entries left of column 0 are zero.
+Factor storage: the lower Cholesky factor L of the effective stiffness in row CSR
+(``Lp``, ``Lj``, ``Lx``), columns ascending and the diagonal last in each row, stored as
+its reciprocal (see :func:`sparse_cholesky`).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
+#: LLVM fast-math flags of the time loops: reassociation (vectorised reductions), contraction
+#: (FMA), reciprocal and signed-zero freedom -- but not ``nnan``/``ninf``, so the non-finite and
+#: blow-up tests of the state stay exact.
+FASTMATH = {"reassoc", "contract", "arcp", "nsz"}
+
 
 @njit(cache=True)
-def band_cholesky(Ab: np.ndarray) -> int:
-    """In-place Cholesky factorisation of a symmetric positive-definite band matrix.
+def sparse_cholesky(indptr, indices, vals, Lp, Lj, Lx) -> int:
+    """Numeric Cholesky factorisation A = L L^T on a precomputed pattern (up-looking, by rows).
 
-    ``Ab`` (n, bw + 1) lower band (see module docstring). Returns 0, or i + 1 when the
-    leading minor of order i + 1 is not positive definite.
+    A : symmetric CSR (indptr, indices, vals; both triangles stored). L : row CSR (Lp, Lj)
+    from :func:`vfcore.solver.system.cholesky_pattern`, the diagonal last in each row; its values
+    are written to ``Lx`` with the diagonal stored as its reciprocal 1 / L_ii (the solves
+    multiply by it). Row i: L_ij = (A_ij - sum_{k<j} L_ik L_jk) / L_jj for j in the row's
+    pattern, ascending, then L_ii = sqrt(A_ii - sum_k L_ik^2).
+    Returns 0, or i + 1 when the leading minor of order i + 1 is not positive definite.
     """
-    n, w = Ab.shape
-    bw = w - 1
-    for i in range(n):
-        j0 = max(0, i - bw)
-        for j in range(j0, i + 1):
-            s = Ab[i, j - i + bw]
-            k0 = max(j0, j - bw)
-            for k in range(k0, j):
-                s -= Ab[i, k - i + bw] * Ab[j, k - j + bw]
-            if j == i:
-                if not s > 0.0:
-                    return i + 1
-                Ab[i, bw] = np.sqrt(s)
-            else:
-                Ab[i, j - i + bw] = s / Ab[j, bw]
-    return 0
-
-
-@njit(cache=True, fastmath=True)
-def band_solve(Lb: np.ndarray, b: np.ndarray) -> None:
-    """Solve (L L^T) x = b in place, L from :func:`band_cholesky`."""
-    n, w = Lb.shape
-    bw = w - 1
-    for i in range(n):
-        s = b[i]
-        j0 = max(0, i - bw)
-        off = bw - i
-        for j in range(j0, i):
-            s -= Lb[i, j + off] * b[j]
-        b[i] = s / Lb[i, bw]
-    for i in range(n - 1, -1, -1):
-        xi = b[i] / Lb[i, bw]
-        b[i] = xi
-        j0 = max(0, i - bw)
-        off = bw - i
-        for j in range(j0, i):
-            b[j] -= Lb[i, j + off] * xi
-
-
-@njit(cache=True)
-def csr_to_band(indptr, indices, data, n, bw, out):
-    """Scatter the lower triangle of a symmetric CSR matrix into band storage ``out``."""
-    out[:, :] = 0.0
+    n = Lp.size - 1
+    row = np.zeros(n)                  # dense copy of the row of L being built
     for i in range(n):
         for p in range(indptr[i], indptr[i + 1]):
             j = indices[p]
             if j <= i:
-                out[i, j - i + bw] += data[p]
+                row[j] = vals[p]
+        end = Lp[i + 1] - 1            # diagonal slot
+        d = row[i]
+        for q in range(Lp[i], end):
+            j = Lj[q]
+            s = row[j]
+            for t in range(Lp[j], Lp[j + 1] - 1):
+                s -= Lx[t] * row[Lj[t]]
+            lij = s * Lx[Lp[j + 1] - 1]
+            row[j] = lij
+            Lx[q] = lij
+            d -= lij * lij
+        if not d > 0.0:
+            return i + 1
+        Lx[end] = 1.0 / np.sqrt(d)
+        for q in range(Lp[i], Lp[i + 1]):
+            row[Lj[q]] = 0.0
+    return 0
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def chol_solve(Lp, Lj, Lx, b) -> None:
+    """Solve (L L^T) x = b in place, L from :func:`sparse_cholesky`."""
+    n = Lp.size - 1
+    for i in range(n):
+        s = b[i]
+        end = Lp[i + 1] - 1
+        for q in range(Lp[i], end):
+            s -= Lx[q] * b[Lj[q]]
+        b[i] = s * Lx[end]
+    for i in range(n - 1, -1, -1):
+        end = Lp[i + 1] - 1
+        xi = b[i] * Lx[end]
+        b[i] = xi
+        for q in range(Lp[i], end):
+            b[Lj[q]] -= Lx[q] * xi
 
 
 @njit(cache=True)
@@ -145,6 +149,20 @@ def contact_correct(u, sdx, sX, x_mid, G, lam, active, max_iter):
     Returns the number of active-set iterations, or -1 if it did not settle.
     """
     m = sdx.size
+    return contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, np.empty(u.size), np.empty((m, m)),
+                              np.empty(m), np.empty(m, dtype=np.int64))
+
+
+@njit(cache=True)
+def contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, u0, S, rhs, idx):
+    """:func:`contact_correct` with caller-owned work arrays (no allocation per call): u0 (n,),
+    S (m, m), rhs (m,), idx (m,) int64.
+
+    The active-set system S lam = rhs, S_ab = G[sdx[a], b] = e_a^T K_eff^{-1} e_b, is symmetric
+    positive definite (a principal submatrix of K_eff^{-1}); it is solved by Cholesky in place.
+    """
+    m = sdx.size
+    n = u.size
     any_pen = False
     for j in range(m):
         lam[j] = 0.0
@@ -154,28 +172,48 @@ def contact_correct(u, sdx, sX, x_mid, G, lam, active, max_iter):
             any_pen = True
     if not any_pen:
         return 0
-    u0 = u.copy()
+    for i in range(n):
+        u0[i] = u[i]
     for it in range(max_iter):
-        idx = np.nonzero(active)[0]
-        k = idx.size
-        if k > 0:
-            S = np.empty((k, k))
-            rhs = np.empty(k)
-            for a in range(k):
-                ja = idx[a]
-                rhs[a] = (x_mid - sX[ja]) - u0[sdx[ja]]
-                for b in range(k):
-                    S[a, b] = G[sdx[ja], idx[b]]
-            sol = np.linalg.solve(S, rhs)
+        k = 0
+        for j in range(m):
+            if active[j]:
+                idx[k] = j
+                k += 1
+        for a in range(k):
+            ja = idx[a]
+            rhs[a] = (x_mid - sX[ja]) - u0[sdx[ja]]
+            for b in range(a + 1):
+                S[a, b] = G[sdx[ja], idx[b]]
+        # Cholesky S = C C^T (lower, in place) and two triangular solves
+        for a in range(k):
+            for b in range(a + 1):
+                t = S[a, b]
+                for c in range(b):
+                    t -= S[a, c] * S[b, c]
+                if b == a:
+                    S[a, a] = np.sqrt(t)
+                else:
+                    S[a, b] = t / S[b, b]
+        for a in range(k):
+            t = rhs[a]
+            for c in range(a):
+                t -= S[a, c] * rhs[c]
+            rhs[a] = t / S[a, a]
+        for a in range(k - 1, -1, -1):
+            t = rhs[a]
+            for c in range(a + 1, k):
+                t -= S[c, a] * rhs[c]
+            rhs[a] = t / S[a, a]
         for j in range(m):
             lam[j] = 0.0
         for a in range(k):
-            lam[idx[a]] = sol[a]
-        for i in range(u.size):
-            s = u0[i]
+            lam[idx[a]] = rhs[a]
+        for i in range(n):
+            t = u0[i]
             for a in range(k):
-                s += G[i, idx[a]] * sol[a]
-            u[i] = s
+                t += G[i, idx[a]] * rhs[a]
+            u[i] = t
         changed = False
         for j in range(m):
             if sdx[j] < 0:
@@ -280,19 +318,19 @@ def subglottal_response(q, coef):
     return out
 
 
-@njit(cache=True, fastmath=True)
-def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
+@njit(cache=True, fastmath=FASTMATH)
+def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
               u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
     """:func:`integrate_coupled` without subglottal resonators (the inlet pressure is ``p_sub``)."""
-    return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G,
+    return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                              sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                              width, gsep_out, lam_out, traj_every, traj_u, traj_v,
                              np.zeros((0, 3)), 0.0, np.zeros(0))
 
 
-@njit(cache=True, fastmath=True)
-def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lb, G, sdx, sdz, sX, sZ,
+@njit(cache=True, fastmath=FASTMATH)
+def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
                       u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                       width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
@@ -327,6 +365,10 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     pres = np.empty(m)
     lam = np.empty(m)
     active = np.zeros(m, dtype=np.bool_)
+    ws_u0 = np.empty(n)
+    ws_S = np.empty((m, m))
+    ws_rhs = np.empty(m)
+    ws_idx = np.empty(m, dtype=np.int64)
     ntr = 0
     nmod = sub_coef.shape[0]
     sub_p1 = np.zeros(nmod)
@@ -358,10 +400,10 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
             if sdx[j] >= 0:
                 r[sdx[j]] += fx[j]
                 r[sdz[j]] += fz[j]
-        band_solve(Lb, r)
+        chol_solve(Lp, Lj, Lx, r)
         for i in range(n):
             r[i] += u[i]          # r is now u_{n+1} before contact
-        if contact_correct(r, sdx, sX, x_mid, G, lam, active, 50) < 0:
+        if contact_correct_ws(r, sdx, sX, x_mid, G, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx) < 0:
             return -k          # contact active set did not settle: a failure, never silent penetration
         bad = False
         for i in range(n):
