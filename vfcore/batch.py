@@ -100,7 +100,7 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     return out
 
 
-def simulate_many(params_array, config: SimConfig | None = None, block: int = 8,
+def simulate_many(params_array, config: SimConfig | None = None, block: int = 32,
                   configs=None) -> list[SimResult]:
     """Simulate each row of ``params_array`` ((N, 7), ``PARAM_NAMES`` order, paper units).
 

@@ -222,16 +222,22 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
 
 
 def _simulate_rows(args):
-    rows, config = args
-    return [simulate(Params.from_array(r), config) for r in rows]
+    rows, config, block = args
+    if block <= 1:
+        return [simulate(Params.from_array(r), config) for r in rows]
+    from .batch import simulate_many
+    return simulate_many(rows, config, block=block)
 
 
-def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1) -> list[SimResult]:
+def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1, block: int = 32
+                   ) -> list[SimResult]:
     """Simulate many parameter vectors.
 
     params : (n, 7) array in ``PARAM_NAMES`` order (paper units), or a list of Params.
     n_workers : processes to spread the batch over (1 = in this process). Each process
     runs numba single-threaded (one level of parallelism at a time).
+    block : lock-step block size within a process (:func:`vfcore.batch.simulate_many`, SIMD
+    across samples); 1 = one scalar :func:`simulate` per row.
     """
     config = config or SimConfig()
     if isinstance(params, np.ndarray):
@@ -241,10 +247,10 @@ def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1) 
     else:
         arr = np.array([_params(x).as_array() for x in params])
     if n_workers <= 1 or len(arr) < 2:
-        return _simulate_rows((arr, config))
+        return _simulate_rows((arr, config, block))
     chunks = [c for c in np.array_split(arr, n_workers) if len(c)]
     with ProcessPoolExecutor(n_workers) as ex:
-        out = list(ex.map(_simulate_rows, [(c, config) for c in chunks]))
+        out = list(ex.map(_simulate_rows, [(c, config, block) for c in chunks]))
     return [r for part in out for r in part]
 
 

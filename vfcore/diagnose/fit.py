@@ -169,18 +169,34 @@ class ExtendedEvaluator:
         return get(self.name)            # looked up, not stored: catalogue entries hold closures
 
     def _simulate(self, base_params, phis):
+        from ..batch import simulate_many
         ext = self.extension
         cfg = self.problem.config
         if ext.kind == "observation":
-            from ..batch import simulate_many
-            return simulate_many(base_params, cfg, block=16)
-        from ..forward import simulate
-        out = []
-        for p, phi in zip(base_params, phis):
+            return simulate_many(base_params, cfg, block=32)
+        # forward-level: each draw has its own configuration; the lock-step kernel takes the
+        # extensions per row, so the draws still run in blocks
+        out: list = [None] * len(base_params)
+        rows, cfgs = [], []
+        for i, (p, phi) in enumerate(zip(base_params, phis)):
             try:
-                out.append(simulate(p, extended_config(cfg, ext.name, phi)))
+                cfgs.append(extended_config(cfg, ext.name, phi))
+                rows.append(i)
             except Exception as exc:  # noqa: BLE001 - reported per draw
-                out.append(exc)
+                out[i] = exc
+        if rows:
+            try:
+                res = simulate_many([base_params[i] for i in rows], block=32, configs=cfgs)
+            except Exception:  # noqa: BLE001 - find the failing draw(s) one by one
+                from ..forward import simulate
+                res = []
+                for i, c in zip(rows, cfgs):
+                    try:
+                        res.append(simulate(base_params[i], c))
+                    except Exception as exc:  # noqa: BLE001 - reported per draw
+                        res.append(exc)
+            for i, r in zip(rows, res):
+                out[i] = r
         return out
 
     def __call__(self, thetas) -> Evaluation:

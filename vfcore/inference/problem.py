@@ -286,7 +286,7 @@ def _simulate_rows(thetas, problem: Problem, simulate_fn: Callable | None, block
     return out
 
 
-def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None, block: int = 16) -> Evaluation:
+def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None, block: int = 32) -> Evaluation:
     """Run the forward model at each row of ``thetas`` (k, d) and score it against the data.
 
     A pure function of its inputs (the unit of work of one worker chunk). A simulation
