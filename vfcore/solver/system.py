@@ -6,9 +6,9 @@ pattern), so a simulation costs one sparse Cholesky factorisation (on the symbol
 computed here once) plus the time loop.
 
 Ordering: minimum degree on the dof graph (Tinney & Walker 1967, scheme 2; ties broken by the
-lower index, so the order is deterministic). On the shipped meshes it leaves 3,111 nonzeros in
-the factor of the medium mesh (2,457 coarse, 4,553 fine) against 6,540 stored and 3,771 filled
-entries of the reverse Cuthill-McKee band used before (docs/model.md, "Cost of a step").
+lower index, so the order is deterministic). On the shipped meshes it leaves 3,303 nonzeros in
+the factor of the medium mesh (2,453 coarse, 4,677 fine) against 6,540 stored and 3,771 filled
+entries of the reverse Cuthill-McKee band used before (docs/model.md, "Speed").
 """
 from __future__ import annotations
 
