@@ -224,8 +224,12 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     else:
         n_sims += int(base.n_simulations)
     before = fit_summary(base, problem.obs_compared, problem.fps, problem.sigma_e)
+    before["wall_s"] = time.perf_counter() - t0          # all base runs
+    before["base_simulations"] = n_sims
+    t1 = time.perf_counter()
     scr = screen(problem, base, cand, seed=seed, map=map, **(screen_options or {}))
     n_sims += sum(int(v["n_simulations"]) for v in scr.values())
+    scr["_base"]["wall_s"] = time.perf_counter() - t1
     ranked = sorted((n for n in cand if np.isfinite(scr[n]["score"])), key=lambda n: -scr[n]["score"])
     obs_ranked = [n for n in ranked if not (refit_forward and get(n).kind == "forward")]
     chosen = [n for n in obs_ranked if scr[n]["score"] > screen_min][:max_refits]   # [:None] = all
@@ -237,6 +241,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     refits, after = {}, {}
     loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
     for i, name in enumerate(chosen):
+        t1 = time.perf_counter()
         post = fit_extended(problem, name, n_particles=refit_particles or n_particles, seed=seed + 101 * (i + 1),
                             map=map,
                             chunk_size=chunk_size, **opts)
@@ -247,6 +252,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
         s["rms_improvement"] = 1.0 - s["residual_rms"] / before["residual_rms"]
         s["null_consistent"] = null_consistent(post.names, post.mean, post.sd, name, null_sd)
+        s["wall_s"] = time.perf_counter() - t1
+        s["n_generations"] = int(post.info.get("n_generations", 0))
         after[name] = s
     ranking = rank_extensions(base, refits, residual={n: after[n]["residual_removed"] for n in after},
                               n_extra={n: len(get(n).params) for n in refits},
