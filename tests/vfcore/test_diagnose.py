@@ -299,3 +299,14 @@ def test_compare_fits_from_posteriors():
     p1.samples[:, 1] = 0.001 * np.arange(20)
     r = compare_fits(p0, {"leak": p1})
     assert r.winner is None and r.rows[0].null_consistent and r.reference == "leak"
+
+
+def test_se_inflation_from_independent_base_runs():
+    """Two runs of the same model whose evidences differ by far more than their reported errors
+    inflate every error by the observed spread; runs that agree leave them alone (factor >= 1)."""
+    from vfcore.diagnose.pipeline import _se_inflation
+    f = _se_inflation([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
+    assert f == pytest.approx((5.3 / math.sqrt(2)) / math.sqrt((0.36 + 0.25) / 2))
+    assert _se_inflation([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 1.0
+    assert _se_inflation([_Post(-446.0, 0.6)]) == 1.0
+    assert _se_inflation([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 1.0

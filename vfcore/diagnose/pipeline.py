@@ -85,6 +85,18 @@ def _best_particles(post: Posterior, m: int) -> np.ndarray:
     return np.array(out)
 
 
+def _se_inflation(runs) -> float:
+    """Factor (>= 1) by which the reported log-evidence errors of independent runs of the same
+    model understate their observed spread: ``sd(log Z_k) / rms(se_k)``. The SMC error is a
+    delta-method lower bound that ignores the particle dependence (vfcore.inference.smc); the
+    spread of independent runs is a direct (if rough, with 2 runs) measure of the real error."""
+    z = np.array([p.log_evidence for p in runs], dtype=float)
+    se = np.array([p.log_evidence_se for p in runs], dtype=float)
+    if z.size < 2 or not (np.all(np.isfinite(z)) and np.all(np.isfinite(se))) or not np.any(se > 0):
+        return 1.0
+    return float(max(1.0, np.std(z, ddof=1) / math.sqrt(np.mean(se ** 2))))
+
+
 def _sobol(d: int, n: int, seed: int) -> np.ndarray:
     import warnings
 
@@ -211,6 +223,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     cand = [n for n in (candidates or CATALOGUE) if get(n).implemented]
     notes = []
     n_sims = 0
+    se_inflation = 1.0
     if base is None:
         runs = []
         for k in range(max(1, int(base_runs))):
@@ -221,6 +234,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         if len(runs) > 1:
             notes.append("base runs log-evidence: " + ", ".join(f"{p.log_evidence:.1f} +- {p.log_evidence_se:.1f}"
                                                                  for p in runs) + "; the largest kept")
+            se_inflation = _se_inflation(runs)
     else:
         n_sims += int(base.n_simulations)
     before = fit_summary(base, problem.obs_compared, problem.fps, problem.sigma_e)
@@ -255,7 +269,15 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
         after[name] = s
-    ranking = rank_extensions(base, refits, residual={n: after[n]["residual_removed"] for n in after},
+    if se_inflation > 1.0:
+        notes.append(f"Monte Carlo errors of the log-evidences x {se_inflation:.2f}: the spread of the independent "
+                     "base runs exceeds their reported (delta-method) errors")
+
+    def lz(p):
+        return float(p.log_evidence), float(p.log_evidence_se) * se_inflation
+
+    ranking = rank_extensions(lz(base), {n: lz(p) for n, p in refits.items()},
+                              residual={n: after[n]["residual_removed"] for n in after},
                               n_extra={n: len(get(n).params) for n in refits},
                               rms={n: after[n]["residual_rms"] for n in after}, base_rms=before["residual_rms"],
                               null={n: after[n]["null_consistent"] for n in after},
