@@ -43,6 +43,7 @@ __all__ = [
     "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",
     "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile", "zipper_area",
     "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale", "oscillates",
+    "amplitude", "phonates",
     "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
 ]
 
@@ -62,6 +63,13 @@ SIGMA_RANGE = (0.3, 1.0)
 TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)}
 #: Oscillation criterion of a usable case.
 MIN_PEAK_MM2 = 2.0
+#: Phonation criterion of a usable recording: the clean waveform's robust peak-to-trough amplitude
+#: (95th minus 5th percentile) must reach this many mm^2 AND ``MIN_AMPLITUDE_SIGMA`` noise standard
+#: deviations, and the noisy recording must still show a periodic oscillation (finite
+#: autocorrelation f0, >= 2 cycles). Seed 0, old generator: case 08 (epithelium) kept a glottis
+#: open at ~8.5 mm^2 with a 0.9 mm^2 ripple, and its noisy recording (sigma 0.31) had no f0.
+MIN_AMPLITUDE_MM2 = 2.0
+MIN_AMPLITUDE_SIGMA = 4.0
 #: Detectability floor: an effect draw whose clean waveform differs from the control at the same
 #: truth by less than this RMS (mm^2) is redrawn. Exposure has none: at 2000 fps its low-pass is
 #: intrinsically weak on a 60-200 Hz GAW (README), so its cases are near-null by construction.
@@ -271,6 +279,28 @@ def oscillates(gaw, fps: float) -> bool:
                 and math.isfinite(estimate_f0(g, fps)))
 
 
+def amplitude(gaw) -> float:
+    """Robust peak-to-trough amplitude (mm^2): 95th minus 5th percentile of the waveform."""
+    g = np.asarray(gaw, dtype=float)
+    return float(np.percentile(g, 95) - np.percentile(g, 5))
+
+
+def phonates(clean, noisy, sigma: float, fps: float) -> bool:
+    """Whether a case's recording is usable: the clean waveform oscillates with an amplitude of at
+    least ``MIN_AMPLITUDE_MM2`` and ``MIN_AMPLITUDE_SIGMA * sigma``, and the noisy recording shows
+    a periodic oscillation over at least two cycles (what a fit's input validation requires)."""
+    if not oscillates(clean, fps):
+        return False
+    amp = amplitude(clean)
+    if amp < MIN_AMPLITUDE_MM2 or amp < MIN_AMPLITUDE_SIGMA * sigma:
+        return False
+    y = np.asarray(noisy, dtype=float)
+    if not np.all(np.isfinite(y)):
+        return False
+    f0 = estimate_f0(y, fps)
+    return bool(math.isfinite(f0) and f0 > 0 and y.size * f0 / fps >= 2.0)
+
+
 def _ok(res) -> bool:
     return bool(res.ok and oscillates(res.gaw, res.fps))
 
@@ -400,7 +430,8 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
 def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config: SimConfig = BASE_CONFIG,
               n_obs: int = N_OBS, max_attempts: int = 20, sim=simulate) -> Case:
     """One case, deterministic in ``seed_seq``: draw truth until the base oscillates, draw the
-    offset and the effect (redrawn when its simulation does not oscillate), add noise."""
+    offset and the effect (redrawn when its simulation does not oscillate), add noise; the whole
+    draw is repeated (same stream) when the recording does not phonate (:func:`phonates`)."""
     rng = np.random.default_rng(seed_seq)
     for attempt in range(1, max_attempts + 1):
         truth = draw_truth(rng)
@@ -422,6 +453,10 @@ def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config
         clean, eff = out
         sigma = _uniform(rng, SIGMA_RANGE)
         noisy = clean + sigma * rng.standard_normal(n_obs)
+        if not phonates(clean, noisy, sigma, config.fps):
+            # not a usable recording (no phonation, or an oscillation lost in the noise): redraw
+            # from the same stream; a case that passes consumes exactly the draws it did before
+            continue
         return Case(case_id, label, eff, truth.as_dict(), offset, sigma, config.fps, clean, base_clean, noisy,
                     attempts=attempt)
     raise RuntimeError(f"case {case_id} ({label}): no oscillating draw in {max_attempts} attempts")

@@ -201,6 +201,62 @@ def test_rank_names_large_gain():
     assert rep.rows[1].found and not rep.rows[2].found    # exposure: d = 5 > 3 and > 3 * 0.42
 
 
+def test_rank_big_evidence_small_rms_gain_is_not_named():
+    """The effect-size rule: a decisive evidence gain with a residual only 10 % smaller is not a
+    finding; with 30 % or more it is; the larger dlogZ among qualifying fits wins."""
+    base = _Post(-1000.0, 0.5)
+    fits = {"scale": _Post(-900.0, 0.5), "leak": _Post(-960.0, 0.5), "zipper": _Post(-950.0, 0.5)}
+    rep = rank_extensions(base, fits, rms={"scale": 0.9, "leak": 0.6, "zipper": 0.71}, base_rms=1.0)
+    rows = {r.name: r for r in rep.rows}
+    assert not rows["scale"].found and "effect size" in rows["scale"].reason
+    assert rows["scale"].rms_gain == pytest.approx(0.1)
+    assert rows["leak"].found and rows["zipper"].found is False      # 29 % < 30 %
+    assert rep.winner == "leak"
+    # exactly at the threshold counts; a missing RMS never does once RMS is being checked
+    rep = rank_extensions(base, fits, rms={"scale": 0.7}, base_rms=1.0)
+    assert rep.winner == "scale"
+    assert not any(r.found for r in rep.rows if r.name != "scale")
+    # the threshold is a parameter: 0 turns the rule back into evidence only
+    assert rank_extensions(base, fits, rms={"scale": 0.9, "leak": 0.6, "zipper": 0.71}, base_rms=1.0,
+                           min_rms_gain=0.0).winner == "scale"
+
+
+def test_null_consistent_posteriors():
+    from vfcore.diagnose.rank import null_consistent
+    names = ("E_body", "leak_mm2")
+    assert null_consistent(names, [10.0, 0.05], [1.0, 0.04], "leak")        # piled up at the bound
+    assert not null_consistent(names, [10.0, 1.5], [1.0, 0.1], "leak")       # a real leak
+    assert null_consistent(names, [10.0, 1.5], [1.0, 0.87], "leak")          # unidentified (~ prior)
+    # every parameter that has a null must sit at it
+    names = ("E_body", "lr_phase", "lr_amp")
+    assert null_consistent(names, [10.0, 0.01, 1.02], [1.0, 0.01, 0.03], "asymmetry")
+    assert not null_consistent(names, [10.0, 0.01, 0.7], [1.0, 0.01, 0.03], "asymmetry")
+    assert null_consistent(("sep_ratio",), [1.31], [0.02], "sep_ratio")
+    assert not null_consistent(("sep_ratio",), [1.15], [0.02], "sep_ratio")
+    # no null value in the prior (epithelium stiffness): never null-consistent
+    assert not null_consistent(("E_epith_kpa",), [5.0], [50.0], "epithelium")
+
+
+def test_rank_null_fit_is_not_named_and_raises_the_reference():
+    """A refit at its null value that beats the base found a better material mode: it is not
+    named, and the other gains are measured against it (evidence and RMS)."""
+    base = _Post(-5000.0, 1.0)
+    fits = {"sep_ratio": _Post(-1000.0, 1.0), "frame_rate": _Post(-700.0, 1.0), "leak": _Post(-990.0, 1.0)}
+    rms = {"sep_ratio": 1.2, "frame_rate": 0.5, "leak": 1.1}
+    rep = rank_extensions(base, fits, rms=rms, base_rms=11.9, null={"sep_ratio": True})
+    rows = {r.name: r for r in rep.rows}
+    assert rep.reference == "sep_ratio" and rep.notes
+    assert not rows["sep_ratio"].found and rows["sep_ratio"].delta == pytest.approx(0.0)
+    assert rows["leak"].delta == pytest.approx(10.0) and rows["leak"].rms_gain == pytest.approx(1 - 1.1 / 1.2)
+    assert not rows["leak"].found                                        # 8 % against the new reference
+    assert rows["frame_rate"].found and rep.winner == "frame_rate"
+    assert rows["frame_rate"].rms_gain == pytest.approx(1 - 0.5 / 1.2)
+    # a null fit below the base evidence leaves the reference at the base and is not named
+    rep = rank_extensions(base, {"leak": _Post(-6000.0, 1.0)}, rms={"leak": 0.1}, base_rms=11.9,
+                          null={"leak": True})
+    assert rep.reference == "base" and rep.winner is None and rep.rows[0].null_consistent
+
+
 def test_rank_missing_se_never_found():
     rep = rank_extensions((-100.0, math.nan), {"leak": (-50.0, 0.1)})
     assert rep.winner is None and rep.notes
@@ -231,9 +287,26 @@ def test_compare_fits_from_posteriors():
     obs = np.maximum(base, 1.0)
     p0 = _posterior(np.tile(base, (20, 1)), obs, -200.0, 0.3)
     p1 = _posterior(np.tile(np.maximum(base, 1.0), (20, 1)), obs, -150.0, 0.3, names=("E_body", "leak_mm2"))
+    p1.samples[:, 1] = 1.0 + 0.01 * np.arange(20)      # a leak of ~1 mm^2, far from its null (0)
     rep, pv = from_posterior(p0)
     assert rep.dominant_phase == "closed"
     assert pv["min_area_mm2"].p_upper == 0.0 and pv["glottal_gap_index"].p_two_sided == 0.0
     r = compare_fits(p0, {"leak": p1})
     assert r.winner == "leak" and r.rows[0].n_extra == 1
     assert r.rows[0].residual_removed == pytest.approx(1.0, abs=1e-6)
+    assert r.rows[0].rms_gain == pytest.approx(1.0, abs=1e-6) and not r.rows[0].null_consistent
+    # the same fit with its leak at the null value (0) is a better base fit, not a finding
+    p1.samples[:, 1] = 0.001 * np.arange(20)
+    r = compare_fits(p0, {"leak": p1})
+    assert r.winner is None and r.rows[0].null_consistent and r.reference == "leak"
+
+
+def test_se_inflation_from_independent_base_runs():
+    """Two runs of the same model whose evidences differ by far more than their reported errors
+    inflate every error by the observed spread; runs that agree leave them alone (factor >= 1)."""
+    from vfcore.diagnose.pipeline import _se_inflation
+    f = _se_inflation([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
+    assert f == pytest.approx((5.3 / math.sqrt(2)) / math.sqrt((0.36 + 0.25) / 2))
+    assert _se_inflation([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 1.0
+    assert _se_inflation([_Post(-446.0, 0.6)]) == 1.0
+    assert _se_inflation([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 1.0

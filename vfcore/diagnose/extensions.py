@@ -35,11 +35,16 @@ RHO_AIR = 1.14
 
 @dataclass(frozen=True)
 class ExtParam:
+    """One extra parameter: uniform prior ``[lo, hi]`` in ``unit``. ``null``: the value at which
+    the extension is (or, for a bound, most nearly is) the base model; ``None`` where the prior
+    holds no such value (epithelium stiffness, a resonance frequency). Used by the naming rule to
+    tell a physics gain from a mode-finding gain (docs/diagnose.md, section 3)."""
     name: str
     lo: float
     hi: float
     unit: str
     source: str
+    null: float | None = None
 
 
 @dataclass(frozen=True)
@@ -180,27 +185,29 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
     Extension(
         "leak", "observation",
         (ExtParam("leak_mm2", 0.0, 3.0, "mm^2",
-                  "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)"),),
+                  "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)", null=0.0),),
         ("closed",), ("min_area_mm2", "glottal_gap_index", "open_quotient", "closing_quotient"),
         "area floor above zero during the closed phase; GGI > 0; DC flow", True, _leak),
     Extension(
         "scale", "observation",
         (ExtParam("scale", 0.8, 1.2, "-",
-                  "px-to-mm calibration error of laryngoscopic images (+-20 %; Deng, Hadwin & Peterson 2019)"),),
+                  "px-to-mm calibration error of laryngoscopic images (+-20 %; Deng, Hadwin & Peterson 2019)",
+                  null=1.0),),
         ("peak", "opening", "closing"), ("amplitude_mm2", "min_area_mm2", "max_area_mm2"),
         "residual proportional to the GAW itself (largest at the peak); timing quotients unchanged", True,
         _obs_apply(lambda g, f, th: apply_scale(g, th["scale"]))),
     Extension(
         "exposure", "observation",
         (ExtParam("exposure_fraction", 0.0, 1.0, "-",
-                  "exposure time / frame interval, at most 1 (Deng, Hadwin & Peterson 2019)"),),
+                  "exposure time / frame interval, at most 1 (Deng, Hadwin & Peterson 2019)", null=0.0),),
         ("peak", "closed"), ("amplitude_mm2", "hrf_db", "naq", "amplitude_quotient_s", "speed_quotient"),
         "peaks lowered and corners rounded (low-pass sinc(f tau)); HRF falls, closing slope shallower", True,
         _obs_apply(lambda g, f, th: apply_exposure(g, f, th["exposure_fraction"]))),
     Extension(
         "frame_rate", "observation",
         (ExtParam("rate_ratio", 0.9, 1.1, "-",
-                  "true/labelled frame rate, +-10 % (chosen bound; Deng, Hadwin & Peterson 2019 study fps)"),),
+                  "true/labelled frame rate, +-10 % (chosen bound; Deng, Hadwin & Peterson 2019 study fps)",
+                  null=1.0),),
         ("opening", "closing"), ("f0_hz", "period_s"),
         "f0 offset; residual grows along the record as the phases drift (antisymmetric at edges)", True,
         _obs_apply(lambda g, f, th: apply_frame_rate(g, f, th["rate_ratio"]))),
@@ -208,7 +215,7 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
         "sep_ratio", "forward",
         (ExtParam("sep_ratio", 1.0, 1.6, "-",
                   "separation where A >= sep_ratio * A_min; range of empirical separation criteria "
-                  "(Pelorson et al. 1994, JASA); default 1.3 here; JASA-EL 2021 flow-model selection"),),
+                  "(Pelorson et al. 1994, JASA); default 1.3 here; JASA-EL 2021 flow-model selection", null=1.3),),
         ("opening", "closing"), ("speed_quotient", "closing_quotient", "naq", "f0_hz", "amplitude_mm2"),
         "GAW skew (opening vs closing asymmetry) and amplitude; driving-pressure timing", True, _sep),
     Extension(
@@ -222,8 +229,10 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
     Extension(
         "zipper", "observation",
         (ExtParam("ap_phase_lag", 0.0, 0.4, "cycles",
-                  "anterior-posterior phase difference of high-speed recordings (zipper-like closure; chosen bounds)"),
-         ExtParam("end_fraction", 0.0, 0.5, "-", "fraction of the length over which the ends are held (taper)")),
+                  "anterior-posterior phase difference of high-speed recordings (zipper-like closure; chosen bounds)",
+                  null=0.0),
+         ExtParam("end_fraction", 0.0, 0.5, "-", "fraction of the length over which the ends are held (taper)",
+                  null=0.0)),
         ("opening", "closing", "peak"), ("speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
         "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
         True, None),
@@ -231,14 +240,15 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
         "subglottal", "forward",
         (ExtParam("f_sub_hz", 200.0, 900.0, "Hz",
                   "first subglottal resonance: ~500-700 Hz in humans, lower in rigs with long subglottal tubes"),
-         ExtParam("log10_Z_sub", 5.0, 7.0, "log10(Pa s/m^3)", "peak input impedance of the resonance (chosen bounds)")),
+         ExtParam("log10_Z_sub", 5.0, 7.0, "log10(Pa s/m^3)", "peak input impedance of the resonance (chosen bounds)",
+                  null=5.0)),
         ("opening", "peak", "closing"), ("hrf_db", "f0_hz", "shr", "amplitude_mm2"),
         "ripple at the subglottal resonance superposed on the GAW; f0 and amplitude change (p_in varies)",
         True, None),
     Extension(
         "asymmetry", "observation",
-        (ExtParam("lr_phase", 0.0, 0.25, "cycles", "left-right phase difference (chosen bounds)"),
-         ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)")),
+        (ExtParam("lr_phase", 0.0, 0.25, "cycles", "left-right phase difference (chosen bounds)", null=0.0),
+         ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)", null=1.0)),
         ("opening", "closing", "closed"), ("open_quotient", "speed_quotient", "glottal_gap_index"),
         "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
         True, None),
