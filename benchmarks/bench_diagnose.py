@@ -8,6 +8,10 @@ GAW files while fitting; ``truth.json`` is opened afterwards, for scoring only (
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --workers 2
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --score
 
+Defaults (docs/diagnose.md, section 5): 0.35 s simulated with 0.15 s discarded, 2 base SMC runs of
+40 particles (larger evidence kept), every observation-level extension screened above 3 nats and
+every forward-level one refitted with 24 particles, naming rule with min_rms_gain 0.30.
+
 Per case it writes ``<out>/case_XX.json`` (the diagnosis report; existing reports are kept, so an
 interrupted run resumes) and a figure ``case_XX.png``. ``--score`` prints the per-case table,
 the detection rate over effect cases, false alarms over controls, residual-RMS improvements,
