@@ -159,7 +159,7 @@ def main(argv=None) -> int:
     ap.add_argument("--min-rms-gain", type=float, default=0.30)
     ap.add_argument("--duration", type=float, default=0.35)
     ap.add_argument("--discard", type=float, default=0.15,
-                    help="simulated transient discarded, s (the limit cycle is established by 0.15 s; docs/diagnose.md)")
+                    help="simulated transient discarded, s (limit cycle established by 0.15 s; docs/diagnose.md)")
     ap.add_argument("--sigma-e", type=float, default=1.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)
