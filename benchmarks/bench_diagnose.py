@@ -121,19 +121,19 @@ def score(a) -> None:
         label = t.get("label") or t.get("effect")
         if "error" in d:
             rows.append((cid, label, "rejected", False, float("nan"), float("nan"), 0, 0.0,
-                         t.get("effect_loglik", float("nan"))))
+                         t.get("effect_loglik", float("nan")), "-"))
             continue
         win = d["winner"]
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), float("nan")) if win else float("nan")
         imp = d["refits"][win]["rms_improvement"] if win else float("nan")
         ok = (win is None) if label == "control" else (win == label)
         rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
-                     t.get("effect_loglik", float("nan"))))
+                     t.get("effect_loglik", float("nan")), d.get("reference", "base")))
     print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"
-          f"{'effect ll':>11}")
-    for cid, lab, win, ok, g, imp, n, w, el in rows:
+          f"{'effect ll':>11}  reference")
+    for cid, lab, win, ok, g, imp, n, w, el, ref in rows:
         print(f"{cid:<5}{lab:<12}{str(win):<12}{'Y' if ok else 'N':<4}{g:9.1f}{100 * imp:8.0f}%{n:7d}{w:8.0f}"
-              f"{el:11.1f}")
+              f"{el:11.1f}  {ref}")
     eff = [r for r in rows if r[1] != "control"]
     ctl = [r for r in rows if r[1] == "control"]
     named = [r for r in rows if r[2] is not None and r[2] != "rejected"]
@@ -143,7 +143,7 @@ def score(a) -> None:
         print(f"named effects with RMS improvement >= 30%: {sum(r[5] >= 0.3 for r in named)}/{len(named)}; "
               f"with dlogZ > 0: {sum(r[4] > 0 for r in named)}/{len(named)}")
     print(f"simulations per case: mean {np.mean([r[6] for r in rows]):.0f}; wall per case: mean "
-          f"{np.mean([r[7] for r in rows]):.0f} s (2 workers); total {sum(r[7] for r in rows) / 60:.1f} min")
+          f"{np.mean([r[7] for r in rows]):.0f} s (as run: see --workers); total {sum(r[7] for r in rows) / 60:.1f} min")
 
 
 def main(argv=None) -> int:
