@@ -8,6 +8,10 @@ GAW files while fitting; ``truth.json`` is opened afterwards, for scoring only (
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --workers 2
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --score
 
+Defaults (docs/diagnose.md, section 5): 0.35 s simulated with 0.15 s discarded, 2 base SMC runs of
+40 particles (larger evidence kept), every observation-level extension screened above 3 nats and
+every forward-level one refitted with 24 particles, naming rule with min_rms_gain 0.30.
+
 Per case it writes ``<out>/case_XX.json`` (the diagnosis report; existing reports are kept, so an
 interrupted run resumes) and a figure ``case_XX.png``. ``--score`` prints the per-case table,
 the detection rate over effect cases, false alarms over controls, residual-RMS improvements,
@@ -117,19 +121,19 @@ def score(a) -> None:
         label = t.get("label") or t.get("effect")
         if "error" in d:
             rows.append((cid, label, "rejected", False, float("nan"), float("nan"), 0, 0.0,
-                         t.get("effect_loglik", float("nan"))))
+                         t.get("effect_loglik", float("nan")), "-"))
             continue
         win = d["winner"]
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), float("nan")) if win else float("nan")
         imp = d["refits"][win]["rms_improvement"] if win else float("nan")
         ok = (win is None) if label == "control" else (win == label)
         rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
-                     t.get("effect_loglik", float("nan"))))
+                     t.get("effect_loglik", float("nan")), d.get("reference", "base")))
     print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"
-          f"{'effect ll':>11}")
-    for cid, lab, win, ok, g, imp, n, w, el in rows:
+          f"{'effect ll':>11}  reference")
+    for cid, lab, win, ok, g, imp, n, w, el, ref in rows:
         print(f"{cid:<5}{lab:<12}{str(win):<12}{'Y' if ok else 'N':<4}{g:9.1f}{100 * imp:8.0f}%{n:7d}{w:8.0f}"
-              f"{el:11.1f}")
+              f"{el:11.1f}  {ref}")
     eff = [r for r in rows if r[1] != "control"]
     ctl = [r for r in rows if r[1] == "control"]
     named = [r for r in rows if r[2] is not None and r[2] != "rejected"]
@@ -139,7 +143,7 @@ def score(a) -> None:
         print(f"named effects with RMS improvement >= 30%: {sum(r[5] >= 0.3 for r in named)}/{len(named)}; "
               f"with dlogZ > 0: {sum(r[4] > 0 for r in named)}/{len(named)}")
     print(f"simulations per case: mean {np.mean([r[6] for r in rows]):.0f}; wall per case: mean "
-          f"{np.mean([r[7] for r in rows]):.0f} s (2 workers); total {sum(r[7] for r in rows) / 60:.1f} min")
+          f"{np.mean([r[7] for r in rows]):.0f} s (as run: see --workers); total {sum(r[7] for r in rows) / 60:.1f} min")
 
 
 def main(argv=None) -> int:
@@ -155,7 +159,7 @@ def main(argv=None) -> int:
     ap.add_argument("--min-rms-gain", type=float, default=0.30)
     ap.add_argument("--duration", type=float, default=0.35)
     ap.add_argument("--discard", type=float, default=0.15,
-                    help="simulated transient discarded, s (the limit cycle is established by 0.15 s; docs/diagnose.md)")
+                    help="simulated transient discarded, s (limit cycle established by 0.15 s; docs/diagnose.md)")
     ap.add_argument("--sigma-e", type=float, default=1.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)

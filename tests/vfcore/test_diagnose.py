@@ -257,6 +257,22 @@ def test_rank_null_fit_is_not_named_and_raises_the_reference():
     assert rep.reference == "base" and rep.winner is None and rep.rows[0].null_consistent
 
 
+def test_rank_base_refit_near_the_winner_is_a_reference():
+    """A base-model fit re-run near the winner's material mode that explains the data nearly as
+    well takes the winner's gain away (evidence and RMS are measured against it)."""
+    base = _Post(-25000.0, 1.0)
+    fits = {"leak": _Post(-650.0, 1.0), "frame_rate": _Post(-840.0, 1.0)}
+    rms = {"leak": 1.34, "frame_rate": 1.59}
+    assert rank_extensions(base, fits, rms=rms, base_rms=11.9).winner == "leak"
+    rep = rank_extensions(base, fits, rms=rms, base_rms=11.9, references={"base near leak": (-700.0, 1.0, 1.5)})
+    assert rep.reference == "base near leak" and rep.winner is None and rep.notes
+    rows = {r.name: r for r in rep.rows}
+    assert rows["leak"].delta == pytest.approx(50.0) and "effect size" in rows["leak"].reason
+    # a lower bound below the base evidence changes nothing
+    rep = rank_extensions(base, fits, rms=rms, base_rms=11.9, references={"base near leak": (-26000.0, 1.0, 0.1)})
+    assert rep.reference == "base" and rep.winner == "leak"
+
+
 def test_rank_missing_se_never_found():
     rep = rank_extensions((-100.0, math.nan), {"leak": (-50.0, 0.1)})
     assert rep.winner is None and rep.notes

@@ -24,7 +24,10 @@ factor <= 1: ``log Z_e <= log Z_base(that mode)`` approximately. Its log-evidenc
 (conservative) estimate of the base evidence, and the reference becomes the null-consistent fit
 with the largest log Z when it beats the base fit (residual RMS of that fit likewise). Every gain
 is then measured against the best base-model fit found by any run, so a refit cannot win by
-finding the material mode alone.
+finding the material mode alone. ``references`` adds further base-model estimates: the pipeline
+re-runs the base fit on a small box of the prior around the would-be winner's material
+posterior (:func:`.pipeline.base_near`), whose evidence times the box's prior probability is a
+lower bound on the base evidence (the likelihood is >= 0 outside the box).
 
 Among found extensions the one with the largest ``d`` is named; when none qualifies the verdict
 is "no missing physics found". Each candidate also carries the fraction of the *localised*
@@ -134,7 +137,8 @@ class RankReport:
 
 def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_extra: dict | None = None,
                     rms: dict | None = None, base_rms: float | None = None, null: dict | None = None,
-                    min_gain: float = 3.0, k_se: float = 3.0, min_rms_gain: float = 0.30) -> RankReport:
+                    references: dict | None = None, min_gain: float = 3.0, k_se: float = 3.0,
+                    min_rms_gain: float = 0.30) -> RankReport:
     """Rank candidate extended fits against ``base`` (module docstring: rule and reference).
 
     Parameters
@@ -146,6 +150,9 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
     rms, base_rms : name -> residual RMS of each fit, and the base fit's (mm^2). When given, the
         effect-size criterion applies (a candidate without a finite RMS is then never found).
     null : name -> whether the fit sits at its null value (:func:`null_consistent`).
+    references : label -> ``(log Z, se, rms)`` of further *base-model* evidence estimates (lower
+        bounds, e.g. a base fit re-run around an extended fit's material mode); the reference is
+        the largest of the base, these and the null-consistent fits.
     """
     z0, s0 = _lz(base)
     null = dict(null or {})
@@ -158,7 +165,14 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
         if null.get(name) and math.isfinite(z) and (not math.isfinite(z0) or z > z0):
             z0, s0, ref = z, s, name
             r0 = float(rms.get(name, math.nan)) if base_rms is not None else r0
-    if ref != "base":
+    for label, (z, s, r) in (references or {}).items():
+        if math.isfinite(z) and (not math.isfinite(z0) or z > z0):
+            z0, s0, ref = float(z), float(s), label
+            r0 = float(r) if base_rms is not None else r0
+    if ref != "base" and ref not in candidates:
+        notes.append(f"{ref}: a base-model fit with a higher log-evidence than the base fit (the base SMC missed "
+                     f"a material mode); gains are measured against it")
+    elif ref != "base":
         notes.append(f"{ref}: the fit sits at its null value (the base model) with a higher log-evidence than "
                      f"the base fit, so the base SMC missed a material mode; gains are measured against {ref}")
     rows = []
