@@ -317,12 +317,16 @@ def test_compare_fits_from_posteriors():
     assert r.winner is None and r.rows[0].null_consistent and r.reference == "leak"
 
 
-def test_se_inflation_from_independent_base_runs():
+def test_between_run_error_from_independent_base_runs():
     """Two runs of the same model whose evidences differ by far more than their reported errors
-    inflate every error by the observed spread; runs that agree leave them alone (factor >= 1)."""
-    from vfcore.diagnose.pipeline import _se_inflation
-    f = _se_inflation([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
-    assert f == pytest.approx((5.3 / math.sqrt(2)) / math.sqrt((0.36 + 0.25) / 2))
-    assert _se_inflation([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 1.0
-    assert _se_inflation([_Post(-446.0, 0.6)]) == 1.0
-    assert _se_inflation([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 1.0
+    give the unexplained spread as an additive error; runs that agree within their errors give 0."""
+    from vfcore.diagnose.pipeline import _between_run_sd
+    tau = _between_run_sd([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
+    assert tau == pytest.approx(math.sqrt(5.3 ** 2 / 2 - (0.36 + 0.25) / 2))
+    assert _between_run_sd([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 0.0
+    assert _between_run_sd([_Post(-446.0, 0.6)]) == 0.0
+    assert _between_run_sd([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 0.0
+    # stop-9 case 08: base runs 1,027 nats apart; a 3,515-nat gain still clears 3 combined errors
+    tau = _between_run_sd([_Post(-5121.0, 0.3), _Post(-4093.7, 0.6)])
+    se = math.hypot(math.hypot(0.6, tau), math.hypot(1.0, tau))
+    assert 3 * se < 3515.4 < 5 * se

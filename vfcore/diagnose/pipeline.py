@@ -120,16 +120,24 @@ def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int,
     return float(near.log_evidence) + log_vol, float(near.log_evidence_se), near
 
 
-def _se_inflation(runs) -> float:
-    """Factor (>= 1) by which the reported log-evidence errors of independent runs of the same
-    model understate their observed spread: ``sd(log Z_k) / rms(se_k)``. The SMC error is a
-    delta-method lower bound that ignores the particle dependence (vfcore.inference.smc); the
-    spread of independent runs is a direct (if rough, with 2 runs) measure of the real error."""
+def _between_run_sd(runs) -> float:
+    """Monte Carlo error of one SMC log-evidence that its own (delta-method) error misses: the
+    part of the observed spread of independent runs of the same model not explained by their
+    reported errors, ``sqrt(max(var(log Z_k) - mean(se_k^2), 0))`` (sample variance, ddof = 1).
+
+    The delta-method error ignores the particle dependence and, above all, which mode of a rugged
+    likelihood a run settles in (vfcore.inference.smc); two runs of the base model differing by
+    tens to thousands of nats measure that directly. It is an *additive* error of every single SMC
+    run on this recording (base or extended: the same sampler, the same likelihood), so each fit's
+    error becomes ``sqrt(se^2 + tau^2)``. A multiplicative factor (stop 9's first version) scaled
+    tau by the ratio to a tiny delta-method error and let a 1,000-nat base spread wipe out a
+    3,500-nat gain whose extended fit had a delta-method error of 1 nat. 0 with fewer than two
+    finite runs."""
     z = np.array([p.log_evidence for p in runs], dtype=float)
     se = np.array([p.log_evidence_se for p in runs], dtype=float)
-    if z.size < 2 or not (np.all(np.isfinite(z)) and np.all(np.isfinite(se))) or not np.any(se > 0):
-        return 1.0
-    return float(max(1.0, np.std(z, ddof=1) / math.sqrt(np.mean(se ** 2))))
+    if z.size < 2 or not (np.all(np.isfinite(z)) and np.all(np.isfinite(se))):
+        return 0.0
+    return float(math.sqrt(max(np.var(z, ddof=1) - np.mean(se ** 2), 0.0)))
 
 
 def _sobol(d: int, n: int, seed: int) -> np.ndarray:
@@ -262,7 +270,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     cand = [n for n in (candidates or CATALOGUE) if get(n).implemented]
     notes = []
     n_sims = 0
-    se_inflation = 1.0
+    tau = 0.0
     if base is None:
         runs = []
         for k in range(max(1, int(base_runs))):
@@ -273,7 +281,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         if len(runs) > 1:
             notes.append("base runs log-evidence: " + ", ".join(f"{p.log_evidence:.1f} +- {p.log_evidence_se:.1f}"
                                                                  for p in runs) + "; the largest kept")
-            se_inflation = _se_inflation(runs)
+            tau = _between_run_sd(runs)
     else:
         n_sims += int(base.n_simulations)
     before = fit_summary(base, problem.obs_compared, problem.fps, problem.sigma_e)
@@ -308,12 +316,12 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
         after[name] = s
-    if se_inflation > 1.0:
-        notes.append(f"Monte Carlo errors of the log-evidences x {se_inflation:.2f}: the spread of the independent "
-                     "base runs exceeds their reported (delta-method) errors")
+    if tau > 0.0:
+        notes.append(f"between-run Monte Carlo error of a log-evidence: {tau:.2f} nats (spread of the independent "
+                     "base runs beyond their reported errors), added in quadrature to every fit's error")
 
     def lz(p):
-        return float(p.log_evidence), float(p.log_evidence_se) * se_inflation
+        return float(p.log_evidence), math.hypot(float(p.log_evidence_se), tau)
 
     def name_it(references):
         return rank_extensions(lz(base), {n: lz(p) for n, p in refits.items()},
@@ -337,7 +345,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zb, box=near.info["box"],
                   log_box_probability=near.info["log_box_probability"])
         before.setdefault("mode_checks", {})[w] = sn
-        references[f"base near {w}"] = (zb, sb * se_inflation, sn["residual_rms"])
+        references[f"base near {w}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
         ranking = name_it(references)
     notes.extend(ranking.notes)
     return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
