@@ -28,7 +28,7 @@ from vfcore.solver._batch_kernels import chol_solve_many  # noqa: E402
 from vfcore.solver.system import get_system  # noqa: E402
 
 
-@njit(cache=True, fastmath=kern.FASTMATH)
+@njit(cache=True)
 def _products(n_rep, indptr, indices, kval, mval, dval, y1, y2, u, r):
     for k in range(n_rep):
         for i in range(r.size):

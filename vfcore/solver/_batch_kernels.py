@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import FASTMATH, contact_correct_ws, step_coefficients, subglottal_step, surface_loads
+from ._kernels import contact_correct_ws, step_coefficients, subglottal_step, surface_loads
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(cache=True)
 def chol_solve_many(Lp, Lj, Lx, r) -> None:
     """Solve (L_b L_b^T) x_b = r[:, b] in place for every sample b (Lx (nnz_L, B))."""
     n, B = r.shape
@@ -40,7 +40,7 @@ def chol_solve_many(Lp, Lj, Lx, r) -> None:
                 r[j, b] -= Lx[q, b] * r[i, b]
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(cache=True)
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                    sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                    width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out):

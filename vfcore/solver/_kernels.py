@@ -9,15 +9,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-#: LLVM fast-math flags of the time loops: none (strict IEEE arithmetic, every sum in source order).
-#: With ``reassoc`` LLVM may vectorise a reduction (a CSR row, a triangular-solve row) with an
-#: association order that depends on the compilation context: a kernel compiled cold gave other bits
-#: than the same kernel loaded from numba's cache (measured: GAWs differing by up to 22 mm^2 on a
-#: sensitive case). Contraction into FMAs is likewise a code-generation choice. Without fast-math the
-#: results are the same whether compiled or cached, and nothing was lost: the scalar loop got faster
-#: (143 -> 96 ms per simulation) and the lock-step one stayed at 41 ms. ``nnan``/``ninf`` would also
-#: have let LLVM drop the non-finite and blow-up tests of the state.
-FASTMATH = False
+# No fast-math anywhere in the solver kernels (strict IEEE arithmetic, every sum in source order).
+# With ``reassoc`` LLVM may vectorise a reduction (a CSR row, a triangular-solve row) with an
+# association order that depends on the compilation context: a kernel compiled cold gave other bits
+# than the same kernel loaded from numba's cache (measured: GAWs differing by up to 22 mm^2 on a
+# sensitive case). Contraction into FMAs is likewise a code-generation choice. Without fast-math the
+# results are the same whether compiled or cached, and the scalar and lock-step kernels agree bit for
+# bit; nothing was lost: the scalar loop got faster (143 -> 96 ms per simulation) and the lock-step one
+# stayed at 37-41 ms. (The flags are literal, not a shared constant: numba's cache does not notice a
+# change of a constant imported from another module.)
 
 
 @njit(cache=True)
@@ -57,7 +57,7 @@ def sparse_cholesky(indptr, indices, vals, Lp, Lj, Lx) -> int:
     return 0
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(cache=True)
 def chol_solve(Lp, Lj, Lx, b) -> None:
     """Solve (L L^T) x = b in place, L from :func:`sparse_cholesky`."""
     n = Lp.size - 1
@@ -323,7 +323,7 @@ def subglottal_response(q, coef):
     return out
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(cache=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
               u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
@@ -334,7 +334,7 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
                              np.zeros((0, 3)), 0.0, np.zeros(0))
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(cache=True)
 def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
                       u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                       width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out):
