@@ -90,7 +90,7 @@ def main() -> None:
     simulate(TABLE3, SimConfig(duration=0.01, discard=0.0))     # JIT warm-up
     for el in a.elements.split(","):
         print(f"\nelement {el} (nu 0.4995, Table 3, sep_ratio {a.sep_ratio}, dt 5e-5 s, 550 ms, last 300 ms)")
-        print(f"{'mesh':>9s} {'tri':>5s} {'dofs':>5s} {'bw':>4s} {'eig1-3 (Hz)':>20s} {'regime':>7s} {'f0 (Hz)':>8s} "
+        print(f"{'mesh':>9s} {'tri':>5s} {'dofs':>5s} {'nnzL':>6s} {'eig1-3 (Hz)':>20s} {'regime':>7s} {'f0 (Hz)':>8s} "
               f"{'f0cyc':>6s} {'peak':>6s} {'cv':>5s} {'p2p100':>7s} {'min':>6s} {'wall s':>6s}")
         rows = []
         for name, mesh in meshes:
@@ -99,10 +99,10 @@ def main() -> None:
             lc = limit_cycle(s, el, a.sep_ratio)
             ev_s = ", ".join(f"{x:5.1f}" for x in ev)
             if not lc["ok"]:
-                print(f"{name:>9s} {mesh.n_triangles:5d} {s.n:5d} {s.bw:4d} {ev_s:>20s}  failed: {lc['msg']}")
+                print(f"{name:>9s} {mesh.n_triangles:5d} {s.n:5d} {s.nnz_factor:6d} {ev_s:>20s}  failed: {lc['msg']}")
                 continue
             reg = "osc" if lc["osc"] else ("open" if lc["amin"] > 0 else "closed")
-            print(f"{name:>9s} {mesh.n_triangles:5d} {s.n:5d} {s.bw:4d} {ev_s:>20s} {reg:>7s} {lc['f0']:8.2f} "
+            print(f"{name:>9s} {mesh.n_triangles:5d} {s.n:5d} {s.nnz_factor:6d} {ev_s:>20s} {reg:>7s} {lc['f0']:8.2f} "
                   f"{lc['f0_cyc']:6.2f} {lc['peak']:6.2f} {lc['peak_cv']:5.3f} {lc['p2p']:7.2f} {lc['amin']:6.2f} "
                   f"{lc['wall']:6.2f}", flush=True)
             if ":" not in name:
