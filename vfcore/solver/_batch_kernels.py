@@ -63,7 +63,6 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     y1 = np.empty((n, B))
     y2 = np.empty((n, B))
     r = np.empty((n, B))
-    rb = np.empty(n)
     ws_u0 = np.empty(n)
     ws_S = np.empty((m, m))
     ws_rhs = np.empty(m)
@@ -134,24 +133,10 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
         for b in range(B):
             if not live[b]:
                 continue
-            # contact only where a surface node crossed the midline (contact_correct's own test)
-            xm = x_mid[b]
-            pen = False
-            for j in range(m):
-                if sdx[j] >= 0 and sX[j] + r[sdx[j], b] > xm:
-                    pen = True
-                    break
-            if not pen:
-                for j in range(m):
-                    lam[b, j] = 0.0
-                    active[b, j] = False
-                continue
-            for i in range(n):
-                rb[i] = r[i, b]
-            if contact_correct_ws(rb, sdx, sX, xm, G[b], lam[b], active[b], 50, ws_u0, ws_S, ws_rhs, ws_idx) < 0:
+            # in place on the sample's (strided) column; returns at once when nothing penetrates
+            if contact_correct_ws(r[:, b], sdx, sX, x_mid[b], G[b], lam[b], active[b], 50, ws_u0, ws_S, ws_rhs,
+                                  ws_idx) < 0:
                 unsettled[b] = True     # contact did not settle: fails with status -k below
-            for i in range(n):
-                r[i, b] = rb[i]
         for b in range(B):
             umax[b] = 0.0
         for i in range(n):
