@@ -12,13 +12,12 @@ share a block; the extensions are per-sample data of the lock-step kernel.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 
 import numpy as np
 
 from .config import SimConfig
-from .forward import BLOWUP, CLOSED_TOL, RHO_AIR, _params, _result, midline, setup
+from .forward import BLOWUP, CLOSED_TOL, _params, _result, flow_coefficient, midline, setup
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .solver import _kernels as kern
@@ -86,11 +85,10 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     tu = np.zeros((B, n_traj, n))
     tv = np.zeros((B, n_traj, n))
     status = np.zeros(B, dtype=np.int64)
-    flow_coef = 2.0 * config.length_mm * 1e-3 * math.sqrt(2.0 / RHO_AIR)
     integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, system.Lp, system.Lj,
                    Lx, G, system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, sep,
                    x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-                   status, sub_coef, flow_coef, p_in)
+                   status, sub_coef, flow_coefficient(config), p_in)
     t_each = (time.perf_counter() - t_wall) / B
     out = []
     for b, p in enumerate(ps):

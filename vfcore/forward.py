@@ -87,6 +87,12 @@ def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray
                         max_contact_pressure=np.array(cx))
 
 
+def flow_coefficient(config: SimConfig) -> float:
+    """Q = flow_coefficient * gsep * sqrt(p_in - p_sup) (m^3/s; gsep the half gap at separation, m):
+    Q = 1.3 A_min sqrt(2 dp / rho_air) with A = 2 L g, as the time loops use it."""
+    return 2.0 * (config.length_mm * 1e-3) * math.sqrt(2.0 / RHO_AIR)
+
+
 def setup(p: Params, config: SimConfig, system: System):
     """Per-simulation set-up shared by :func:`simulate` and :mod:`vfcore.batch`.
 
@@ -133,7 +139,6 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     h = config.dt
     n_steps = int(round(config.duration / h))
     x_mid = midline(p, config)
-    L = config.length_mm * 1e-3
 
     K_vals, D_vals, M_vals, u, Lx, G = setup(p, config, system)
     v = np.zeros(system.n)
@@ -164,7 +169,7 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
             D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
             u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
             config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-            kern.subglottal_coefficients(config.subglottal_modes, h), 2.0 * L * math.sqrt(2.0 / RHO_AIR), p_in)
+            kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in)
     return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall, p_in)
 
 
