@@ -28,8 +28,10 @@ _STOP = object()
 
 
 def new_job_id() -> str:
-    """128+ random bits, URL-safe: unguessable, and the only thing a store path is built from."""
-    return secrets.token_urlsafe(24)
+    """128 random bits as 32 hex digits: unguessable, the only thing a store path is built from,
+    and never starting with "-" (a URL-safe token does 1 time in 64, and the CLI then reads the id
+    as an option: ``vfinfer status -n...`` failed with "No such option: -n")."""
+    return secrets.token_hex(16)
 
 
 @dataclass

@@ -43,3 +43,14 @@ def test_bad_cli_input_names_field(tmp_path):
     gaw = _gaw_file(tmp_path)
     r = CliRunner().invoke(app, ["infer", str(gaw), *TOY, "--prior", "E_cover=900:400"], env={"COLUMNS": "200"})
     assert r.exit_code == 2 and "priors" in r.output
+
+
+def test_job_ids_are_valid_cli_arguments():
+    """A job id must pass the API's pattern and never start with "-" (typer would read it as an
+    option). Under the old URL-safe tokens 1 id in 64 did: 2,000 draws would all pass with
+    probability (63/64)^2000 ~ 2e-14."""
+    from service.deps import JOB_ID_RE
+    from service.manager import new_job_id
+    ids = {new_job_id() for _ in range(2000)}
+    assert len(ids) == 2000
+    assert all(JOB_ID_RE.match(j) and not j.startswith("-") for j in ids)
