@@ -91,7 +91,8 @@ def run(a) -> None:
                 warnings.simplefilter("ignore")
                 rep = diagnose(pb, n_particles=a.particles, seed=a.seed, map=mapper, chunk_size=a.chunk,
                                max_refits=a.max_refits or None, refit_particles=a.refit_particles,
-                               base_runs=a.base_runs, min_rms_gain=a.min_rms_gain)
+                               base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
+                               escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
             path.write_text(json.dumps(d, indent=1, default=float))
@@ -112,13 +113,15 @@ def score(a) -> None:
     truth = truth.get("cases", truth)
     if isinstance(truth, list):
         truth = {t["id"]: t for t in truth}
-    rows = []
+    rows, presence = [], {}
     for cid, t in sorted(truth.items()):
         p = out / f"case_{cid}.json"
         if not p.exists():
             continue
         d = json.loads(p.read_text())
         label = t.get("label") or t.get("effect")
+        present = bool(t.get("present", True)) if label != "control" else False
+        presence[cid] = (present, t.get("unabsorbed_rms_mm2", float("nan")), t.get("sigma_mm2", float("nan")))
         if "error" in d:
             rows.append((cid, label, "rejected", False, float("nan"), float("nan"), 0, 0.0,
                          t.get("effect_loglik", float("nan")), "-"))
@@ -130,14 +133,19 @@ def score(a) -> None:
         rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
                      t.get("effect_loglik", float("nan")), d.get("reference", "base")))
     print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"
-          f"{'effect ll':>11}  reference")
+          f"{'effect ll':>11}{'unabs/sd':>9}  reference")
     for cid, lab, win, ok, g, imp, n, w, el, ref in rows:
+        pr, un, sd = presence[cid]
         print(f"{cid:<5}{lab:<12}{str(win):<12}{'Y' if ok else 'N':<4}{g:9.1f}{100 * imp:8.0f}%{n:7d}{w:8.0f}"
-              f"{el:11.1f}  {ref}")
+              f"{el:11.1f}{un / sd:9.2f}{'' if pr or lab == 'control' else '*'}  {ref}")
     eff = [r for r in rows if r[1] != "control"]
+    eff_p = [r for r in eff if presence[r[0]][0]]
+    if len(eff_p) < len(eff):
+        print(f"\n* effect not present (absorbed by the base model to < {1.02:.2f} sigma; generator presence rule)")
+        print(f"effect cases with the effect present named correctly: {sum(r[3] for r in eff_p)}/{len(eff_p)}")
     ctl = [r for r in rows if r[1] == "control"]
     named = [r for r in rows if r[2] is not None and r[2] != "rejected"]
-    print(f"\neffect cases named correctly: {sum(r[3] for r in eff)}/{len(eff)}")
+    print(f"{'' if len(eff_p) < len(eff) else chr(10)}all effect cases named correctly: {sum(r[3] for r in eff)}/{len(eff)}")
     print(f"false alarms in controls: {sum(not r[3] for r in ctl)}/{len(ctl)}")
     if named:
         print(f"named effects with RMS improvement >= 30%: {sum(r[5] >= 0.3 for r in named)}/{len(named)}; "
@@ -161,6 +169,8 @@ def main(argv=None) -> int:
     ap.add_argument("--discard", type=float, default=0.15,
                     help="simulated transient discarded, s (limit cycle established by 0.15 s; docs/diagnose.md)")
     ap.add_argument("--sigma-e", type=float, default=1.0)
+    ap.add_argument("--escalate-tau", type=float, default=10.0,
+                    help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)

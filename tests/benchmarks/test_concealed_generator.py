@@ -54,7 +54,7 @@ SMALL = {"leak": 1, "sep_ratio": 1, "control": 1}
 def test_determinism_and_public_files(tmp_path):
     a = G.generate_suite(5, counts=SMALL)
     b = G.generate_suite(5, counts=SMALL)
-    c = G.generate_suite(6, counts=SMALL)
+    c = G.generate_suite(6, counts=SMALL, presence=False)
     assert [x.label for x in a] == [x.label for x in b]
     for x, y in zip(a, b):
         assert np.array_equal(x.gaw, y.gaw) and np.array_equal(x.clean, y.clean)
@@ -177,7 +177,7 @@ def test_each_effect_changes_the_waveform(label):
     avail = G.forward_extensions_available()
     if label in avail and not avail[label]:
         pytest.skip(f"{label}: SimConfig lacks the forward-model fields")
-    c = G.make_case("e", label, np.random.SeedSequence([3, G.EFFECTS.index(label)]))
+    c = G.make_case("e", label, np.random.SeedSequence([3, G.EFFECTS.index(label)]), presence=False)
     assert c.label == label and c.effect
     assert G.oscillates(c.clean, CFG.fps)
     # exposure at 2000 fps on a ~60-150 Hz GAW is a weak low-pass (documented in the README)
@@ -190,3 +190,46 @@ def test_each_effect_changes_the_waveform(label):
     if label == "leak":
         assert G.LEAK_AREA_MM2[0] <= c.effect["chink_area_mm2"] <= G.LEAK_AREA_MM2[1]
         assert c.clean.min() >= c.effect["chink_area_mm2"] - 1e-9
+
+
+def test_aligned_sse_finds_any_subframe_lag(base):
+    g = np.asarray(base.gaw_hr, dtype=float)
+    for start in (0.0, 123.0, 377.37, 1000.5):          # high-rate samples, fractional included
+        t = start + 10 * np.arange(G.N_OBS)
+        y = np.interp(t, np.arange(g.size), g)
+        assert G._aligned_sse(y, g) < 1e-18 * G.N_OBS + 1e-20 * np.sum(y ** 2), start
+    y = np.interp(377.37 + 10 * np.arange(G.N_OBS), np.arange(g.size), g)
+    assert G._aligned_sse(y + 0.5, g) > 0.5 * G.N_OBS * 0.25      # an offset is not a lag
+    assert G._aligned_sse(y, g[:100]) == np.inf                      # window shorter than the record
+
+
+def test_presence_threshold_is_the_30_percent_bound():
+    # a base fit that absorbs all but e, then an extension that removes e: RMS sqrt(s^2+e^2) -> s
+    s = 0.7
+    e = G.PRESENCE_SIGMA * s
+    assert np.isclose(1 - s / np.hypot(s, e), 0.30)
+
+
+def test_unabsorbed_rms_control_and_scale(base):
+    """The base model absorbs its own waveform exactly and most of a 15 % scale error (p_sub and
+    the moduli trade amplitude for shape): the unabsorbed part is far below the effect itself."""
+    truth = Params(**{**TABLE3.as_dict(), "E_body": 12.0, "E_cover": 600.0, "p_sub": 1000.0})
+    r = simulate(truth, CFG)
+    t = G.frame_times(G.N_OBS, 97.3, CFG.fps)
+    clean = G.sample_hr(np.asarray(r.gaw_hr), G.hr_times(r), t)
+    u0, fit0 = G.unabsorbed_rms(clean, truth, n_sobol=8, maxfev=10)
+    assert u0 < 1e-6
+    scaled = 0.85 * clean
+    effect = np.sqrt(np.mean((scaled - clean) ** 2))
+    u1, fit1 = G.unabsorbed_rms(scaled, truth, n_sobol=16, maxfev=60)
+    assert 0.0 < u1 < 0.5 * effect, (u1, effect)
+    assert fit1["p_sub"] < truth.p_sub          # the amplitude loss is absorbed by a lower pressure
+
+
+def test_case_presence_flag():
+    c = G.make_case("p", "leak", np.random.SeedSequence([3, 0]))
+    assert np.isfinite(c.unabsorbed) and c.absorbing_fit
+    assert c.present == (c.unabsorbed >= G.PRESENCE_SIGMA * c.sigma)
+    assert c.present or c.notes
+    ctl = G.make_case("c", "control", np.random.SeedSequence(11))
+    assert not ctl.present and np.isnan(ctl.unabsorbed)

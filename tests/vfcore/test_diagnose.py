@@ -330,3 +330,36 @@ def test_between_run_error_from_independent_base_runs():
     tau = _between_run_sd([_Post(-5121.0, 0.3), _Post(-4093.7, 0.6)])
     se = math.hypot(math.hypot(0.6, tau), math.hypot(1.0, tau))
     assert 3 * se < 3515.4 < 5 * se
+
+
+def test_base_fit_escalates_when_runs_disagree(monkeypatch):
+    """Base runs whose log-evidences differ beyond their errors trigger more particles; agreeing
+    runs do not. A fake sampler: evidence depends on the seed at 40 particles (mode hopping) and
+    is stable at 80."""
+    from types import SimpleNamespace
+
+    import sys
+
+    from vfcore.diagnose.pipeline import base_fit
+    smc_mod = sys.modules["vfcore.inference.smc"]       # the package re-exports the function under the same name
+    calls = []
+
+    def fake_smc(problem, n_particles, seed, **kw):
+        calls.append((n_particles, seed))
+        z = (-100.0 - 500.0 * (seed % 2)) if n_particles == 40 else -90.0 - 0.1 * (seed % 3)
+        return SimpleNamespace(log_evidence=z, log_evidence_se=1.0, n_simulations=10 * n_particles)
+
+    monkeypatch.setattr(smc_mod, "smc", fake_smc)
+    base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)   # seeds 0, 7919
+    assert factor == 2 and [c[0] for c in calls] == [40, 40, 80, 80]
+    assert len({c[1] for c in calls}) == 4                        # every run its own seed
+    assert base.log_evidence > -91 and tau < 1.0 and n == 10 * (40 + 40 + 80 + 80)
+    assert any("disagree" in s for s in notes)
+
+    calls.clear()
+    monkeypatch.setattr(smc_mod, "smc", lambda problem, n_particles, seed, **kw: calls.append(seed) or SimpleNamespace(
+        log_evidence=-100.0 + 0.5 * (seed % 2), log_evidence_se=1.0, n_simulations=5))
+    base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)
+    assert factor == 1 and len(calls) == 2 and tau == 0.0 and base.log_evidence == -99.5
+    base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0, escalate_tau=None)
+    assert factor == 1

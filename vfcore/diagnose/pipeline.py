@@ -41,7 +41,7 @@ from .fit import ExtendedEvaluator, fit_extended, observe_extended
 from .locate import LocateReport, locate, measure_pvalues
 from .rank import NO_FINDING, RankReport, null_consistent, rank_extensions, residual_removed
 
-__all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near"]
+__all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near", "base_fit"]
 
 
 def _pred(post: Posterior) -> np.ndarray:
@@ -204,6 +204,46 @@ def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, s
     return out
 
 
+def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: int = 0, map=map,
+             chunk_size: int = 40, escalate_tau: float | None = 10.0, escalate_factor: int = 2, **smc_options):
+    """The base fit of :func:`diagnose`: ``base_runs`` independent SMC runs (seeds ``seed``,
+    ``seed + 7919``, ...), the one with the largest log-evidence kept.
+
+    When the runs disagree beyond their reported errors (between-run error
+    :func:`_between_run_sd` > ``escalate_tau`` nats) the sampler is hopping between material
+    modes on this recording: ``max(2, base_runs)`` more runs are made with ``escalate_factor``
+    times the particles, the largest evidence of all runs is kept, and the between-run error is
+    taken from the larger runs (the ones later fits are made at). Returns
+    ``(base, tau, factor, n_simulations, notes)`` with ``factor`` 1 or ``escalate_factor``.
+    """
+    from ..inference.smc import smc
+
+    def best(ps):
+        return max(ps, key=lambda p: p.log_evidence if math.isfinite(p.log_evidence) else -math.inf)
+
+    def fmt(ps):
+        return ", ".join(f"{p.log_evidence:.1f} +- {p.log_evidence_se:.1f}" for p in ps)
+
+    runs, notes, factor = [], [], 1
+    for k in range(max(1, int(base_runs))):
+        runs.append(smc(problem, n_particles=n_particles, seed=seed + 7919 * k, map=map, chunk_size=chunk_size,
+                        **smc_options))
+    n_sims = sum(int(p.n_simulations) for p in runs)
+    tau = _between_run_sd(runs)
+    if len(runs) > 1:
+        notes.append(f"base runs log-evidence: {fmt(runs)}; the largest kept")
+    if escalate_tau is not None and len(runs) > 1 and tau > escalate_tau and int(escalate_factor) > 1:
+        factor = int(escalate_factor)
+        big = [smc(problem, n_particles=n_particles * factor, seed=seed + 7919 * (k + len(runs)), map=map,
+                   chunk_size=chunk_size, **smc_options) for k in range(max(2, int(base_runs)))]
+        n_sims += sum(int(p.n_simulations) for p in big)
+        notes.append(f"base runs disagree (between-run error {tau:.1f} nats > {escalate_tau:g}): "
+                     f"{factor}x particles from here on; larger base runs: {fmt(big)}")
+        tau = _between_run_sd(big)
+        runs = runs + big
+    return best(runs), tau, factor, n_sims, notes
+
+
 @dataclass
 class DiagnoseReport:
     base: Posterior
@@ -242,7 +282,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              mode_checks: int = 2,
              base: Posterior | None = None, smc_options: dict | None = None,
              screen_options: dict | None = None, refit_forward: bool = True,
-             refit_particles: int | None = None) -> DiagnoseReport:
+             refit_particles: int | None = None, escalate_tau: float | None = 10.0,
+             escalate_factor: int = 2) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -263,6 +304,13 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     small box around the winner's material posterior (:func:`base_near`, ``refit_particles``);
     its evidence bound joins the reference, and the ranking is redone (at most ``mode_checks``
     times; 0 = off). A refit that won only by finding a better material mode then loses its gain.
+    ``escalate_tau``, ``escalate_factor``: when the base runs' between-run error (the spread of
+    their log-evidences beyond their reported errors) exceeds ``escalate_tau`` nats, the sampler is
+    hopping between material modes; ``max(2, base_runs)`` more base runs are made with
+    ``escalate_factor`` times the particles, and the refits and mode checks use ``escalate_factor``
+    times ``refit_particles``. Measured (docs/diagnose.md section 5, run C): an epithelium case
+    named subglottal at 40/24 particles (base runs 1,700 nats apart) was named right at 80/48.
+    ``None`` = never.
     """
     from ..inference.smc import smc
     t0 = time.perf_counter()
@@ -271,17 +319,14 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     notes = []
     n_sims = 0
     tau = 0.0
+    refit_n = refit_particles or n_particles
     if base is None:
-        runs = []
-        for k in range(max(1, int(base_runs))):
-            runs.append(smc(problem, n_particles=n_particles, seed=seed + 7919 * k, map=map, chunk_size=chunk_size,
-                            **opts))
-            n_sims += int(runs[-1].n_simulations)
-        base = max(runs, key=lambda p: p.log_evidence if math.isfinite(p.log_evidence) else -math.inf)
-        if len(runs) > 1:
-            notes.append("base runs log-evidence: " + ", ".join(f"{p.log_evidence:.1f} +- {p.log_evidence_se:.1f}"
-                                                                 for p in runs) + "; the largest kept")
-            tau = _between_run_sd(runs)
+        base, tau, factor, nb, bnotes = base_fit(problem, n_particles=n_particles, base_runs=base_runs, seed=seed,
+                                                 map=map, chunk_size=chunk_size, escalate_tau=escalate_tau,
+                                                 escalate_factor=escalate_factor, **opts)
+        n_sims += nb
+        notes.extend(bnotes)
+        n_particles, refit_n = n_particles * factor, refit_n * factor
     else:
         n_sims += int(base.n_simulations)
     before = fit_summary(base, problem.obs_compared, problem.fps, problem.sigma_e)
@@ -303,7 +348,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
     for i, name in enumerate(chosen):
         t1 = time.perf_counter()
-        post = fit_extended(problem, name, n_particles=refit_particles or n_particles, seed=seed + 101 * (i + 1),
+        post = fit_extended(problem, name, n_particles=refit_n, seed=seed + 101 * (i + 1),
                             map=map,
                             chunk_size=chunk_size, **opts)
         refits[name] = post
@@ -338,7 +383,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         w = ranking.winner
         checked.add(w)
         t1 = time.perf_counter()
-        zb, sb, near = base_near(problem, refits[w], n_particles=refit_particles or n_particles,
+        zb, sb, near = base_near(problem, refits[w], n_particles=refit_n,
                                  seed=seed + 65537 + len(checked), map=map, chunk_size=chunk_size, **opts)
         n_sims += int(near.n_simulations)
         sn = fit_summary(near, problem.obs_compared, problem.fps, problem.sigma_e)
