@@ -111,6 +111,10 @@ SUB_Z1 = (0.5e6, 2.0e6)             # Pa s/m^3, first-mode peak impedance
 SUB_ZETA1 = (0.08, 0.15)
 ASYM_Q_RANGES = ((0.6, 0.8), (1.25, 1.5))
 ASYM_LAG_CYCLES = (0.05, 0.2)
+#: Per-layer spread of the right/left stiffness ratio: the cover and ligament ratios are Q times a
+#: factor from this range (the body's is Q), so the right fold differs in *layer balance*, not
+#: only in overall stiffness; the fitted lr_stiffness extension scales all three by one ratio.
+ASYM_LAYER_SPREAD = (0.85, 1.15)
 EXPOSURE_FRAC = (0.6, 1.0)
 EXPOSURE_JITTER = (0.02, 0.05)      # relative sd of the per-frame exposure time
 RATE_RANGES = ((0.93, 0.97), (1.03, 1.07))
@@ -502,9 +506,11 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
     if label == "asymmetry":
         Q = _two_sided(rng, ASYM_Q_RANGES)
         lag = _uniform(rng, ASYM_LAG_CYCLES)
+        q_layer = {"E_body": Q, "E_cover": Q * _uniform(rng, ASYM_LAYER_SPREAD),
+                   "E_lig": Q * _uniform(rng, ASYM_LAYER_SPREAD)}
         d = truth.as_dict()
-        for k in ("E_body", "E_cover", "E_lig"):
-            d[k] *= Q
+        for k, qk in q_layer.items():
+            d[k] *= qk
         right = sim(Params(**d), config)
         if not _ok(right) or right.cycles is None or not math.isfinite(right.f0):
             return None
@@ -513,7 +519,8 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
             clean = asymmetric_area(base, right, t, lag, t_c)
         except ValueError:
             return None
-        return clean, {"Q": Q, "lag_cycles": lag, "f0_left_hz": base.f0, "f0_right_hz": right.f0,
+        return clean, {"Q": Q, "Q_layers": q_layer, "lag_cycles": lag, "f0_left_hz": base.f0,
+                       "f0_right_hz": right.f0,
                        "right_params": d}
     raise ValueError(f"unknown label {label!r}; known: {LABELS}")
 

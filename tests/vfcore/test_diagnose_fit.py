@@ -103,3 +103,49 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     assert abs(rep.refits["leak"].mean[-1] - 1.5) < 0.3
     assert ctl.winner is None and ctl.verdict == "no missing physics found", ctl.to_dict()["ranking"]
     assert rep.n_simulations > rep.base.n_simulations
+
+
+# ------------------------------------------------------------- two folds of different stiffness
+def _pulses(t, f0, oq=0.6, amp=10.0):
+    tau = np.mod(t * f0, 1.0)
+    return np.where(tau < oq, amp * np.sin(np.pi * tau / oq), 0.0)
+
+
+def test_entrain_pair_identity_and_lag_against_analytic_answers(base_run):
+    from vfcore.diagnose.fit import entrain_pair
+    hr = np.asarray(base_run.gaw_hr, dtype=float)
+    # the identical fold at lag 0 returns the left fold's area (to the extrapolated first partial cycle)
+    out = entrain_pair(hr, hr, FPS, 0.0)
+    assert np.max(np.abs(out - hr)) < 0.05 * hr.max()
+    rate = HR_OVERSAMPLE * FPS
+    t = np.arange(4001) / rate
+    left = _pulses(t, 100.0)
+    # a right fold at another f0 is entrained on the left's cycles: at lag 0 the same pulse shape
+    right = _pulses(t + 0.0003, 125.0)                      # other f0, other start
+    out = entrain_pair(left, right, FPS, 0.0)
+    inner = slice(400, 3600)
+    np.testing.assert_allclose(out[inner], left[inner], atol=0.05)
+    # lag 1/4 cycle: the right half is the left pulse delayed by T/4
+    out = entrain_pair(left, right, FPS, 0.25)
+    want = 0.5 * left + 0.5 * _pulses(t - 0.0025, 100.0)
+    np.testing.assert_allclose(out[inner], want[inner], atol=0.05)
+
+
+def test_lr_stiffness_is_two_folds_and_the_base_model_at_its_null(base_run):
+    from vfcore.diagnose.extensions import get
+    from vfcore.diagnose.fit import right_fold_params
+    assert get("lr_stiffness").physics == "asymmetry" and get("asymmetry").physics == "asymmetry"
+    assert get("leak").physics == "leak"
+    r = right_fold_params(TABLE3, 1.0)
+    assert np.isclose(r.E_body, 2 * TABLE3.E_body) and np.isclose(r.E_cover, 2 * TABLE3.E_cover)
+    assert np.isclose(r.E_lig, 2 * TABLE3.E_lig) and r.p_sub == TABLE3.p_sub
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(4)
+    y = np.asarray(base_run.gaw_hr[55::HR_OVERSAMPLE][:200]) + 0.5 * rng.standard_normal(200)
+    pb = Problem(y, FPS, prior, config=CFG)
+    th = np.array([[TABLE3.E_cover, 0.0, 0.0], [TABLE3.E_cover, 0.5, 0.1]])
+    ev = ExtendedEvaluator(pb, "lr_stiffness")(th)
+    base = evaluate(th[:1, :1], pb).loglik[0]
+    # at the null the pair is the base fold (up to the extrapolated first partial cycle)
+    assert abs(ev.loglik[0] - base) < 1.0
+    assert ev.loglik[1] < ev.loglik[0] - 50          # a stiffer, lagging right fold is a different GAW

@@ -57,6 +57,12 @@ class Extension:
     signature: str                 # in words
     implemented: bool
     _apply: Callable | None = field(default=None, repr=False)
+    family: str = ""               # the physics it models, when several entries model one (asymmetry)
+
+    @property
+    def physics(self) -> str:
+        """What is named: the family (e.g. "asymmetry" for ``lr_stiffness``) or the name."""
+        return self.family or self.name
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -251,7 +257,19 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
          ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)", null=1.0)),
         ("opening", "closing", "closed"), ("open_quotient", "speed_quotient", "glottal_gap_index"),
         "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
-        True, None),
+        True, None, family="asymmetry"),
+    Extension(
+        "lr_stiffness", "forward",
+        (ExtParam("log2_lr_Q", -1.0, 1.0, "-",
+                  "log2 of the right/left ratio of the three Young's moduli: a unilateral tension imbalance "
+                  "(e.g. paresis; Steinecke & Herzel 1995, JASA); [-1, 1] = ratios 0.5-2 (chosen bounds)", null=0.0),
+         ExtParam("lr_lag", -0.25, 0.25, "cycles", "phase lag of the right fold behind the left (chosen bounds)",
+                  null=0.0)),
+        ("opening", "closing", "closed", "peak"),
+        ("open_quotient", "speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
+        "two folds of different stiffness entrained 1:1: the GAW is the mean of two differently shaped cycles "
+        "(amplitude, open quotient and skew differ; shoulders on opening or closing)",
+        True, None, family="asymmetry"),
 ]}
 
 

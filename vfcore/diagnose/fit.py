@@ -13,7 +13,9 @@ Extensions act in one of two ways (``Extension.kind``):
   These operators are defined here, on the oversampled waveform, so that they stay continuous
   in their parameters (a frame-rate grid would quantise time shifts).
 - **forward** (sep_ratio, epithelium, subglottal): a ``SimConfig`` field of the forward model,
-  so each draw re-simulates.
+  so each draw re-simulates. ``lr_stiffness`` (two folds of different stiffness) simulates a
+  second, right fold with its moduli scaled and combines the two (:func:`entrain_pair`), so each
+  draw costs two simulations.
 """
 from __future__ import annotations
 
@@ -29,7 +31,8 @@ from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
 from .extensions import Extension, get
 
-__all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "extended_config", "fit_extended"]
+__all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "extended_config", "fit_extended",
+           "entrain_pair", "right_fold_params"]
 
 
 # ------------------------------------------------------------------------------------ prior
@@ -139,6 +142,60 @@ def observe_extended(name: str, hr: np.ndarray, fps: float, phi: dict, length_mm
     raise ValueError(f"{name!r} is not an observation-level extension")
 
 
+def _opening_instants(y: np.ndarray, rate: float) -> np.ndarray:
+    """Upward crossings (s, linear interpolation) of the mid-level ``(min + max) / 2``: one
+    opening instant per cycle (a crossing closer than half the autocorrelation period to the
+    previous one is a ripple and is dropped)."""
+    m = 0.5 * (float(np.min(y)) + float(np.max(y)))
+    i = np.nonzero((y[:-1] < m) & (y[1:] >= m))[0]
+    t = (i + (m - y[i]) / (y[i + 1] - y[i])) / rate
+    if t.size < 2:
+        raise RuntimeError("fewer than two opening instants: the fold does not oscillate in the window")
+    T = _period_s(y, rate / HR_OVERSAMPLE)
+    keep = [t[0]]
+    for tk in t[1:]:
+        if tk - keep[-1] > 0.5 * T:
+            keep.append(tk)
+    return np.array(keep)
+
+
+def right_fold_params(params, log2_q: float):
+    """The right fold's parameters: E_body, E_lig and E_cover of ``params`` times ``2**log2_q``."""
+    q = 2.0 ** float(log2_q)
+    return params.replace(E_body=params.E_body * q, E_lig=params.E_lig * q, E_cover=params.E_cover * q)
+
+
+def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycles: float) -> np.ndarray:
+    """Glottal area of two different folds, each simulated as a symmetric section (area ``A_L``,
+    ``A_R``), each contributing half its area: ``A_L(t)/2 + A_R(t_R(t))/2``.
+
+    The right fold is entrained 1:1 on the left fold's cycles, cycle by cycle: with ``c_L(t)`` the
+    left fold's cycle coordinate (k at its k-th opening instant, linear in between), the right
+    fold is read where its own cycle coordinate is ``c_L(t) - lag_cycles`` (folded by whole cycles
+    into its record). A piecewise-linear warp between opening instants, so the identical fold
+    (ratio 1, lag 0) returns ``A_L`` exactly. The folds' coupling through the shared flow, which
+    sets the common f0 in reality, is not modelled (docs/diagnose.md)."""
+    rate = HR_OVERSAMPLE * fps
+    yl = np.asarray(left_hr, dtype=float)
+    yr = np.asarray(right_hr, dtype=float)
+    ol, orr = _opening_instants(yl, rate), _opening_instants(yr, rate)
+    if orr.size < 2:
+        raise RuntimeError("too few cycles to entrain the folds")
+    t = np.arange(yl.size) / rate
+    # cycle coordinate of the left fold: k at its k-th opening instant, linear in between (mean
+    # period outside); the right fold is read at the same coordinate minus the lag, folded by
+    # whole cycles into the span of its own opening instants
+    T_L = (ol[-1] - ol[0]) / (ol.size - 1)
+    c = np.interp(t, ol, np.arange(ol.size, dtype=float))
+    c = np.where(t < ol[0], (t - ol[0]) / T_L, np.where(t > ol[-1], ol.size - 1 + (t - ol[-1]) / T_L, c))
+    c = c - float(lag_cycles)
+    top = orr.size - 1
+    c = np.where(c > top, c - np.ceil(c - top), c)
+    c = np.where(c < 0, c + np.ceil(-c), c)
+    t_r = np.interp(c, np.arange(orr.size, dtype=float), orr)
+    return 0.5 * yl + 0.5 * np.interp(t_r, np.arange(yr.size) / rate, yr)
+
+
 def extended_config(config, name: str, phi: dict):
     """The ``SimConfig`` of a forward-level extension ``name`` with parameters ``phi``."""
     if name == "sep_ratio":
@@ -174,6 +231,8 @@ class ExtendedEvaluator:
         cfg = self.problem.config
         if ext.kind == "observation":
             return simulate_many(base_params, cfg, block=32)
+        if ext.name == "lr_stiffness":
+            return self._simulate_pairs(base_params, phis)
         # forward-level: each draw has its own configuration; the lock-step kernel takes the
         # extensions per row, so the draws still run in blocks
         out: list = [None] * len(base_params)
@@ -197,6 +256,31 @@ class ExtendedEvaluator:
                         res.append(exc)
             for i, r in zip(rows, res):
                 out[i] = r
+        return out
+
+    def _simulate_pairs(self, base_params, phis):
+        """Two folds per draw (left: the base parameters; right: :func:`right_fold_params`), all
+        rows in one lock-step batch; each draw's result is the left fold's with its area replaced
+        by :func:`entrain_pair` (flow and contact stay the left fold's)."""
+        from ..batch import simulate_many
+        cfg = self.problem.config
+        n = len(base_params)
+        rights = [right_fold_params(p, phi["log2_lr_Q"]) for p, phi in zip(base_params, phis)]
+        res = simulate_many(list(base_params) + rights, cfg, block=32)
+        out: list = []
+        for i, phi in enumerate(phis):
+            left, right = res[i], res[n + i]
+            if not left.ok:
+                out.append(left)
+                continue
+            if not right.ok:
+                out.append(RuntimeError(f"right fold: {right.message}"))
+                continue
+            try:
+                hr = entrain_pair(left.gaw_hr, right.gaw_hr, cfg.fps, phi["lr_lag"])
+                out.append(dataclasses.replace(left, gaw_hr=hr, gaw=hr[::HR_OVERSAMPLE].copy()))
+            except Exception as exc:  # noqa: BLE001 - reported per draw
+                out.append(exc)
         return out
 
     def __call__(self, thetas) -> Evaluation:
