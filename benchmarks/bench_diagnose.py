@@ -107,6 +107,11 @@ def run(a) -> None:
             pool.join()
 
 
+def _physics(name):
+    from vfcore.diagnose.extensions import CATALOGUE
+    return CATALOGUE[name].physics if name in CATALOGUE else name
+
+
 def score(a) -> None:
     out, cases_dir = Path(a.out), Path(a.cases)
     truth = json.loads((cases_dir / "truth.json").read_text())
@@ -129,7 +134,8 @@ def score(a) -> None:
         win = d["winner"]
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), float("nan")) if win else float("nan")
         imp = d["refits"][win]["rms_improvement"] if win else float("nan")
-        ok = (win is None) if label == "control" else (win == label)
+        physics = d.get("physics") or _physics(win)   # the winner's family (lr_stiffness -> asymmetry)
+        ok = (win is None) if label == "control" else (physics == label)
         rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
                      t.get("effect_loglik", float("nan")), d.get("reference", "base")))
     print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"

@@ -267,7 +267,7 @@ class DiagnoseReport:
     def to_dict(self) -> dict:
         rows = self.ranking.table()
         return {
-            "verdict": self.verdict, "winner": self.winner,
+            "verdict": self.verdict, "winner": self.winner, "physics": self.ranking.physics,
             "base": self.before,
             "screening": {k: {kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
                               for kk, vv in v.items()} for k, v in self.screening.items()},

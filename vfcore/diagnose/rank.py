@@ -126,10 +126,21 @@ class RankReport:
         if self.winner is None:
             return NO_FINDING
         r = next(r for r in self.rows if r.name == self.winner)
-        return (f"missing physics: {self.winner} (dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}"
+        return (f"missing physics: {self.physics}"
+                + (f" ({self.winner} model" if self.physics != self.winner else " (")
+                + (", " if self.physics != self.winner else "") + f"dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}"
                 + (f", residual RMS {100 * r.rms_gain:.0f} % lower" if math.isfinite(r.rms_gain) else "")
                 + (f", removes {100 * r.residual_removed:.0f} % of the localised residual"
                    if math.isfinite(r.residual_removed) else "") + ")")
+
+    @property
+    def physics(self) -> str | None:
+        """The physics named: the winner's family (``Extension.physics``), or None."""
+        if self.winner is None:
+            return None
+        from .extensions import CATALOGUE
+        ext = CATALOGUE.get(self.winner)
+        return ext.physics if ext is not None else self.winner
 
     def table(self) -> list[dict]:
         return [r.__dict__.copy() for r in self.rows]
