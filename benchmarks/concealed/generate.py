@@ -233,7 +233,13 @@ def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre
     scaled stiffness) each contributing half its symmetric glottal width. The right fold is
     entrained 1:1 to the left fold's f0 by a linear time warp anchored at cycle starts near
     ``t_centre`` and lags it by ``lag_cycles`` of the left cycle:
-    ``t_R = tR0 + (t - tL0 - lag/f0_L) f0_R/f0_L``; width ``max(W_L/2 + W_R(t_R)/2, 0)``."""
+    ``t_R = tR0 + (t - tL0 - lag/f0_L) f0_L/f0_R``, so one left period ``1/f0_L`` spans one right
+    period ``1/f0_R``; width ``max(W_L/2 + W_R(t_R)/2, 0)``.
+
+    (Stops 7-9 had the ratio inverted, ``f0_R/f0_L``: the right fold then ran at ``f0_R^2/f0_L``,
+    a two-frequency beating waveform rather than an entrained pair; found in stop 10 when the
+    fitted two-fold model could not approach the generated asymmetry cases even at the true
+    right fold. ``test_asymmetry_is_entrained`` checks the combined f0.)"""
     L = left.config.length_mm
     t_hr = hr_times(left)
     wl = sample_hr(np.asarray(left.gaw_hr) / L, t_hr, t_eval)
@@ -241,7 +247,7 @@ def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre
         f_l = f_r = left.f0
     else:
         f_l, f_r = left.f0, right.f0
-    ratio = f_r / f_l
+    ratio = f_l / f_r
     tl0 = _anchor(left, t_centre)
     tr0 = tl0 if right is left else _anchor(right, t_centre)
     t_r = tr0 + (np.asarray(t_eval) - tl0 - lag_cycles / f_l) * ratio

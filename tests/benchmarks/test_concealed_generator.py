@@ -187,6 +187,11 @@ def test_each_effect_changes_the_waveform(label):
     if label in ranges:
         k, rr = ranges[label]
         assert any(lo <= c.effect[k] <= hi for lo, hi in rr)
+    if label == "asymmetry":          # the right fold's layers are not scaled alike (richer than the fit)
+        q = c.effect["Q_layers"]
+        assert q["E_body"] == c.effect["Q"] and q["E_cover"] != q["E_body"] and q["E_lig"] != q["E_body"]
+        for k in ("E_cover", "E_lig"):
+            assert G.ASYM_LAYER_SPREAD[0] <= q[k] / c.effect["Q"] <= G.ASYM_LAYER_SPREAD[1]
     if label == "leak":
         assert G.LEAK_AREA_MM2[0] <= c.effect["chink_area_mm2"] <= G.LEAK_AREA_MM2[1]
         assert c.clean.min() >= c.effect["chink_area_mm2"] - 1e-9
@@ -233,3 +238,21 @@ def test_case_presence_flag():
     assert c.present or c.notes
     ctl = G.make_case("c", "control", np.random.SeedSequence(11))
     assert not ctl.present and np.isnan(ctl.unabsorbed)
+
+
+def test_asymmetry_is_entrained(base):
+    """A right fold of another f0 is entrained 1:1: the combined GAW has the LEFT fold's f0 and
+    repeats every left cycle (the stops 7-9 generator inverted the warp and produced beating)."""
+    from vfcore.measures import estimate_f0
+    right = simulate(TABLE3.replace(E_body=1.3 * TABLE3.E_body, E_cover=1.3 * TABLE3.E_cover,
+                                    E_lig=1.3 * TABLE3.E_lig), CFG)
+    assert right.ok and abs(right.f0 / base.f0 - 1) > 0.08          # a clearly different fold
+    t = G.frame_times(G.N_OBS, 77.3, CFG.fps)
+    a = G.asymmetric_area(base, right, t, 0.1, t[G.N_OBS // 2])
+    assert abs(estimate_f0(a, CFG.fps) / base.f0 - 1) < 0.01
+    # one left period later the waveform repeats (to the folds' cycle-to-cycle variation)
+    per = 1.0 / base.f0
+    tt = t[(t > t[0] + per) & (t < t[-1] - 2 * per)]
+    a1 = G.asymmetric_area(base, right, tt, 0.1, t[G.N_OBS // 2])
+    a2 = G.asymmetric_area(base, right, tt + per, 0.1, t[G.N_OBS // 2])
+    assert np.sqrt(np.mean((a1 - a2) ** 2)) < 0.05 * np.ptp(a1)
