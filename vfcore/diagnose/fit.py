@@ -179,7 +179,7 @@ def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycl
     yl = np.asarray(left_hr, dtype=float)
     yr = np.asarray(right_hr, dtype=float)
     ol, orr = _opening_instants(yl, rate), _opening_instants(yr, rate)
-    if orr.size < 2:
+    if ol.size < 2 or orr.size < 2:
         raise RuntimeError("too few cycles to entrain the folds")
     t = np.arange(yl.size) / rate
     # cycle coordinate of the left fold: k at its k-th opening instant, linear in between (mean
