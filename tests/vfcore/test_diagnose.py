@@ -363,3 +363,20 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
     assert factor == 1 and len(calls) == 2 and tau == 0.0 and base.log_evidence == -99.5
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0, escalate_tau=None)
     assert factor == 1
+
+
+def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
+    from vfcore.diagnose.rank import promote_local
+    # a 6,585-nat gain with 82 % RMS gain, but base runs 1,760 nats apart: not found globally
+    tau = 1760.0
+    r = rank_extensions((-7175.4, math.hypot(0.5, tau)), {"epithelium": (-590.0, math.hypot(1.0, tau)),
+                                                          "leak": (-6607.0, math.hypot(1.0, tau))},
+                        rms={"epithelium": 1.1, "leak": 5.9}, base_rms=6.17, null={})
+    assert r.winner is None
+    row = next(x for x in r.rows if x.name == "epithelium")
+    assert row.reason.startswith("evidence") and row.rms_gain > 0.8
+    p = promote_local(r, "epithelium", 5000.0, 1.5, tau)
+    assert p.winner == "epithelium" and p.physics == "epithelium" and "local comparison" in p.notes[-1]
+    assert next(x for x in p.rows if x.name == "epithelium").found
+    assert not next(x for x in p.rows if x.name == "leak").found
+    assert r.winner is None                       # the original report is unchanged

@@ -39,7 +39,7 @@ from ..result import HR_OVERSAMPLE
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, observe_extended
 from .locate import LocateReport, locate, measure_pvalues
-from .rank import NO_FINDING, RankReport, null_consistent, rank_extensions, residual_removed
+from .rank import NO_FINDING, RankReport, null_consistent, promote_local, rank_extensions, residual_removed
 
 __all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near", "base_fit"]
 
@@ -279,7 +279,7 @@ class DiagnoseReport:
 def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: int = 0, map=map,
              chunk_size: int = 40, max_refits: int | None = None, screen_min: float = 3.0, min_gain: float = 3.0,
              k_se: float = 3.0, min_rms_gain: float = 0.30, null_sd: float = 2.0, base_runs: int = 2,
-             mode_checks: int = 2,
+             mode_checks: int = 2, local_check: bool = True,
              base: Posterior | None = None, smc_options: dict | None = None,
              screen_options: dict | None = None, refit_forward: bool = True,
              refit_particles: int | None = None, escalate_tau: float | None = 10.0,
@@ -304,6 +304,10 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     small box around the winner's material posterior (:func:`base_near`, ``refit_particles``);
     its evidence bound joins the reference, and the ranking is redone (at most ``mode_checks``
     times; 0 = off). A refit that won only by finding a better material mode then loses its gain.
+    ``local_check``: when no extension is found but one fails only the ``k_se`` test because the
+    between-run error ``tau`` dominates its error, the base model is refitted around its material
+    mode too, and it is named when it beats that local fit by ``k_se`` delta-method errors and
+    still beats every base-model fit (:func:`.rank.promote_local`, docs/diagnose.md section 3).
     ``escalate_tau``, ``escalate_factor``: when the base runs' between-run error (the spread of
     their log-evidences beyond their reported errors) exceeds ``escalate_tau`` nats, the sampler is
     hopping between material modes; ``max(2, base_runs)`` more base runs are made with
@@ -392,6 +396,33 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         before.setdefault("mode_checks", {})[w] = sn
         references[f"base near {w}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
         ranking = name_it(references)
+    # Local check: a candidate that fails ONLY because the between-run error tau swamps its gain
+    # (base runs in different modes) is compared with the base model refitted in its own mode.
+    if ranking.winner is None and local_check and tau > 0:
+        cands = [r for r in ranking.rows if r.reason.startswith("evidence") and math.isfinite(r.delta)
+                 and r.delta > min_gain and math.isfinite(r.rms_gain) and r.rms_gain >= min_rms_gain
+                 and not r.null_consistent and r.name not in checked]
+        if cands:
+            c = cands[0]                                   # rows are sorted by delta
+            t1 = time.perf_counter()
+            zb, sb, near = base_near(problem, refits[c.name], n_particles=refit_n,
+                                     seed=seed + 65537 + len(checked) + 1, map=map, chunk_size=chunk_size, **opts)
+            n_sims += int(near.n_simulations)
+            sn = fit_summary(near, problem.obs_compared, problem.fps, problem.sigma_e)
+            sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zb, box=near.info["box"],
+                      log_box_probability=near.info["log_box_probability"])
+            before.setdefault("mode_checks", {})[c.name] = sn
+            references[f"base near {c.name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
+            ranking = name_it(references)
+            post = refits[c.name]
+            d_loc = float(post.log_evidence) - zb
+            se_loc = math.hypot(float(post.log_evidence_se), sb)
+            row = next(r for r in ranking.rows if r.name == c.name)
+            sn["local"] = {"candidate": c.name, "dlogZ": d_loc, "se": se_loc}
+            if (ranking.winner is None and math.isfinite(d_loc) and d_loc > min_gain and d_loc > k_se * se_loc
+                    and row.delta > min_gain and math.isfinite(row.rms_gain) and row.rms_gain >= min_rms_gain
+                    and not row.null_consistent):
+                ranking = promote_local(ranking, c.name, d_loc, se_loc, tau)
     notes.extend(ranking.notes)
     return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
                           n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)

@@ -210,6 +210,21 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
     return RankReport(z0, s0, rows, winner, min_gain, k_se, notes, min_rms_gain, ref)
 
 
+def promote_local(ranking: RankReport, name: str, d_local: float, se_local: float, tau: float) -> RankReport:
+    """``ranking`` with ``name`` found on the *local* comparison (docs/diagnose.md, section 3):
+    a candidate that met every criterion except ``d > k_se * se`` with the between-run error
+    ``tau`` in ``se`` is named when it beats the base model refitted in its own material mode
+    (:func:`.pipeline.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
+    errors of the two fits, no ``tau``: both sit in one mode, so the mode hopping that ``tau``
+    measures is not part of this comparison) and still beats every base-model fit found."""
+    import dataclasses as dc
+    rows = [dc.replace(r, found=True, reason="") if r.name == name else r for r in ranking.rows]
+    note = (f"{name}: named on the local comparison: dlogZ {d_local:.1f} +- {se_local:.1f} against the base model "
+            f"refitted in its material mode (the global error includes a between-run error of {tau:.1f} nats from "
+            f"base runs that landed in different modes)")
+    return dc.replace(ranking, rows=rows, winner=name, notes=list(ranking.notes) + [note])
+
+
 def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: float = 3.0,
                  min_rms_gain: float = 0.30, null_sd: float = 2.0) -> RankReport:
     """:func:`rank_extensions` from fitted posteriors carrying predictions: the localised residual
