@@ -380,3 +380,19 @@ def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
     assert next(x for x in p.rows if x.name == "epithelium").found
     assert not next(x for x in p.rows if x.name == "leak").found
     assert r.winner is None                       # the original report is unchanged
+
+
+def test_rivals_within_the_errors_are_reported_not_named():
+    # winner 3,106 +- 55, runner-up of another physics 147 nats lower: 147 < 3 * 78 -> a rival
+    r = rank_extensions((-5000.0, 1.0), {"subglottal": (-1894.0, 55.0), "epithelium": (-2041.0, 55.0),
+                                          "leak": (-4000.0, 55.0), "lr_stiffness": (-1950.0, 55.0),
+                                          "asymmetry": (-1960.0, 55.0)},
+                        rms={"subglottal": 1.0, "epithelium": 1.2, "leak": 3.0, "lr_stiffness": 1.3,
+                             "asymmetry": 1.3}, base_rms=4.0, null={})
+    assert r.winner == "subglottal"
+    names = [x[0] for x in r.rivals]
+    assert names == ["asymmetry", "epithelium"]       # one entry per family, leak is far below
+    assert "not distinguishable from asymmetry" in r.verdict and "epithelium" in r.verdict
+    far = rank_extensions((-5000.0, 1.0), {"subglottal": (-1894.0, 5.0), "epithelium": (-2041.0, 5.0)},
+                          rms={"subglottal": 1.0, "epithelium": 1.2}, base_rms=4.0, null={})
+    assert far.rivals == [] and "distinguishable" not in far.verdict

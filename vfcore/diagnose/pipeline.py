@@ -268,6 +268,7 @@ class DiagnoseReport:
         rows = self.ranking.table()
         return {
             "verdict": self.verdict, "winner": self.winner, "physics": self.ranking.physics,
+            "rivals": [{"physics": f, "gap": g, "se": e} for f, g, e in self.ranking.rivals],
             "base": self.before,
             "screening": {k: {kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
                               for kk, vv in v.items()} for k, v in self.screening.items()},

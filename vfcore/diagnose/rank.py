@@ -131,7 +131,34 @@ class RankReport:
                 + (", " if self.physics != self.winner else "") + f"dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}"
                 + (f", residual RMS {100 * r.rms_gain:.0f} % lower" if math.isfinite(r.rms_gain) else "")
                 + (f", removes {100 * r.residual_removed:.0f} % of the localised residual"
-                   if math.isfinite(r.residual_removed) else "") + ")")
+                   if math.isfinite(r.residual_removed) else "") + ")"
+                + "".join(f"; not distinguishable from {name} (dlogZ {d:.0f} +- {se:.0f} below)"
+                          for name, d, se in self.rivals))
+
+    @property
+    def rivals(self) -> list[tuple[str, float, float]]:
+        """Other physics the evidence cannot tell from the winner: ``(physics, gap, se)`` for every
+        found-eligible row of another family whose log-evidence is within ``k_se`` errors of the
+        winner's (``gap`` = winner's minus its, ``se`` = both fits' errors in quadrature; the
+        reference cancels). The winner is still the largest; a rival is reported, not scored."""
+        if self.winner is None:
+            return []
+        from .extensions import CATALOGUE
+        w = next(r for r in self.rows if r.name == self.winner)
+        fam = self.physics
+        out, seen = [], {fam}
+        for r in self.rows:
+            f = CATALOGUE[r.name].physics if r.name in CATALOGUE else r.name
+            if r.name == w.name or f in seen:
+                continue
+            qualifies = r.found or r.reason.startswith("evidence") and math.isfinite(r.delta) and r.delta > self.min_gain
+            qualifies = qualifies and (not math.isfinite(r.rms_gain) or r.rms_gain >= self.min_rms_gain) \
+                and not r.null_consistent
+            gap, se = w.delta - r.delta, math.hypot(w.log_evidence_se, r.log_evidence_se)
+            if qualifies and math.isfinite(gap) and math.isfinite(se) and gap <= self.k_se * se:
+                out.append((f, float(gap), float(se)))
+                seen.add(f)
+        return out
 
     @property
     def physics(self) -> str | None:
