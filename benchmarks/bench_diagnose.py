@@ -136,8 +136,11 @@ def score(a) -> None:
         imp = d["refits"][win]["rms_improvement"] if win else float("nan")
         physics = d.get("physics") or _physics(win)   # the winner's family (lr_stiffness -> asymmetry)
         ok = (win is None) if label == "control" else (physics == label)
+        ref = d.get("reference", "base")
+        if d.get("rivals"):
+            ref += "; rivals: " + ", ".join(r["physics"] for r in d["rivals"])
         rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
-                     t.get("effect_loglik", float("nan")), d.get("reference", "base")))
+                     t.get("effect_loglik", float("nan")), ref))
     print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"
           f"{'effect ll':>11}{'unabs/sd':>9}  reference")
     for cid, lab, win, ok, g, imp, n, w, el, ref in rows:
