@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -112,6 +113,16 @@ def _physics(name):
     return CATALOGUE[name].physics if name in CATALOGUE else name
 
 
+def _rivals(d: dict) -> list:
+    """Rivals of a report written before they were stored (rebuilt from its ranking rows)."""
+    from vfcore.diagnose.rank import CandidateRow, RankReport
+    if not d.get("winner"):
+        return []
+    rows = [CandidateRow(**r) for r in d["ranking"]]
+    rep = RankReport(math.nan, math.nan, rows, d["winner"], 3.0, 3.0)
+    return [{"physics": f, "gap": g, "se": e} for f, g, e in rep.rivals]
+
+
 def score(a) -> None:
     out, cases_dir = Path(a.out), Path(a.cases)
     truth = json.loads((cases_dir / "truth.json").read_text())
@@ -137,8 +148,9 @@ def score(a) -> None:
         physics = d.get("physics") or _physics(win)   # the winner's family (lr_stiffness -> asymmetry)
         ok = (win is None) if label == "control" else (physics == label)
         ref = d.get("reference", "base")
-        if d.get("rivals"):
-            ref += "; rivals: " + ", ".join(r["physics"] for r in d["rivals"])
+        rivals = d["rivals"] if "rivals" in d else _rivals(d)
+        if rivals:
+            ref += "; rivals: " + ", ".join(r["physics"] for r in rivals)
         rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
                      t.get("effect_loglik", float("nan")), ref))
     print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"
