@@ -317,7 +317,6 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     named subglottal at 40/24 particles (base runs 1,700 nats apart) was named right at 80/48.
     ``None`` = never.
     """
-    from ..inference.smc import smc
     t0 = time.perf_counter()
     opts = dict(smc_options or {})
     cand = [n for n in (candidates or CATALOGUE) if get(n).implemented]
