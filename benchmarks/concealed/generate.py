@@ -9,6 +9,8 @@ their ranges and sources). Each case is one observation of ``N_OBS`` frames:
     -> base simulation (SimConfig(mesh="coarse", dt=1e-4))
     -> effect (one of EFFECTS, or none for "control")
     -> N(0, sigma^2) noise, sigma ~ U[0.3, 1.0] mm^2
+    -> kept when the recording phonates and the effect is *present*: the best base-model fit of
+       the clean waveform leaves >= PRESENCE_SIGMA * sigma (:func:`unabsorbed_rms`); else redrawn
 
 Output of :func:`write_suite` / the CLI::
 
