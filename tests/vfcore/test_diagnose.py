@@ -396,3 +396,16 @@ def test_rivals_within_the_errors_are_reported_not_named():
     far = rank_extensions((-5000.0, 1.0), {"subglottal": (-1894.0, 5.0), "epithelium": (-2041.0, 5.0)},
                           rms={"subglottal": 1.0, "epithelium": 1.2}, base_rms=4.0, null={})
     assert far.rivals == [] and "distinguishable" not in far.verdict
+
+
+def test_confusable_entries_are_always_rivals():
+    # zipper vs the phase/amplitude asymmetry: 9 nats apart with 1.4-nat errors (case 05, run E)
+    r = rank_extensions((-3000.0, 1.0), {"asymmetry": (-2560.7, 1.0), "zipper": (-2570.0, 1.0),
+                                          "leak": (-2945.0, 1.0)},
+                        rms={"asymmetry": 1.65, "zipper": 1.63, "leak": 3.1}, base_rms=3.25, null={})
+    assert r.winner == "asymmetry" and [x[0] for x in r.rivals] == ["zipper"]
+    assert r.rivals[0][1] > 3 * r.rivals[0][2]             # beyond the errors, listed anyway
+    # not confusable: the same gap between sep_ratio and epithelium is not a rivalry
+    r2 = rank_extensions((-3000.0, 1.0), {"sep_ratio": (-2560.7, 1.0), "epithelium": (-2570.0, 1.0)},
+                         rms={"sep_ratio": 1.65, "epithelium": 1.63}, base_rms=3.25, null={})
+    assert r2.rivals == []

@@ -58,6 +58,9 @@ class Extension:
     implemented: bool
     _apply: Callable | None = field(default=None, repr=False)
     family: str = ""               # the physics it models, when several entries model one (asymmetry)
+    #: entries whose GAW signature this one reproduces by construction (both a sum of delayed
+    #: copies of one waveform): the verdict always lists a qualifying one as a rival
+    confusable: tuple[str, ...] = ()
 
     @property
     def physics(self) -> str:
@@ -241,7 +244,7 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
                   null=0.0)),
         ("opening", "closing", "peak"), ("speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
         "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
-        True, None),
+        True, None, confusable=("asymmetry",)),
     Extension(
         "subglottal", "forward",
         (ExtParam("f_sub_hz", 200.0, 900.0, "Hz",
@@ -257,7 +260,7 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
          ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)", null=1.0)),
         ("opening", "closing", "closed"), ("open_quotient", "speed_quotient", "glottal_gap_index"),
         "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
-        True, None, family="asymmetry"),
+        True, None, family="asymmetry", confusable=("zipper",)),
     Extension(
         "lr_stiffness", "forward",
         (ExtParam("log2_lr_Q", -1.0, 1.0, "-",

@@ -140,7 +140,10 @@ class RankReport:
         """Other physics the evidence cannot tell from the winner: ``(physics, gap, se)`` for every
         found-eligible row of another family whose log-evidence is within ``k_se`` errors of the
         winner's (``gap`` = winner's minus its, ``se`` = both fits' errors in quadrature; the
-        reference cancels). The winner is still the largest; a rival is reported, not scored."""
+        reference cancels), and every found-eligible row the winner's entry lists as
+        ``confusable`` (zipper and the phase/amplitude asymmetry: both sums of delayed copies of
+        one waveform, which a GAW alone cannot tell apart) whatever the gap. The winner is still
+        the largest; a rival is reported, not scored."""
         if self.winner is None:
             return []
         from .extensions import CATALOGUE
@@ -155,7 +158,8 @@ class RankReport:
             qualifies = qualifies and (not math.isfinite(r.rms_gain) or r.rms_gain >= self.min_rms_gain) \
                 and not r.null_consistent
             gap, se = w.delta - r.delta, math.hypot(w.log_evidence_se, r.log_evidence_se)
-            if qualifies and math.isfinite(gap) and math.isfinite(se) and gap <= self.k_se * se:
+            confusable = w.name in CATALOGUE and r.name in CATALOGUE[w.name].confusable
+            if qualifies and math.isfinite(gap) and math.isfinite(se) and (gap <= self.k_se * se or confusable):
                 out.append((f, float(gap), float(se)))
                 seen.add(f)
         return out
