@@ -108,11 +108,6 @@ def run(a) -> None:
             pool.join()
 
 
-def _physics(name):
-    from vfcore.diagnose.extensions import CATALOGUE
-    return CATALOGUE[name].physics if name in CATALOGUE else name
-
-
 def _rivals(d: dict) -> list:
     """Rivals of a report written before they were stored (rebuilt from its ranking rows)."""
     from vfcore.diagnose.rank import CandidateRow, RankReport
@@ -124,6 +119,7 @@ def _rivals(d: dict) -> list:
 
 
 def score(a) -> None:
+    from vfcore.diagnose.extensions import physics_of
     out, cases_dir = Path(a.out), Path(a.cases)
     truth = json.loads((cases_dir / "truth.json").read_text())
     truth = truth.get("cases", truth)
@@ -145,7 +141,7 @@ def score(a) -> None:
         win = d["winner"]
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), float("nan")) if win else float("nan")
         imp = d["refits"][win]["rms_improvement"] if win else float("nan")
-        physics = d.get("physics") or _physics(win)   # the winner's family (lr_stiffness -> asymmetry)
+        physics = d.get("physics") or physics_of(win)   # the winner's family (lr_stiffness -> asymmetry)
         ok = (win is None) if label == "control" else (physics == label)
         ref = d.get("reference", "base")
         rivals = d["rivals"] if "rivals" in d else _rivals(d)

@@ -27,7 +27,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
-           "apply_exposure", "apply_frame_rate", "leak_flow", "RHO_AIR", "matching"]
+           "apply_exposure", "apply_frame_rate", "leak_flow", "RHO_AIR", "matching", "physics_of"]
 
 #: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
 RHO_AIR = 1.14
@@ -281,6 +281,13 @@ def get(name: str) -> Extension:
         return CATALOGUE[name]
     except KeyError:
         raise KeyError(f"unknown extension {name!r}; known: {sorted(CATALOGUE)}") from None
+
+
+def physics_of(name: str | None) -> str | None:
+    """The physics an entry names (its family, e.g. "asymmetry" for ``lr_stiffness``); a name
+    outside the catalogue (or None) is returned as it is."""
+    ext = CATALOGUE.get(name) if name is not None else None
+    return ext.physics if ext is not None else name
 
 
 def implemented(kind: str | None = None) -> list[str]:

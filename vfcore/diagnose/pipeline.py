@@ -380,49 +380,47 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                                null={n: after[n]["null_consistent"] for n in after}, references=references,
                                min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
 
-    # Mode check: before naming a winner, re-fit the base model around the winner's material mode.
-    # If that base fit explains the data as well, the gain was the mode, not the physics.
-    ranking, references, checked = name_it({}), {}, set()
-    while ranking.winner is not None and ranking.winner not in checked and len(checked) < max(0, int(mode_checks)):
-        w = ranking.winner
-        checked.add(w)
+    references: dict = {}
+
+    def mode_check(name: str) -> dict:
+        """Refit the base model around ``name``'s material mode; its evidence bound joins the
+        references (returns the summary, also kept in ``before["mode_checks"]``)."""
+        nonlocal n_sims
         t1 = time.perf_counter()
-        zb, sb, near = base_near(problem, refits[w], n_particles=refit_n,
-                                 seed=seed + 65537 + len(checked), map=map, chunk_size=chunk_size, **opts)
+        zb, sb, near = base_near(problem, refits[name], n_particles=refit_n,
+                                 seed=seed + 65537 + len(before.get("mode_checks", {})) + 1, map=map,
+                                 chunk_size=chunk_size, **opts)
         n_sims += int(near.n_simulations)
         sn = fit_summary(near, problem.obs_compared, problem.fps, problem.sigma_e)
-        sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zb, box=near.info["box"],
-                  log_box_probability=near.info["log_box_probability"])
-        before.setdefault("mode_checks", {})[w] = sn
-        references[f"base near {w}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
+        sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zb, log_evidence_bound_se=sb,
+                  box=near.info["box"], log_box_probability=near.info["log_box_probability"])
+        before.setdefault("mode_checks", {})[name] = sn
+        references[f"base near {name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
+        return sn
+
+    # Mode check: before naming a winner, re-fit the base model around the winner's material mode.
+    # If that base fit explains the data as well, the gain was the mode, not the physics.
+    ranking, checked = name_it({}), set()
+    while ranking.winner is not None and ranking.winner not in checked and len(checked) < max(0, int(mode_checks)):
+        checked.add(ranking.winner)
+        mode_check(ranking.winner)
         ranking = name_it(references)
     # Local check: a candidate that fails ONLY because the between-run error tau swamps its gain
     # (base runs in different modes) is compared with the base model refitted in its own mode.
     if ranking.winner is None and local_check and tau > 0:
-        cands = [r for r in ranking.rows if r.reason.startswith("evidence") and math.isfinite(r.delta)
-                 and r.delta > min_gain and math.isfinite(r.rms_gain) and r.rms_gain >= min_rms_gain
-                 and not r.null_consistent and r.name not in checked]
+        cands = [r for r in ranking.rows if r.fails_only_on_error(min_gain, min_rms_gain) and r.name not in checked]
         if cands:
-            c = cands[0]                                   # rows are sorted by delta
-            t1 = time.perf_counter()
-            zb, sb, near = base_near(problem, refits[c.name], n_particles=refit_n,
-                                     seed=seed + 65537 + len(checked) + 1, map=map, chunk_size=chunk_size, **opts)
-            n_sims += int(near.n_simulations)
-            sn = fit_summary(near, problem.obs_compared, problem.fps, problem.sigma_e)
-            sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zb, box=near.info["box"],
-                      log_box_probability=near.info["log_box_probability"])
-            before.setdefault("mode_checks", {})[c.name] = sn
-            references[f"base near {c.name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
+            name = cands[0].name                           # rows are sorted by delta
+            sn = mode_check(name)
             ranking = name_it(references)
-            post = refits[c.name]
-            d_loc = float(post.log_evidence) - zb
-            se_loc = math.hypot(float(post.log_evidence_se), sb)
-            row = next(r for r in ranking.rows if r.name == c.name)
-            sn["local"] = {"candidate": c.name, "dlogZ": d_loc, "se": se_loc}
+            post = refits[name]
+            d_loc = float(post.log_evidence) - sn["log_evidence_bound"]
+            se_loc = math.hypot(float(post.log_evidence_se), sn["log_evidence_bound_se"])
+            sn["local"] = {"candidate": name, "dlogZ": d_loc, "se": se_loc}
+            row = next(r for r in ranking.rows if r.name == name)
             if (ranking.winner is None and math.isfinite(d_loc) and d_loc > min_gain and d_loc > k_se * se_loc
-                    and row.delta > min_gain and math.isfinite(row.rms_gain) and row.rms_gain >= min_rms_gain
-                    and not row.null_consistent):
-                ranking = promote_local(ranking, c.name, d_loc, se_loc, tau)
+                    and row.fails_only_on_error(min_gain, min_rms_gain)):
+                ranking = promote_local(ranking, name, d_loc, se_loc, tau)
     notes.extend(ranking.notes)
     return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
                           n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)

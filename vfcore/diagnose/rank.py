@@ -108,6 +108,15 @@ class CandidateRow:
     null_consistent: bool = False
     reason: str = ""                    # why not found ("" when found)
 
+    def fails_only_on_error(self, min_gain: float, min_rms_gain: float, need_rms: bool = True) -> bool:
+        """Not found only because ``delta <= k_se * se``: the gain exceeds ``min_gain``, the RMS
+        gain reaches ``min_rms_gain`` (a missing RMS gain passes only with ``need_rms=False``) and
+        the fit is not at its null value. (The evidence test is applied first, so its ``reason``
+        hides whether the others hold.)"""
+        rms_ok = self.rms_gain >= min_rms_gain if math.isfinite(self.rms_gain) else not need_rms
+        return (not self.found and self.reason.startswith("evidence") and math.isfinite(self.delta)
+                and self.delta > min_gain and rms_ok and not self.null_consistent)
+
 
 @dataclass
 class RankReport:
@@ -146,17 +155,14 @@ class RankReport:
         the largest; a rival is reported, not scored."""
         if self.winner is None:
             return []
-        from .extensions import CATALOGUE
+        from .extensions import CATALOGUE, physics_of
         w = next(r for r in self.rows if r.name == self.winner)
-        fam = self.physics
-        out, seen = [], {fam}
+        out, seen = [], {self.physics}
         for r in self.rows:
-            f = CATALOGUE[r.name].physics if r.name in CATALOGUE else r.name
+            f = physics_of(r.name)
             if r.name == w.name or f in seen:
                 continue
-            qualifies = r.found or r.reason.startswith("evidence") and math.isfinite(r.delta) and r.delta > self.min_gain
-            qualifies = qualifies and (not math.isfinite(r.rms_gain) or r.rms_gain >= self.min_rms_gain) \
-                and not r.null_consistent
+            qualifies = r.found or r.fails_only_on_error(self.min_gain, self.min_rms_gain, need_rms=False)
             gap, se = w.delta - r.delta, math.hypot(w.log_evidence_se, r.log_evidence_se)
             confusable = w.name in CATALOGUE and r.name in CATALOGUE[w.name].confusable
             if qualifies and math.isfinite(gap) and math.isfinite(se) and (gap <= self.k_se * se or confusable):
@@ -167,11 +173,8 @@ class RankReport:
     @property
     def physics(self) -> str | None:
         """The physics named: the winner's family (``Extension.physics``), or None."""
-        if self.winner is None:
-            return None
-        from .extensions import CATALOGUE
-        ext = CATALOGUE.get(self.winner)
-        return ext.physics if ext is not None else self.winner
+        from .extensions import physics_of
+        return physics_of(self.winner)
 
     def table(self) -> list[dict]:
         return [r.__dict__.copy() for r in self.rows]
