@@ -61,6 +61,15 @@ class Extension:
     #: entries whose GAW signature this one reproduces by construction (both a sum of delayed
     #: copies of one waveform): the verdict always lists a qualifying one as a rival
     confusable: tuple[str, ...] = ()
+    #: parameters of a forward-level entry that act on the simulated waveforms only (no new
+    #: simulation when they change), like ``lr_stiffness``'s phase lag
+    waveform_params: tuple[str, ...] = ()
+
+    @property
+    def integrable(self) -> tuple[str, ...]:
+        """Parameters that can be integrated out per simulation by quadrature
+        (:mod:`.quadrature`): all of an observation-level entry's, ``waveform_params`` otherwise."""
+        return self.param_names if self.kind == "observation" else tuple(self.waveform_params)
 
     @property
     def physics(self) -> str:
@@ -272,7 +281,7 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
         ("open_quotient", "speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
         "two folds of different stiffness entrained 1:1: the GAW is the mean of two differently shaped cycles "
         "(amplitude, open quotient and skew differ; shoulders on opening or closing)",
-        True, None, family="asymmetry"),
+        True, None, family="asymmetry", waveform_params=("lr_lag",)),
 ]}
 
 

@@ -31,8 +31,8 @@ from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
 from .extensions import Extension, get
 
-__all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "extended_config", "fit_extended",
-           "entrain_pair", "right_fold_params"]
+__all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "observer", "extended_config", "fit_extended",
+           "entrain_pair", "pair_observer", "right_fold_params", "integrated_summary", "param_table"]
 
 
 # ------------------------------------------------------------------------------------ prior
@@ -46,13 +46,18 @@ class ExtendedPrior(Prior):
 
     base: Prior | None = None
     extension: str = ""
+    #: leave out the extension's integrable parameters (integrated per simulation by quadrature)
+    integrate: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, Prior):
             raise ValueError("ExtendedPrior needs a base Prior")
         ext = get(self.extension)
         b = dict(self.base.bounds)
+        skip = set(ext.integrable) if self.integrate else set()
         for p in ext.params:
+            if p.name in skip:
+                continue
             if p.name in b:
                 raise ValueError(f"extension parameter {p.name!r} clashes with a base parameter")
             b[p.name] = (float(p.lo), float(p.hi))
@@ -72,19 +77,13 @@ class ExtendedPrior(Prior):
         return self.base.to_params(self.split(theta)[0])
 
     def to_dict(self) -> dict:
-        return {"base": self.base.to_dict(), "extension": self.extension}
+        return {"base": self.base.to_dict(), "extension": self.extension, "integrate": self.integrate}
 
     def __repr__(self) -> str:
-        return f"ExtendedPrior({self.base!r} + {self.extension})"
+        return f"ExtendedPrior({self.base!r} + {self.extension}{' (integrated)' if self.integrate else ''})"
 
 
 # ------------------------------------------------------------------- observation operators
-def _shift(y: np.ndarray, rate: float, delay_s) -> np.ndarray:
-    """``y(t - delay)`` on the same grid (linear interpolation; ends held)."""
-    t = np.arange(y.size) / rate
-    return np.interp(t - delay_s, t, y)
-
-
 def _period_s(hr: np.ndarray, fps: float) -> float:
     f0 = estimate_f0(hr[::HR_OVERSAMPLE], fps)
     if not (math.isfinite(f0) and f0 > 0):
@@ -94,7 +93,8 @@ def _period_s(hr: np.ndarray, fps: float) -> float:
 
 def observe_extended(name: str, hr: np.ndarray, fps: float, phi: dict, length_mm: float = 17.0) -> np.ndarray:
     """What the camera records of an oversampled simulated area ``hr`` (mm^2, rate
-    ``HR_OVERSAMPLE * fps``) under observation-level extension ``name`` with parameters ``phi``.
+    ``HR_OVERSAMPLE * fps``) under observation-level extension ``name`` with parameters ``phi``
+    (:func:`observer` for many ``phi`` on one simulation).
 
     - leak: ``A + leak_mm2`` (a parallel, rigid posterior gap).
     - scale: ``scale * A`` (pixel-size / viewing-angle calibration error).
@@ -107,38 +107,48 @@ def observe_extended(name: str, hr: np.ndarray, fps: float, phi: dict, length_mm
     - asymmetry: two folds with the section's motion, the second delayed by
       ``lr_phase * T0`` and scaled by ``lr_amp``: ``A/2 + lr_amp * A(t - lr_phase T0)/2``.
     """
+    return observer(name, hr, fps, length_mm)(phi)
+
+
+def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
+    """``phi -> observed oversampled area`` for one simulation (see :func:`observe_extended`);
+    what does not depend on ``phi`` (the period, the running integral) is computed once."""
     rate = HR_OVERSAMPLE * fps
     y = np.asarray(hr, dtype=float)
+    t = np.arange(y.size) / rate
     if name == "leak":
-        return y + phi["leak_mm2"]
+        return lambda phi: y + phi["leak_mm2"]
     if name == "scale":
-        return y * phi["scale"]
+        return lambda phi: y * phi["scale"]
     if name == "exposure":
-        tau = phi["exposure_fraction"] / fps
-        if tau <= 0:
-            return y.copy()
-        t = np.arange(y.size) / rate
         c = np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) / rate)])
-        lo = np.clip(t - tau / 2, 0, t[-1])
-        hi = np.clip(t + tau / 2, 0, t[-1])
-        w = hi - lo
-        return np.where(w > 0, (np.interp(hi, t, c) - np.interp(lo, t, c)) / np.where(w > 0, w, 1), y)
+
+        def exposure(phi):
+            tau = phi["exposure_fraction"] / fps
+            if tau <= 0:
+                return y.copy()
+            lo = np.clip(t - tau / 2, 0, t[-1])
+            hi = np.clip(t + tau / 2, 0, t[-1])
+            w = hi - lo
+            return np.where(w > 0, (np.interp(hi, t, c) - np.interp(lo, t, c)) / np.where(w > 0, w, 1), y)
+        return exposure
     if name == "frame_rate":
-        t = np.arange(y.size) / rate
-        return np.interp(t / phi["rate_ratio"], t, y)
-    if name == "zipper":
+        return lambda phi: np.interp(t / phi["rate_ratio"], t, y)
+    if name in ("zipper", "asymmetry"):
         T0 = _period_s(y, fps)
+        if name == "asymmetry":
+            return lambda phi: 0.5 * y + 0.5 * phi["lr_amp"] * np.interp(t - phi["lr_phase"] * T0, t, y)
         n = 24
         ys = (np.arange(n) + 0.5) / n                    # strip centres, fraction of length
-        e = phi["end_fraction"]
-        taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
-        out = np.zeros_like(y)
-        for yk, wk in zip(ys, taper):
-            out += wk * _shift(y, rate, phi["ap_phase_lag"] * T0 * (yk - 0.5))
-        return out / n
-    if name == "asymmetry":
-        T0 = _period_s(y, fps)
-        return 0.5 * y + 0.5 * phi["lr_amp"] * _shift(y, rate, phi["lr_phase"] * T0)
+
+        def zipper(phi):
+            e = phi["end_fraction"]
+            taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
+            out = np.zeros_like(y)
+            for yk, wk in zip(ys, taper):
+                out += wk * np.interp(t - phi["ap_phase_lag"] * T0 * (yk - 0.5), t, y)
+            return out / n
+        return zipper
     raise ValueError(f"{name!r} is not an observation-level extension")
 
 
@@ -175,6 +185,12 @@ def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycl
     into its record). A piecewise-linear warp between opening instants, so the identical fold
     (ratio 1, lag 0) returns ``A_L`` exactly. The folds' coupling through the shared flow, which
     sets the common f0 in reality, is not modelled (docs/diagnose.md)."""
+    return pair_observer(left_hr, right_hr, fps)(lag_cycles)
+
+
+def pair_observer(left_hr: np.ndarray, right_hr: np.ndarray, fps: float):
+    """``lag_cycles -> entrain_pair(left_hr, right_hr, fps, lag_cycles)``, with the folds'
+    opening instants found once."""
     rate = HR_OVERSAMPLE * fps
     yl = np.asarray(left_hr, dtype=float)
     yr = np.asarray(right_hr, dtype=float)
@@ -182,18 +198,22 @@ def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycl
     if ol.size < 2 or orr.size < 2:
         raise RuntimeError("too few cycles to entrain the folds")
     t = np.arange(yl.size) / rate
+    tr = np.arange(yr.size) / rate
     # cycle coordinate of the left fold: k at its k-th opening instant, linear in between (mean
     # period outside); the right fold is read at the same coordinate minus the lag, folded by
     # whole cycles into the span of its own opening instants
     T_L = (ol[-1] - ol[0]) / (ol.size - 1)
-    c = np.interp(t, ol, np.arange(ol.size, dtype=float))
-    c = np.where(t < ol[0], (t - ol[0]) / T_L, np.where(t > ol[-1], ol.size - 1 + (t - ol[-1]) / T_L, c))
-    c = c - float(lag_cycles)
+    c0 = np.interp(t, ol, np.arange(ol.size, dtype=float))
+    c0 = np.where(t < ol[0], (t - ol[0]) / T_L, np.where(t > ol[-1], ol.size - 1 + (t - ol[-1]) / T_L, c0))
     top = orr.size - 1
-    c = np.where(c > top, c - np.ceil(c - top), c)
-    c = np.where(c < 0, c + np.ceil(-c), c)
-    t_r = np.interp(c, np.arange(orr.size, dtype=float), orr)
-    return 0.5 * yl + 0.5 * np.interp(t_r, np.arange(yr.size) / rate, yr)
+    k_r = np.arange(orr.size, dtype=float)
+
+    def observe(lag_cycles: float) -> np.ndarray:
+        c = c0 - float(lag_cycles)
+        c = np.where(c > top, c - np.ceil(c - top), c)
+        c = np.where(c < 0, c + np.ceil(-c), c)
+        return 0.5 * yl + 0.5 * np.interp(np.interp(c, k_r, orr), tr, yr)
+    return observe
 
 
 def extended_config(config, name: str, phi: dict):
@@ -210,29 +230,51 @@ def extended_config(config, name: str, phi: dict):
 
 
 # -------------------------------------------------------------------------------- evaluator
-class ExtendedEvaluator:
-    """Picklable batch function ``thetas (k, d_base + d_ext) -> Evaluation`` for an extended
-    model; the likelihood, compared frames and alignment are the base ``problem``'s."""
+#: coarse quadrature cells per integrated dimension (:func:`.quadrature.integrate_loglik`); the
+#: frame-rate ratio is pinned by the drift of ~20 compared cycles, a peak ~1e-3 wide in a 0.2 prior
+QUAD_CELLS = {"frame_rate": 64}
+QUAD_CELLS_1D = 24
+QUAD_CELLS_2D = 8
 
-    def __init__(self, problem: Problem, extension: str):
+
+def quad_cells(name: str, d: int) -> int:
+    return QUAD_CELLS.get(name, QUAD_CELLS_1D if d == 1 else QUAD_CELLS_2D)
+
+
+class ExtendedEvaluator:
+    """Picklable batch function ``thetas (k, d) -> Evaluation`` for an extended model; the
+    likelihood, compared frames and alignment are the base ``problem``'s.
+
+    ``integrate=False``: ``thetas`` hold the base parameters and all the extension's (joint).
+    ``integrate=True``: the extension's integrable parameters (``Extension.integrable``: those
+    that act on the simulated waveform only) are integrated out of each simulation's likelihood
+    by quadrature over their uniform prior (:mod:`.quadrature`), so ``thetas`` hold the base
+    parameters and the remaining extension parameters (``self.prior``), and each draw's
+    log-likelihood is the log marginal likelihood. Its prediction is read at the quadrature's
+    best point; ``Evaluation.extra`` holds, per draw, the conditional posterior mean and sd of
+    each integrated parameter (``mean_1, sd_1, mean_2, ...``, in ``self.integrated`` order).
+    """
+
+    def __init__(self, problem: Problem, extension: str, integrate: bool = False):
         self.problem = problem
         self.name = extension
         if not get(extension).implemented:
             raise NotImplementedError(f"extension {extension!r} is not implemented")
-        self.prior = ExtendedPrior(bounds={}, base=problem.prior, extension=extension)
+        self.integrated = tuple(get(extension).integrable) if integrate else ()
+        self.prior = ExtendedPrior(bounds={}, base=problem.prior, extension=extension, integrate=bool(integrate))
 
     @property
     def extension(self) -> Extension:
         return get(self.name)            # looked up, not stored: catalogue entries hold closures
 
-    def _simulate(self, base_params, phis):
+    def _simulate(self, base_params, phis, pairs: bool = False):
         from ..batch import simulate_many
         ext = self.extension
         cfg = self.problem.config
         if ext.kind == "observation":
             return simulate_many(base_params, cfg, block=32)
         if ext.name == "lr_stiffness":
-            return self._simulate_pairs(base_params, phis)
+            return self._simulate_pairs(base_params, phis, combine=not pairs)
         # forward-level: each draw has its own configuration; the lock-step kernel takes the
         # extensions per row, so the draws still run in blocks
         out: list = [None] * len(base_params)
@@ -258,10 +300,11 @@ class ExtendedEvaluator:
                 out[i] = r
         return out
 
-    def _simulate_pairs(self, base_params, phis):
+    def _simulate_pairs(self, base_params, phis, combine: bool = True):
         """Two folds per draw (left: the base parameters; right: :func:`right_fold_params`), all
         rows in one lock-step batch; each draw's result is the left fold's with its area replaced
-        by :func:`entrain_pair` (flow and contact stay the left fold's)."""
+        by :func:`entrain_pair` (flow and contact stay the left fold's). ``combine=False``: the
+        pair ``(left, right)`` per draw instead (the lag is then integrated by the caller)."""
         from ..batch import simulate_many
         cfg = self.problem.config
         n = len(base_params)
@@ -276,6 +319,9 @@ class ExtendedEvaluator:
             if not right.ok:
                 out.append(RuntimeError(f"right fold: {right.message}"))
                 continue
+            if not combine:
+                out.append((left, right))
+                continue
             try:
                 hr = entrain_pair(left.gaw_hr, right.gaw_hr, cfg.fps, phi["lr_lag"])
                 out.append(dataclasses.replace(left, gaw_hr=hr, gaw=hr[::HR_OVERSAMPLE].copy()))
@@ -287,28 +333,135 @@ class ExtendedEvaluator:
         pb = self.problem
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         splits = [self.prior.split(th) for th in thetas]
-        results = self._simulate([pb.prior.to_params(b) for b, _ in splits], [phi for _, phi in splits])
+        base_params = [pb.prior.to_params(b) for b, _ in splits]
+        phis = [phi for _, phi in splits]
+        if self.integrated:
+            return self._integrated(self._simulate(base_params, phis, pairs=True), phis)
+        results = self._simulate(base_params, phis)
         observe = None
         if self.extension.kind == "observation":
             def observe(i, hr):
                 return observe_extended(self.name, hr, pb.fps, splits[i][1], pb.config.length_mm)
         return score_results(results, pb, observe)
 
+    def _integrated(self, results, phis) -> Evaluation:
+        """Score each simulation with the integrated parameters integrated out (class docstring)."""
+        from ..inference.problem import _cycle_means, gaussian_loglik
+        from ..observe import align
+        from .quadrature import integrate_loglik
+        pb = self.problem
+        ext = self.extension
+        names = self.integrated
+        lo = np.array([ext.bounds()[n][0] for n in names])
+        hi = np.array([ext.bounds()[n][1] for n in names])
+        cells = quad_cells(self.name, len(names))
+        max_lag, n_cmp = pb.window
+        obs = pb.obs_compared
+        k = len(results)
+        loglik = np.full(k, -np.inf)
+        ok = np.zeros(k, dtype=bool)
+        gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
+        flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
+        extra = np.full((k, 2 * len(names)), np.nan)
+        messages = []
+        for i, r in enumerate(results):
+            try:
+                if isinstance(r, BaseException):
+                    raise r
+                if isinstance(r, tuple):
+                    left, right = r
+                    see = pair_observer(left.gaw_hr, right.gaw_hr, pb.fps)
+                    fwd = {k_: v for k_, v in phis[i].items()}
+
+                    def obs_fn(phi, see=see):
+                        return see(phi["lr_lag"])
+                    r = left
+                else:
+                    if not r.ok:
+                        raise RuntimeError(r.message or "simulation failed")
+                    obs_fn = observer(self.name, np.asarray(r.gaw_hr, dtype=float), pb.fps, pb.config.length_mm)
+                    fwd = {}
+
+                def seg_of(point, obs_fn=obs_fn, fwd=fwd):
+                    hr = obs_fn({**fwd, **dict(zip(names, map(float, point)))})
+                    sim = hr[::HR_OVERSAMPLE]
+                    if sim.size < max_lag + n_cmp or not np.all(np.isfinite(hr)):
+                        raise RuntimeError("observed GAW too short or not finite")
+                    seg, _, _ = align(sim, pb.obs_gaw, pb.fps, (max_lag, n_cmp), sim_hr=hr,
+                                      oversample=HR_OVERSAMPLE, method=pb.alignment)
+                    return seg
+
+                def fn(points, seg_of=seg_of):
+                    out = np.empty(len(points))
+                    for j, pt in enumerate(points):
+                        try:
+                            out[j] = gaussian_loglik(seg_of(pt), obs, pb.sigma_e)
+                        except (RuntimeError, ValueError):
+                            out[j] = -np.inf
+                    return out
+                q = integrate_loglik(fn, lo, hi, n0=cells)
+                if not math.isfinite(q.log_mean):
+                    raise RuntimeError("no integrated parameter value gives a finite likelihood")
+                gaw[i] = seg_of(q.best)
+            except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble
+                messages.append(f"{i}: {type(exc).__name__}: {exc}")
+                continue
+            loglik[i] = q.log_mean
+            ok[i] = True
+            extra[i, 0::2] = q.mean
+            extra[i, 1::2] = q.sd
+            flow[i], cmean[i], cmax[i] = _cycle_means(r)
+        return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax,
+                          extra=extra, messages=tuple(messages))
+
+
+def integrated_summary(post, names) -> dict[str, dict[str, float]]:
+    """Posterior mean and sd of integrated parameters from the final particles' conditional
+    means and sds (``Evaluation.extra``): a mixture over the resampled particles,
+    ``var = mean(sd_i^2 + m_i^2) - mean(m_i)^2``."""
+    rp = post.resampled_predictive()
+    if rp is None or rp.extra is None:
+        raise ValueError("the posterior carries no integrated-parameter summaries")
+    ok = np.asarray(rp.ok, dtype=bool)
+    ex = np.asarray(rp.extra, dtype=float)[ok]
+    out = {}
+    for j, n in enumerate(names):
+        m, s = ex[:, 2 * j], ex[:, 2 * j + 1]
+        mu = float(np.mean(m))
+        out[n] = {"mean": mu, "sd": float(math.sqrt(max(float(np.mean(s * s + m * m)) - mu * mu, 0.0)))}
+    return out
+
+
+def param_table(post) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """Names, means and sds of every parameter of a fit: the sampled ones, then the integrated
+    ones (``post.info["integrated"]``, set by :func:`fit_extended`)."""
+    integ = post.info.get("integrated") or {}
+    names = tuple(post.names) + tuple(integ)
+    mean = np.concatenate([np.asarray(post.mean, float), [v["mean"] for v in integ.values()]])
+    sd = np.concatenate([np.asarray(post.sd, float), [v["sd"] for v in integ.values()]])
+    return names, mean, sd
+
 
 def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, seed: int = 0, map=map,
-                 chunk_size: int = 40, **smc_options):
-    """Tempered-SMC fit of the base model + ``extension`` (joint in all parameters).
+                 chunk_size: int = 40, integrate: bool = True, **smc_options):
+    """Tempered-SMC fit of the base model + ``extension``.
 
-    Returns a :class:`vfcore.inference.Posterior` whose ``names`` are the base names followed by
-    the extension's, with ``log_evidence`` comparable to the base fit's.
+    ``integrate=True`` (default): the extension's waveform-level parameters are integrated out of
+    each simulation's likelihood by quadrature and the SMC samples the rest
+    (:class:`ExtendedEvaluator`); their posterior summaries are in ``post.info["integrated"]``
+    (:func:`param_table` lists all parameters). ``integrate=False``: SMC joint in all parameters.
+    Returns a :class:`vfcore.inference.Posterior` whose ``log_evidence`` is comparable to the
+    base fit's (the same integral either way).
     """
     from ..inference.smc import smc
-    ev = ExtendedEvaluator(problem, extension)
+    ev = ExtendedEvaluator(problem, extension, integrate=integrate)
     post = smc(ev, prior=ev.prior, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
                **smc_options)
     post.obs_gaw = problem.obs_compared
     post.fps = problem.fps
     post.info["extension"] = extension
+    if ev.integrated:
+        post.info["integrated"] = integrated_summary(post, ev.integrated)
     return post
 
 

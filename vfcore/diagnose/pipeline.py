@@ -37,7 +37,7 @@ from ..inference.problem import Problem, gaussian_loglik
 from ..observe import align
 from ..result import HR_OVERSAMPLE
 from .extensions import CATALOGUE, get
-from .fit import ExtendedEvaluator, fit_extended, observe_extended
+from .fit import ExtendedEvaluator, fit_extended, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
 from .rank import NO_FINDING, RankReport, null_consistent, promote_local, rank_extensions, residual_removed
 
@@ -63,7 +63,7 @@ def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float) ->
         "phase_rms": loc.phase_rms, "dominant_phase": loc.dominant_phase,
         "concentration": loc.concentration(),
         "pvalues": {k: v.p_two_sided for k, v in pv.items()},
-        "params": {n: {"mean": float(m), "sd": float(s)} for n, m, s in zip(post.names, post.mean, post.sd)},
+        "params": {n: {"mean": float(m), "sd": float(s)} for n, m, s in zip(*param_table(post))},
         "log_evidence": float(post.log_evidence), "log_evidence_se": float(post.log_evidence_se),
         "n_simulations": int(post.n_simulations),
     }
@@ -190,7 +190,7 @@ def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, s
                         best, best_phi = ll, phi
             out[name] = {"score": best - best_base, "best_phi": best_phi, "n_simulations": 0}
         else:
-            ev = ExtendedEvaluator(problem, name)
+            ev = ExtendedEvaluator(problem, name, integrate=False)
             u = _sobol(len(lo), screen_fwd, seed + 17 * k)
             phis = lo + u * (hi - lo)
             rows = np.array([np.concatenate([t, ph]) for t in thetas[:n_theta_fwd] for ph in phis])
@@ -284,7 +284,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              base: Posterior | None = None, smc_options: dict | None = None,
              screen_options: dict | None = None, refit_forward: bool = True,
              refit_particles: int | None = None, escalate_tau: float | None = 10.0,
-             escalate_factor: int = 2) -> DiagnoseReport:
+             escalate_factor: int = 2, integrate: bool = True) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -316,6 +316,10 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     times ``refit_particles``. Measured (docs/diagnose.md section 5, run C): an epithelium case
     named subglottal at 40/24 particles (base runs 1,700 nats apart) was named right at 80/48.
     ``None`` = never.
+    ``integrate``: the refits integrate each extension's waveform-level parameters (camera, leak,
+    phase lags) out of every simulation's likelihood by quadrature, so their SMC samples the
+    material parameters only (:func:`.fit.fit_extended`; docs/diagnose.md, "Integrated
+    parameters"). ``False``: the SMC is joint in all parameters (stops 6-10).
     """
     t0 = time.perf_counter()
     opts = dict(smc_options or {})
@@ -353,15 +357,14 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     for i, name in enumerate(chosen):
         t1 = time.perf_counter()
         post = fit_extended(problem, name, n_particles=refit_n, seed=seed + 101 * (i + 1),
-                            map=map,
-                            chunk_size=chunk_size, **opts)
+                            map=map, chunk_size=chunk_size, integrate=integrate, **opts)
         refits[name] = post
         n_sims += int(post.n_simulations)
         s = fit_summary(post, problem.obs_compared, problem.fps, problem.sigma_e)
         g = _pred(post)
         s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
         s["rms_improvement"] = 1.0 - s["residual_rms"] / before["residual_rms"]
-        s["null_consistent"] = null_consistent(post.names, post.mean, post.sd, name, null_sd)
+        s["null_consistent"] = null_consistent(*param_table(post), name, null_sd)
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
         after[name] = s

@@ -279,8 +279,10 @@ def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: flo
 
     r0 = rep(base_post)
     res = {n: residual_removed(r0, rep(p)) for n, p in ext_posts.items()}
-    nx = {n: len(p.names) - len(base_post.names) for n, p in ext_posts.items()}
-    nul = {n: null_consistent(p.names, p.mean, p.sd, p.info.get("extension", n), null_sd)
+    from .extensions import get
+    from .fit import param_table
+    nx = {n: len(get(p.info.get("extension", n)).params) for n, p in ext_posts.items()}
+    nul = {n: null_consistent(*param_table(p), p.info.get("extension", n), null_sd)
            for n, p in ext_posts.items()}
     return rank_extensions(base_post, ext_posts, residual=res, n_extra=nx,
                            rms={n: rms_of(p) for n, p in ext_posts.items()}, base_rms=rms_of(base_post),

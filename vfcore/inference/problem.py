@@ -158,6 +158,8 @@ class Evaluation:
     The optional arrays are absent (None) for likelihoods that are not the FE model:
     ``gaw`` (k, n_compare) float32 aligned predictions (NaN rows for failures),
     ``mean_flow`` (k,) m^3/s, ``mean_contact`` / ``max_contact`` (k,) Pa.
+    ``extra`` (k, m) float64: per-draw summaries a likelihood adds (the integrated parameters'
+    conditional means and sds of :class:`vfcore.diagnose.fit.ExtendedEvaluator`).
     ``messages``: one string per failed draw, ``"i: message"``.
     """
 
@@ -167,9 +169,10 @@ class Evaluation:
     mean_flow: np.ndarray | None = None
     mean_contact: np.ndarray | None = None
     max_contact: np.ndarray | None = None
+    extra: np.ndarray | None = None
     messages: tuple[str, ...] = ()
 
-    _ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact")
+    _ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "extra")
 
     def __len__(self) -> int:
         return int(self.loglik.shape[0])

@@ -1,0 +1,98 @@
+"""Integrating waveform-level extension parameters out of each simulation's likelihood
+(vfcore.diagnose.quadrature, ExtendedEvaluator(integrate=True))."""
+import math
+
+import numpy as np
+import pytest
+from scipy.special import logsumexp
+from scipy.stats import norm
+
+from vfcore.config import SimConfig
+from vfcore.diagnose.fit import ExtendedEvaluator, ExtendedPrior, observe_extended
+from vfcore.diagnose.quadrature import integrate_loglik
+from vfcore.forward import simulate
+from vfcore.inference import Prior
+from vfcore.inference.problem import Problem, gaussian_loglik
+from vfcore.observe import align
+from vfcore.params import PARAM_NAMES, TABLE3
+from vfcore.result import HR_OVERSAMPLE
+
+FPS = 2000.0
+CFG = SimConfig(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
+
+
+def _gauss(c, s, level=0.0):
+    c, s = np.atleast_1d(c), np.atleast_1d(s)
+    return lambda p: level - 0.5 * np.sum(((p - c) / s) ** 2, axis=1)
+
+
+@pytest.mark.parametrize("c,s", [(0.4371, 1e-3), (0.13, 2e-4), (0.5, 0.08)])
+def test_quadrature_integrates_a_gaussian_peak_of_any_width(c, s):
+    """log of the prior mean of a Gaussian likelihood on [0, 1] (mass inside the box by the
+    normal cdf), its mean and sd; peaks far narrower than the coarse cells included."""
+    r = integrate_loglik(_gauss(c, s, 700.0), [0.0], [1.0], n0=24)
+    inside = norm.cdf((1 - c) / s) - norm.cdf(-c / s)
+    want = 700.0 + math.log(s * math.sqrt(2 * math.pi) * inside)
+    assert abs(r.log_mean - want) < 0.02
+    assert abs(r.mean[0] - c) < 0.05 * s
+    assert abs(r.sd[0] / s - 1) < 0.15
+    assert r.n_evals < 120
+
+
+def test_quadrature_truncated_peak_and_two_dimensions():
+    # a peak at the bound: half its mass
+    r = integrate_loglik(_gauss(1.0, 0.01), [0.0], [1.0], n0=24)
+    assert abs(r.log_mean - math.log(0.01 * math.sqrt(2 * math.pi) / 2)) < 0.03
+    # 2-D, unequal widths, box [0, 0.4] x [0.5, 1.5]
+    r = integrate_loglik(_gauss([0.31, 1.2], [0.003, 0.02]), [0.0, 0.5], [0.4, 1.5], n0=8, rounds=6)
+    assert abs(r.log_mean - math.log(2 * math.pi * 0.003 * 0.02 / 0.4)) < 0.05
+    assert abs(r.mean[0] - 0.31) < 3e-4 and abs(r.mean[1] - 1.2) < 2e-3
+    # a flat likelihood: log mean 0, the uniform's mean and sd
+    r = integrate_loglik(lambda p: np.zeros(len(p)), [2.0], [4.0], n0=10)
+    assert abs(r.log_mean) < 1e-12 and abs(r.mean[0] - 3.0) < 1e-12
+    assert abs(r.sd[0] - 2 / math.sqrt(12)) < 1e-9
+    with pytest.raises(ValueError, match="lo < hi"):
+        integrate_loglik(lambda p: np.zeros(len(p)), [1.0], [1.0])
+
+
+@pytest.fixture(scope="module")
+def base_run():
+    return simulate(TABLE3, CFG)
+
+
+@pytest.mark.parametrize("name,phi,n_dense", [("scale", {"scale": 1.13}, 4001),
+                                              ("frame_rate", {"rate_ratio": 1.037}, 8001)])
+def test_integrated_likelihood_equals_a_dense_grid_average(base_run, name, phi, n_dense):
+    """The evaluator's integrated log-likelihood of one simulation equals the log of the average
+    likelihood over a dense grid of the parameter's prior (the definition of the integral), and
+    its conditional mean recovers the value hidden in the recording."""
+    from vfcore.diagnose.extensions import get
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(5)
+    hr0 = np.asarray(base_run.gaw_hr)
+    y = observe_extended(name, hr0, FPS, phi)[55::HR_OVERSAMPLE][:240] + 0.5 * rng.standard_normal(240)
+    pb = Problem(y, FPS, prior, config=CFG)
+    ev = ExtendedEvaluator(pb, name, integrate=True)
+    assert ev.prior.names == ("E_cover",)
+    out = ev(np.array([[TABLE3.E_cover]]))
+    (pname, (lo, hi)), = get(name).bounds().items()
+    grid = lo + (np.arange(n_dense) + 0.5) * (hi - lo) / n_dense
+    max_lag, n_cmp = pb.window
+    lls = []
+    for v in grid:
+        hr = observe_extended(name, hr0, FPS, {pname: v})
+        seg, _, _ = align(hr[::HR_OVERSAMPLE], pb.obs_gaw, FPS, (max_lag, n_cmp), sim_hr=hr,
+                          oversample=HR_OVERSAMPLE, method=pb.alignment)
+        lls.append(gaussian_loglik(seg, pb.obs_compared, pb.sigma_e))
+    want = float(logsumexp(lls) - math.log(n_dense))
+    assert abs(out.loglik[0] - want) < 0.05, (out.loglik[0], want)
+    assert abs(out.extra[0, 0] - phi[pname]) < 3 * out.extra[0, 1] + 1e-3
+
+
+def test_integrated_prior_keeps_only_what_needs_a_simulation():
+    base = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_cover", "p_sub")})
+    assert ExtendedPrior(bounds={}, base=base, extension="lr_stiffness", integrate=True).names == \
+        ("E_cover", "p_sub", "log2_lr_Q")
+    assert ExtendedPrior(bounds={}, base=base, extension="zipper", integrate=True).names == ("E_cover", "p_sub")
+    assert ExtendedPrior(bounds={}, base=base, extension="sep_ratio", integrate=True).names == \
+        ("E_cover", "p_sub", "sep_ratio")
