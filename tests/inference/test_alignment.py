@@ -84,3 +84,19 @@ def test_closure_gap_is_validated():
         SimConfig(closure_gap_mm=-0.01)
     with pytest.raises(ValueError, match="closure_gap_mm"):
         SimConfig(closure_gap_mm=float("nan"))
+
+
+def test_profile_scores_equal_the_direct_sum_at_every_fine_lag():
+    """The correlate/cumsum form of the profile criterion equals the direct windowed sum of
+    squared differences at every fine lag (and so picks the same lag)."""
+    from vfcore.observe import _profile_scores
+    rng = np.random.default_rng(1)
+    q, n, j_max = 10, 352, 450
+    t = np.arange(9000) / 20000.0
+    hr = 10 * np.maximum(np.sin(2 * np.pi * 131 * t), 0) + 0.01 * rng.standard_normal(t.size)
+    tmpl = hr[237::q][:n] + 0.3 * rng.standard_normal(n)
+    js = np.arange(j_max + 1)
+    direct = -np.array([np.sum((hr[j + q * np.arange(n)] - tmpl) ** 2) for j in js])
+    fast = _profile_scores(hr, tmpl, q, j_max)
+    assert np.max(np.abs(fast - direct)) < 1e-8 * np.max(np.abs(direct))
+    assert int(np.argmax(fast)) == int(np.argmax(direct)) == 237

@@ -56,13 +56,16 @@ def test_toy_is_exact(prior2):
     assert np.allclose(lo, g_lo, atol=0.25 * toy.sd.max())
 
 
-def test_toy_smc_exact(prior3):
+@pytest.mark.parametrize("init_factor", [1, 4])
+def test_toy_smc_exact(prior3, init_factor):
+    """Posterior moments and log-evidence against the exact answers; with a 4x larger first
+    population (resampled down to N after the first reweighting) too."""
     toy = LinearGaussianToy(prior3, n_obs=6, noise=0.05, seed=0)
     assert toy.truncation_mass < 1e-6
     R = 8
     means, variances, logz, sims = [], [], [], []
     for s in range(R):
-        post = smc(toy, prior3, n_particles=300, seed=100 + s)
+        post = smc(toy, prior3, n_particles=300, seed=100 + s, init_factor=init_factor)
         means.append(post.mean)
         variances.append(post.sd ** 2)
         logz.append(post.log_evidence)
@@ -78,7 +81,7 @@ def test_toy_smc_exact(prior3):
     # and each run's own quoted s.e. is not wildly optimistic
     assert np.all(np.abs(logz - toy.log_evidence) < 6 * math.sqrt(v) + 0.1)
     # a fraction of the IS cost: the point of the adaptive sampler
-    assert max(sims) < 8000
+    assert max(sims) < 8000 + 300 * (init_factor - 1)
 
 
 def test_is_deterministic_and_map_independent(prior2):
@@ -144,6 +147,8 @@ def test_smc_options_validated(prior3):
         SMCSampler(prior3, ess_fraction=1.5)
     with pytest.raises(ValueError):
         SMCSampler(prior3, kernel="hmc")
+    with pytest.raises(ValueError, match="init_factor"):
+        SMCSampler(prior3, init_factor=0)
 
 
 @pytest.mark.parametrize("kernel", ["independent", "mixture"])

@@ -96,3 +96,14 @@ def test_integrated_prior_keeps_only_what_needs_a_simulation():
     assert ExtendedPrior(bounds={}, base=base, extension="zipper", integrate=True).names == ("E_cover", "p_sub")
     assert ExtendedPrior(bounds={}, base=base, extension="sep_ratio", integrate=True).names == \
         ("E_cover", "p_sub", "sep_ratio")
+
+
+def test_delayed_slices_equal_interpolation_with_held_ends():
+    from vfcore.diagnose.fit import _delayed
+    rng = np.random.default_rng(2)
+    y = rng.standard_normal(500)
+    t = np.arange(y.size, dtype=float)
+    pad = 40
+    yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
+    for d in (0.0, 3.25, -7.5, 37.9, -38.0, 12.0):
+        np.testing.assert_allclose(_delayed(yp, pad, y.size, d), np.interp(t - d, t, y), atol=1e-12)

@@ -136,8 +136,10 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
         return lambda phi: np.interp(t / phi["rate_ratio"], t, y)
     if name in ("zipper", "asymmetry"):
         T0 = _period_s(y, fps)
+        pad = int(math.ceil(0.5 * T0 * rate)) + 2        # the longest delay of either model, in samples
+        yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
         if name == "asymmetry":
-            return lambda phi: 0.5 * y + 0.5 * phi["lr_amp"] * np.interp(t - phi["lr_phase"] * T0, t, y)
+            return lambda phi: 0.5 * y + 0.5 * phi["lr_amp"] * _delayed(yp, pad, y.size, phi["lr_phase"] * T0 * rate)
         n = 24
         ys = (np.arange(n) + 0.5) / n                    # strip centres, fraction of length
 
@@ -146,10 +148,21 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
             taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
             out = np.zeros_like(y)
             for yk, wk in zip(ys, taper):
-                out += wk * np.interp(t - phi["ap_phase_lag"] * T0 * (yk - 0.5), t, y)
+                out += wk * _delayed(yp, pad, y.size, phi["ap_phase_lag"] * T0 * rate * (yk - 0.5))
             return out / n
         return zipper
     raise ValueError(f"{name!r} is not an observation-level extension")
+
+
+def _delayed(yp: np.ndarray, pad: int, n: int, d: float) -> np.ndarray:
+    """``y(i - d)`` for ``i = 0..n-1`` (``d`` in samples, ``|d| < pad - 1``) by linear
+    interpolation, from ``yp`` = ``y`` padded with ``pad`` copies of its end values on each side
+    (so the ends are held, as ``np.interp`` holds them): two shifted slices instead of a search."""
+    k = math.floor(d)
+    w = d - k
+    a = yp[pad - k: pad - k + n]                       # y(i - k)
+    b = yp[pad - k - 1: pad - k - 1 + n]               # y(i - k - 1)
+    return (1.0 - w) * a + w * b
 
 
 def _opening_instants(y: np.ndarray, rate: float) -> np.ndarray:
@@ -234,7 +247,7 @@ def extended_config(config, name: str, phi: dict):
 #: frame-rate ratio is pinned by the drift of ~20 compared cycles, a peak ~1e-3 wide in a 0.2 prior
 QUAD_CELLS = {"frame_rate": 64}
 QUAD_CELLS_1D = 24
-QUAD_CELLS_2D = 8
+QUAD_CELLS_2D = 6
 
 
 def quad_cells(name: str, d: int) -> int:
@@ -348,7 +361,7 @@ class ExtendedEvaluator:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
         from ..inference.problem import _cycle_means, gaussian_loglik
         from ..observe import align
-        from .quadrature import integrate_loglik
+        from . import quadrature as _q
         pb = self.problem
         ext = self.extension
         names = self.integrated
@@ -399,7 +412,7 @@ class ExtendedEvaluator:
                         except (RuntimeError, ValueError):
                             out[j] = -np.inf
                     return out
-                q = integrate_loglik(fn, lo, hi, n0=cells)
+                q = _q.integrate_loglik(fn, lo, hi, n0=cells)
                 if not math.isfinite(q.log_mean):
                     raise RuntimeError("no integrated parameter value gives a finite likelihood")
                 gaw[i] = seg_of(q.best)

@@ -14,8 +14,9 @@ Rule. The box is cut into ``n0`` cells per dimension and the likelihood is read 
 centre (midpoint rule). Then, ``rounds`` times at most, the cells within one cell of the best
 one (a 3 x 3 block in 2-D) are each split into ``split`` children per dimension, which replace
 them. The refinement stops once the best cell's neighbours at its level are within ``tol`` nats
-of it: for a Gaussian peak of width s read at spacing h the drop is h^2 / (2 s^2), so ``tol`` = 1
-means h <= 1.4 s, where the midpoint rule's relative error is about exp(-2 pi^2 s^2 / h^2) < 1e-4.
+of it: for a Gaussian peak of width s read at spacing h the drop is h^2 / (2 s^2), so ``tol`` = 2
+means h <= 2 s, where the midpoint rule's relative error is about exp(-2 pi^2 s^2 / h^2) < 1 %
+(0.01 nats).
 Peaks away from the best one stay at the coarse resolution (they are lower by construction).
 """
 from __future__ import annotations
@@ -43,7 +44,7 @@ class QuadResult:
     n_evals: int
 
 
-def integrate_loglik(fn, lo, hi, *, n0=16, split: int = 3, rounds: int = 6, tol: float = 1.0) -> QuadResult:
+def integrate_loglik(fn, lo, hi, *, n0=16, split: int = 3, rounds: int = 6, tol: float = 2.0) -> QuadResult:
     """Nested midpoint quadrature of ``exp(fn(phi))`` over the box ``[lo, hi]`` (see the module
     docstring). ``fn(points (m, d)) -> log-likelihoods (m,)``, ``-inf`` allowed. ``n0``: coarse
     cells per dimension (an int or one per dimension)."""

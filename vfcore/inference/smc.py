@@ -3,7 +3,9 @@
 Targets the sequence ``pi_phi(theta) ∝ prior(theta) L(theta)^phi`` with ``0 = phi_0 < ... < phi_T = 1``
 (Del Moral, Doucet & Jasra 2006; Chopin & Papaspiliopoulos 2020, ch. 17):
 
-1. ``N`` particles from the prior, each evaluated once.
+1. ``init_factor * N`` particles from the prior, each evaluated once (a larger first population
+   sees more of a rugged likelihood's basins; the first reweighting resamples it down to ``N``,
+   and the first evidence increment is the mean over all of them, so ``log Z`` stays unbiased).
 2. Next temperature by bisection so that the effective sample size of the incremental
    weights ``L^(phi' - phi)`` equals ``ess_fraction * N`` (adaptive tempering, Jasra et al.
    2011; with equal weights this is the conditional ESS of Zhou, Johansen & Aston 2016).
@@ -79,7 +81,7 @@ class SMCSampler:
                  ess_fraction: float = 0.5, target_acceptance: float = 0.3, p_move: float = 0.8,
                  min_moves: int = 2, max_moves: int = 4,
                  max_generations: int = 200, init_scale: float | None = None, kernel: str = "rw",
-                 independent_inflation: float = 1.5):
+                 independent_inflation: float = 1.5, init_factor: int = 1):
         if not isinstance(prior, Prior):
             raise ValueError("prior must be a Prior")
         if int(n_particles) < 10:
@@ -90,6 +92,9 @@ class SMCSampler:
             raise ValueError(f"p_move must lie in (0, 1), got {p_move}")
         if not 1 <= int(min_moves) <= int(max_moves):
             raise ValueError("need 1 <= min_moves <= max_moves")
+        if int(init_factor) < 1:
+            raise ValueError(f"init_factor must be >= 1, got {init_factor}")
+        self.init_factor = int(init_factor)
         if kernel not in ("rw", "independent", "mixture"):
             raise ValueError(f"kernel must be 'rw', 'independent' or 'mixture', got {kernel!r}")
         self.kernel = kernel
@@ -144,8 +149,9 @@ class SMCSampler:
             return None
         if self._pending is None:
             if self._phase == "init":
-                self._pending = self.prior.sample(self.n, self._rng(_INIT))
-                self._pending_idx = np.arange(self.n)
+                m = self.n * self.init_factor
+                self._pending = self.prior.sample(m, self._rng(_INIT))
+                self._pending_idx = np.arange(m)
             else:
                 self._propose()
                 while self._pending is not None and self._pending.shape[0] == 0:
@@ -209,11 +215,12 @@ class SMCSampler:
         dphi = phi_new - self.phi
         logw = np.where(np.isfinite(ll), dphi * ll, -np.inf)  # previous weights are equal (resampled)
         lse = logsumexp(logw)
-        inc = float(lse - math.log(self.n))
+        m = ll.size                  # the population: init_factor * N in the first generation, N after
+        inc = float(lse - math.log(m))
         w = np.exp(logw - lse)
         self.log_evidence += inc
         sw2 = float(np.sum(w * w))
-        self.log_evidence_var += max(self.n / (self.n - 1) * (sw2 - 1.0 / self.n), 0.0)
+        self.log_evidence_var += max(m / (m - 1) * (sw2 - 1.0 / m), 0.0)
         self.last_ess = 1.0 / sw2
         self.generation += 1
         # covariance of the reweighted particles -> RW proposal
