@@ -105,5 +105,5 @@ def test_delayed_slices_equal_interpolation_with_held_ends():
     t = np.arange(y.size, dtype=float)
     pad = 40
     yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
-    for d in (0.0, 3.25, -7.5, 37.9, -38.0, 12.0):
+    for d in (0.0, 3.25, -7.5, 37.9, -38.0, 12.0, 45.5, -120.0):
         np.testing.assert_allclose(_delayed(yp, pad, y.size, d), np.interp(t - d, t, y), atol=1e-12)

@@ -1,7 +1,9 @@
 """Fit extended models: the base forward model plus one catalogued extension.
 
 An extended fit estimates the base model's parameters (those of the base ``Problem``'s prior)
-*jointly* with the extension's parameters, with the same likelihood (Eq. 15, sigma_e, the same
+together with the extension's parameters — sampled jointly, or, for the waveform-level ones,
+integrated out of each simulation's likelihood by quadrature (``integrate=True``, the default of
+:func:`fit_extended`; :mod:`.quadrature`) — with the same likelihood (Eq. 15, sigma_e, the same
 compared frames and the same alignment) as the base fit, so the log-evidences of base and
 extended fits are comparable (docs/diagnose.md, "Refits").
 
@@ -159,6 +161,9 @@ def _delayed(yp: np.ndarray, pad: int, n: int, d: float) -> np.ndarray:
     interpolation, from ``yp`` = ``y`` padded with ``pad`` copies of its end values on each side
     (so the ends are held, as ``np.interp`` holds them): two shifted slices instead of a search."""
     k = math.floor(d)
+    if abs(k) >= pad - 1:                              # beyond the padding: hold the ends by search
+        t = np.arange(n, dtype=float)
+        return np.interp(t - d, t, yp[pad:pad + n])
     w = d - k
     a = yp[pad - k: pad - k + n]                       # y(i - k)
     b = yp[pad - k - 1: pad - k - 1 + n]               # y(i - k - 1)
@@ -384,7 +389,7 @@ class ExtendedEvaluator:
                 if isinstance(r, tuple):
                     left, right = r
                     see = pair_observer(left.gaw_hr, right.gaw_hr, pb.fps)
-                    fwd = {k_: v for k_, v in phis[i].items()}
+                    fwd = dict(phis[i])
 
                     def obs_fn(phi, see=see):
                         return see(phi["lr_lag"])
@@ -476,7 +481,3 @@ def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, see
     if ev.integrated:
         post.info["integrated"] = integrated_summary(post, ev.integrated)
     return post
-
-
-def _ext(name: str) -> Extension:
-    return get(name)
