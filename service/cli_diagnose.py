@@ -103,7 +103,7 @@ def print_report(d: dict) -> None:
     console.print(s)
     if d["refits"]:
         rows = {r["name"]: r for r in d["ranking"]}
-        r = Table(title="Refits (base + extension, joint SMC)")
+        r = Table(title="Refits (base + extension; waveform-level parameters integrated per simulation)")
         for col in ("extension", "dlogZ", "residual RMS", "RMS improvement", "extension parameters", "found"):
             r.add_column(col, justify="left" if col in ("extension", "extension parameters") else "right")
         from vfcore.diagnose.extensions import get
@@ -137,7 +137,7 @@ def diagnose_cmd(
         discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = 0.25,
         sigma_e: Annotated[float, typer.Option(help="observation noise sd, mm^2")] = 1.0,
         particles: Annotated[int, typer.Option(help="SMC particles of each fit")] = 40,
-        max_refits: Annotated[int, typer.Option(help="most extensions refitted jointly")] = 2,
+        max_refits: Annotated[int, typer.Option(help="most observation-level extensions refitted")] = 2,
         candidates: Annotated[Optional[str], typer.Option(
             help="comma-separated extensions to screen (default: every implemented one)")] = None,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,

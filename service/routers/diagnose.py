@@ -145,7 +145,7 @@ class DiagnoseRequest(BaseModel):
         default=None, min_length=1, max_length=50,
         description="catalogued, implemented extensions to screen (default: all implemented ones)")
     n_particles: int = Field(default=40, ge=10, le=400, description="SMC particles of each fit")
-    max_refits: int = Field(default=2, ge=0, le=5, description="most extensions refitted jointly")
+    max_refits: int = Field(default=2, ge=0, le=5, description="most observation-level extensions refitted")
     seed: int = Field(default=0, ge=0, lt=2**63)
 
     @field_validator("candidates")
