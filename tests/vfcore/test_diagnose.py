@@ -409,3 +409,25 @@ def test_confusable_entries_are_always_rivals():
     r2 = rank_extensions((-3000.0, 1.0), {"sep_ratio": (-2560.7, 1.0), "epithelium": (-2570.0, 1.0)},
                          rms={"sep_ratio": 1.65, "epithelium": 1.63}, base_rms=3.25, null={})
     assert r2.rivals == []
+
+
+def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred():
+    """The asymmetry entry nests the scale entry: at zero phase difference its observation is
+    A (1 + lr_amp) / 2 exactly; prefer_nested names the simpler entry with a note."""
+    from vfcore.diagnose.extensions import get
+    from vfcore.diagnose.fit import observe_extended
+    from vfcore.diagnose.rank import prefer_nested
+    assert get("asymmetry").nests == (("scale", ("lr_phase",)),)
+    t = np.arange(6000) / 20000.0
+    y = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0)
+    a = observe_extended("asymmetry", y, 2000.0, {"lr_phase": 0.0, "lr_amp": 1.27})
+    np.testing.assert_allclose(a, observe_extended("scale", y, 2000.0, {"scale": 1.135}), atol=1e-12)
+    # case 01 of run I: asymmetry at lr_phase 0.009 +- 0.005 named; scale refitted in its mode
+    r = rank_extensions((-565.4, 0.6), {"asymmetry": (-395.8, 1.0), "scale": (-397.0, 1.0),
+                                        "frame_rate": (-410.9, 1.0)},
+                        rms={"asymmetry": 0.512, "scale": 0.515, "frame_rate": 0.605}, base_rms=1.102, null={})
+    assert r.winner == "asymmetry"
+    p = prefer_nested(r, "scale", "asymmetry", "scale: named instead of asymmetry")
+    assert p.winner == "scale" and p.physics == "scale" and p.notes[-1].startswith("scale: named instead")
+    assert "not distinguishable from asymmetry" in p.verdict
+    assert r.winner == "asymmetry"                      # the original report is unchanged

@@ -151,3 +151,43 @@ def test_lr_stiffness_is_two_folds_and_the_base_model_at_its_null(base_run):
     # at the null the pair is the base fold (up to the extrapolated first partial cycle)
     assert abs(ev.loglik[0] - base) < 1.0
     assert ev.loglik[1] < ev.loglik[0] - 50          # a stiffer, lagging right fold is a different GAW
+
+
+def test_box_refit_of_an_extension_recovers_it_and_bounds_its_evidence(base_run):
+    """base_near(extension=...): the extended model refitted on a box around a material mode
+    (the nested check's refit) recovers a hidden scale, and its bound is the box evidence plus
+    the box's log prior probability."""
+    import math
+    from types import SimpleNamespace
+
+    from vfcore.diagnose.fit import param_table
+    from vfcore.diagnose.pipeline import base_near
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(12)
+    y = 1.1 * np.asarray(base_run.gaw_hr[41::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
+    pb = Problem(y, FPS, prior, config=CFG)
+    mode = SimpleNamespace(mean=np.array([TABLE3.E_cover]), sd=np.array([2.0]))
+    zb, sb, near = base_near(pb, mode, n_particles=16, seed=3, extension="scale")
+    names, mean, sd = param_table(near)
+    assert names == ("E_cover", "scale") and abs(mean[1] - 1.1) < 0.02
+    lo, hi = near.info["box"]["E_cover"]
+    want = math.log((hi - lo) / (prior.bounds["E_cover"][1] - prior.bounds["E_cover"][0]))
+    assert abs(near.info["log_box_probability"] - want) < 1e-12
+    assert abs(zb - (near.log_evidence + want)) < 1e-9 and sb > 0
+
+
+def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run):
+    """Blind run with a 12 % scale error where only the best-screened observation-level entry is
+    refitted: the asymmetry screens first (it contains every scale), its fit sits at zero phase
+    difference, so the nested check refits scale in that mode and scale is named."""
+    from vfcore.diagnose.pipeline import diagnose
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(11)
+    y = 1.12 * np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
+    rep = diagnose(Problem(y, FPS, prior, config=CFG), n_particles=24, seed=2, candidates=["asymmetry", "scale"],
+                   max_refits=1, refit_forward=False)
+    assert rep.screening["asymmetry"]["score"] > rep.screening["scale"]["score"]
+    assert rep.winner == "scale", rep.verdict
+    assert rep.after["scale"]["box_refit_of"] == "asymmetry"
+    assert any(n.startswith("nested check: asymmetry") for n in rep.notes)
+    assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03

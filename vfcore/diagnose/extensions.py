@@ -64,6 +64,10 @@ class Extension:
     #: parameters of a forward-level entry that act on the simulated waveforms only (no new
     #: simulation when they change), like ``lr_stiffness``'s phase lag
     waveform_params: tuple[str, ...] = ()
+    #: simpler catalogue entries this one reduces to: ``(simpler, params)`` — with ``params`` at
+    #: their null values this entry *is* ``simpler`` (the phase/amplitude asymmetry at zero phase
+    #: difference is ``A (1 + lr_amp) / 2``, a scale error). Used by the nested check (section 3)
+    nests: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     @property
     def integrable(self) -> tuple[str, ...]:
@@ -269,7 +273,7 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
          ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)", null=1.0)),
         ("opening", "closing", "closed"), ("open_quotient", "speed_quotient", "glottal_gap_index"),
         "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
-        True, None, family="asymmetry", confusable=("zipper",)),
+        True, None, family="asymmetry", confusable=("zipper",), nests=(("scale", ("lr_phase",)),)),
     Extension(
         "lr_stiffness", "forward",
         (ExtParam("log2_lr_Q", -1.0, 1.0, "-",

@@ -39,7 +39,8 @@ from ..result import HR_OVERSAMPLE
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
-from .rank import NO_FINDING, RankReport, null_consistent, promote_local, rank_extensions, residual_removed
+from .rank import (NO_FINDING, RankReport, null_consistent, prefer_nested, promote_local, rank_extensions,
+                   residual_removed)
 
 __all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near", "base_fit"]
 
@@ -86,7 +87,8 @@ def _best_particles(post: Posterior, m: int) -> np.ndarray:
 
 
 def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int, map=map, chunk_size: int = 40,
-              half_width: float = 0.025, n_sd: float = 4.0, **smc_options):
+              half_width: float = 0.025, n_sd: float = 4.0, extension: str | None = None, integrate: bool = True,
+              **smc_options):
     """The base model re-fitted around the material mode of an extended fit ``post``.
 
     SMC of the base model on the box ``mean +- max(n_sd * sd, half_width * prior width)`` of
@@ -96,6 +98,8 @@ def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int,
     a lower bound on the base evidence *in the mode the extended fit found*. Returns
     ``(log Z bound, se, posterior)``. At the defaults a 3-parameter box costs at most
     3 log(0.05) = -9 nats of prior volume, small against the gains it is compared with.
+    ``extension``: refit that extended model instead of the base model (its own parameters keep
+    their whole prior), for the nested check of :func:`diagnose`; the bound is then on its evidence.
     """
     import dataclasses as dc
 
@@ -114,7 +118,11 @@ def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int,
         box[name] = (a, b)
         log_vol += math.log((b - a) / (hi - lo))
     pb = dc.replace(problem, prior=Prior(bounds=box, fixed=dict(prior.fixed)))
-    near = smc(pb, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, **smc_options)
+    if extension is None:
+        near = smc(pb, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, **smc_options)
+    else:
+        near = fit_extended(pb, extension, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
+                            integrate=integrate, **smc_options)
     near.info["box"] = box
     near.info["log_box_probability"] = log_vol
     return float(near.log_evidence) + log_vol, float(near.log_evidence_se), near
@@ -284,7 +292,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              base: Posterior | None = None, smc_options: dict | None = None,
              screen_options: dict | None = None, refit_forward: bool = True,
              refit_particles: int | None = None, escalate_tau: float | None = 10.0,
-             escalate_factor: int = 2, integrate: bool = True) -> DiagnoseReport:
+             escalate_factor: int = 2, integrate: bool = True, nested_check: bool = True) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -320,6 +328,11 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     phase lags) out of every simulation's likelihood by quadrature, so their SMC samples the
     material parameters only (:func:`.fit.fit_extended`; docs/diagnose.md, "Integrated
     parameters"). ``False``: the SMC is joint in all parameters (stops 6-10).
+    ``nested_check``: when the winner sits where it reduces to a simpler catalogue entry
+    (``Extension.nests``: the phase/amplitude asymmetry at zero phase difference is a scale error),
+    that entry is refitted in the winner's material mode (:func:`base_near` with ``extension``);
+    if its evidence bound is within ``k_se`` errors of the winner's, the simpler entry is named
+    (:func:`.rank.prefer_nested`; docs/diagnose.md, section 3).
     """
     t0 = time.perf_counter()
     opts = dict(smc_options or {})
@@ -354,12 +367,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                      "base posterior; nothing refitted")
     refits, after = {}, {}
     loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
-    for i, name in enumerate(chosen):
-        t1 = time.perf_counter()
-        post = fit_extended(problem, name, n_particles=refit_n, seed=seed + 101 * (i + 1),
-                            map=map, chunk_size=chunk_size, integrate=integrate, **opts)
-        refits[name] = post
-        n_sims += int(post.n_simulations)
+
+    def summarise(name: str, post: Posterior, t1: float) -> dict:
         s = fit_summary(post, problem.obs_compared, problem.fps, problem.sigma_e)
         g = _pred(post)
         s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
@@ -367,7 +376,14 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         s["null_consistent"] = null_consistent(*param_table(post), name, null_sd)
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
-        after[name] = s
+        return s
+    for i, name in enumerate(chosen):
+        t1 = time.perf_counter()
+        post = fit_extended(problem, name, n_particles=refit_n, seed=seed + 101 * (i + 1),
+                            map=map, chunk_size=chunk_size, integrate=integrate, **opts)
+        refits[name] = post
+        n_sims += int(post.n_simulations)
+        after[name] = summarise(name, post, t1)
     if tau > 0.0:
         notes.append(f"between-run Monte Carlo error of a log-evidence: {tau:.2f} nats (spread of the independent "
                      "base runs beyond their reported errors), added in quadrature to every fit's error")
@@ -401,6 +417,46 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         references[f"base near {name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
         return sn
 
+    def nested(ranking: RankReport) -> RankReport:
+        nonlocal n_sims
+        w = ranking.winner
+        names, mean, sd = param_table(refits[w])
+        idx = {n: i for i, n in enumerate(names)}
+        for simpler, restrict in get(w).nests:
+            if simpler not in cand:
+                continue
+            at_null = all(p.name in idx and p.null is not None
+                          and abs(float(mean[idx[p.name]]) - p.null) <= null_sd * float(sd[idx[p.name]])
+                          for p in get(w).params if p.name in restrict)
+            if not at_null:
+                continue
+            t1 = time.perf_counter()
+            zb, sb, near = base_near(problem, refits[w], n_particles=refit_n, seed=seed + 131071, map=map,
+                                     chunk_size=chunk_size, extension=simpler, integrate=integrate, **opts)
+            n_sims += int(near.n_simulations)
+            first = refits.get(simpler)
+            near.log_evidence = zb                     # a lower bound on the simpler model's evidence
+            near.info["box_refit_of"] = w
+            if first is None or not math.isfinite(float(first.log_evidence)) or zb > float(first.log_evidence):
+                refits[simpler] = near
+                after[simpler] = summarise(simpler, near, t1)
+                after[simpler]["box_refit_of"] = w
+            ranking = name_it(references)
+            ranking.notes.append(f"nested check: {w} sits where it reduces to {simpler}; {simpler} refitted in "
+                                 f"{w}'s material mode: log Z >= {zb:.1f} +- {sb:.1f}")
+            rw = next(r for r in ranking.rows if r.name == w)
+            rs = next((r for r in ranking.rows if r.name == simpler), None)
+            if ranking.winner == simpler or rs is None:
+                return ranking
+            gap, se = rw.log_evidence - rs.log_evidence, math.hypot(rw.log_evidence_se, rs.log_evidence_se)
+            if ranking.winner == w and gap <= k_se * se and (rs.found or rs.fails_only_on_error(min_gain, min_rms_gain)):
+                desc = ", ".join(f"{n} {float(mean[idx[n]]):.3g} +- {float(sd[idx[n]]):.2g}" for n in restrict)
+                return prefer_nested(ranking, simpler, w, (
+                    f"{simpler}: named instead of {w}, whose fit sits where it reduces to {simpler} ({desc}); "
+                    f"{simpler} refitted in that material mode: log Z >= {zb:.1f} +- {sb:.1f}, "
+                    f"{gap:.1f} +- {se:.1f} below {w} with fewer parameters"))
+        return ranking
+
     # Mode check: before naming a winner, re-fit the base model around the winner's material mode.
     # If that base fit explains the data as well, the gain was the mode, not the physics.
     ranking, checked = name_it({}), set()
@@ -408,6 +464,10 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         checked.add(ranking.winner)
         mode_check(ranking.winner)
         ranking = name_it(references)
+    # Nested check: a winner sitting where it reduces to a simpler catalogue entry (the asymmetry
+    # at zero phase difference is a scale error) is compared with that entry refitted in its mode.
+    if ranking.winner is not None and nested_check:
+        ranking = nested(ranking)
     # Local check: a candidate that fails ONLY because the between-run error tau swamps its gain
     # (base runs in different modes) is compared with the base model refitted in its own mode.
     if ranking.winner is None and local_check and tau > 0:

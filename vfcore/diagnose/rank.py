@@ -287,3 +287,14 @@ def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: flo
     return rank_extensions(base_post, ext_posts, residual=res, n_extra=nx,
                            rms={n: rms_of(p) for n, p in ext_posts.items()}, base_rms=rms_of(base_post),
                            null=nul, min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
+
+
+def prefer_nested(ranking: RankReport, simpler: str, richer: str, note: str) -> RankReport:
+    """``ranking`` with ``simpler`` named instead of ``richer``: the richer winner's fit sits where
+    it reduces to the simpler entry (``Extension.nests``) and the simpler model, refitted in the
+    same material mode, is within the errors of it (docs/diagnose.md, section 3: nested check).
+    The same fit quality with fewer parameters is the better explanation (Occam; the evidence
+    would say so too had the simpler model's own SMC found the mode)."""
+    import dataclasses as dc
+    rows = [dc.replace(r, found=True, reason="") if r.name == simpler else r for r in ranking.rows]
+    return dc.replace(ranking, rows=rows, winner=simpler, notes=list(ranking.notes) + [note])
