@@ -417,7 +417,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         references[f"base near {name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
         return sn
 
-    def nested(ranking: RankReport) -> RankReport:
+    def nested(ranking: RankReport, local) -> RankReport:
         nonlocal n_sims
         w = ranking.winner
         names, mean, sd = param_table(refits[w])
@@ -442,19 +442,22 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                 after[simpler] = summarise(simpler, near, t1)
                 after[simpler]["box_refit_of"] = w
             ranking = name_it(references)
+            if local is not None and ranking.winner is None:    # the winner was named on the local comparison
+                ranking = promote_local(ranking, *local, tau)
             ranking.notes.append(f"nested check: {w} sits where it reduces to {simpler}; {simpler} refitted in "
                                  f"{w}'s material mode: log Z >= {zb:.1f} +- {sb:.1f}")
-            rw = next(r for r in ranking.rows if r.name == w)
             rs = next((r for r in ranking.rows if r.name == simpler), None)
             if ranking.winner == simpler or rs is None:
                 return ranking
-            gap, se = rw.log_evidence - rs.log_evidence, math.hypot(rw.log_evidence_se, rs.log_evidence_se)
+            # both fits sit in one material mode: delta-method errors, no between-run error (as the local check)
+            gap = float(refits[w].log_evidence) - float(refits[simpler].log_evidence)
+            se = math.hypot(float(refits[w].log_evidence_se), float(refits[simpler].log_evidence_se))
             if ranking.winner == w and gap <= k_se * se and (rs.found or rs.fails_only_on_error(min_gain, min_rms_gain)):
                 desc = ", ".join(f"{n} {float(mean[idx[n]]):.3g} +- {float(sd[idx[n]]):.2g}" for n in restrict)
                 return prefer_nested(ranking, simpler, w, (
                     f"{simpler}: named instead of {w}, whose fit sits where it reduces to {simpler} ({desc}); "
-                    f"{simpler} refitted in that material mode: log Z >= {zb:.1f} +- {sb:.1f}, "
-                    f"{gap:.1f} +- {se:.1f} below {w} with fewer parameters"))
+                    f"{simpler} refitted in that material mode: log Z >= {zb:.1f} +- {sb:.1f}, against {w}'s "
+                    f"{float(refits[w].log_evidence):.1f} (difference {gap:.1f} +- {se:.1f}), with fewer parameters"))
         return ranking
 
     # Mode check: before naming a winner, re-fit the base model around the winner's material mode.
@@ -464,10 +467,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         checked.add(ranking.winner)
         mode_check(ranking.winner)
         ranking = name_it(references)
-    # Nested check: a winner sitting where it reduces to a simpler catalogue entry (the asymmetry
-    # at zero phase difference is a scale error) is compared with that entry refitted in its mode.
-    if ranking.winner is not None and nested_check:
-        ranking = nested(ranking)
+    local = None
     # Local check: a candidate that fails ONLY because the between-run error tau swamps its gain
     # (base runs in different modes) is compared with the base model refitted in its own mode.
     if ranking.winner is None and local_check and tau > 0:
@@ -484,6 +484,11 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             if (ranking.winner is None and math.isfinite(d_loc) and d_loc > min_gain and d_loc > k_se * se_loc
                     and row.fails_only_on_error(min_gain, min_rms_gain)):
                 ranking = promote_local(ranking, name, d_loc, se_loc, tau)
+                local = (name, d_loc, se_loc)
+    # Nested check: a winner sitting where it reduces to a simpler catalogue entry (the asymmetry
+    # at zero phase difference is a scale error) is compared with that entry refitted in its mode.
+    if ranking.winner is not None and nested_check:
+        ranking = nested(ranking, local)
     notes.extend(ranking.notes)
     return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
                           n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)
