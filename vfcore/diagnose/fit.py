@@ -364,8 +364,7 @@ class ExtendedEvaluator:
 
     def _integrated(self, results, phis) -> Evaluation:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
-        from ..inference.problem import _cycle_means, gaussian_loglik
-        from ..observe import align
+        from ..inference.problem import _cycle_means, aligned_loglik
         from . import quadrature as _q
         pb = self.problem
         ext = self.extension
@@ -374,7 +373,6 @@ class ExtendedEvaluator:
         hi = np.array([ext.bounds()[n][1] for n in names])
         cells = quad_cells(self.name, len(names))
         max_lag, n_cmp = pb.window
-        obs = pb.obs_compared
         k = len(results)
         loglik = np.full(k, -np.inf)
         ok = np.zeros(k, dtype=bool)
@@ -400,27 +398,24 @@ class ExtendedEvaluator:
                     obs_fn = observer(self.name, np.asarray(r.gaw_hr, dtype=float), pb.fps, pb.config.length_mm)
                     fwd = {}
 
-                def seg_of(point, obs_fn=obs_fn, fwd=fwd):
+                def score(point, obs_fn=obs_fn, fwd=fwd):
                     hr = obs_fn({**fwd, **dict(zip(names, map(float, point)))})
-                    sim = hr[::HR_OVERSAMPLE]
-                    if sim.size < max_lag + n_cmp or not np.all(np.isfinite(hr)):
+                    if hr[::HR_OVERSAMPLE].size < max_lag + n_cmp or not np.all(np.isfinite(hr)):
                         raise RuntimeError("observed GAW too short or not finite")
-                    seg, _, _ = align(sim, pb.obs_gaw, pb.fps, (max_lag, n_cmp), sim_hr=hr,
-                                      oversample=HR_OVERSAMPLE, method=pb.alignment)
-                    return seg
+                    return aligned_loglik(hr, pb)
 
-                def fn(points, seg_of=seg_of):
+                def fn(points, score=score):
                     out = np.empty(len(points))
                     for j, pt in enumerate(points):
                         try:
-                            out[j] = gaussian_loglik(seg_of(pt), obs, pb.sigma_e)
+                            out[j] = score(pt)[0]
                         except (RuntimeError, ValueError):
                             out[j] = -np.inf
                     return out
                 q = _q.integrate_loglik(fn, lo, hi, n0=cells)
                 if not math.isfinite(q.log_mean):
                     raise RuntimeError("no integrated parameter value gives a finite likelihood")
-                gaw[i] = seg_of(q.best)
+                gaw[i] = score(q.best)[1]
             except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble
                 messages.append(f"{i}: {type(exc).__name__}: {exc}")
                 continue

@@ -33,9 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..inference.posterior import Posterior
-from ..inference.problem import Problem, gaussian_loglik
-from ..observe import align
-from ..result import HR_OVERSAMPLE
+from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
@@ -164,14 +162,9 @@ def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, s
     thetas = _best_particles(base, n_theta)
     params = [problem.prior.to_params(t) for t in thetas]
     res = simulate_many(params, problem.config, block=max(1, len(params)))
-    max_lag, n_cmp = problem.window
-    obs = problem.obs_compared
 
     def ll_of(hr):
-        sim = hr[::HR_OVERSAMPLE]
-        seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
-                          oversample=HR_OVERSAMPLE, method=problem.alignment)
-        return gaussian_loglik(seg, obs, problem.sigma_e)
+        return aligned_loglik(hr, problem)[0]
 
     base_ll = np.array([ll_of(np.asarray(r.gaw_hr, float)) if r.ok else -np.inf for r in res])
     best_base = float(np.max(base_ll))
@@ -425,10 +418,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         for simpler, restrict in get(w).nests:
             if simpler not in cand:
                 continue
-            at_null = all(p.name in idx and p.null is not None
-                          and abs(float(mean[idx[p.name]]) - p.null) <= null_sd * float(sd[idx[p.name]])
-                          for p in get(w).params if p.name in restrict)
-            if not at_null:
+            if not null_consistent(names, mean, sd, w, null_sd, only=restrict):
                 continue
             t1 = time.perf_counter()
             zb, sb, near = base_near(problem, refits[w], n_particles=refit_n, seed=seed + 131071, map=map,

@@ -54,7 +54,7 @@ def _lz(x) -> tuple[float, float]:
     return float(v), float(s)
 
 
-def null_consistent(names, mean, sd, extension, null_sd: float = 2.0) -> bool:
+def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None) -> bool:
     """Whether a fit of ``extension`` (an :class:`.extensions.Extension` or its name) puts every
     extension parameter that has a null value (``ExtParam.null``) within ``null_sd`` posterior
     standard deviations of it. ``names``/``mean``/``sd``: the posterior's parameter names, means
@@ -62,13 +62,14 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0) -> bool:
 
     Two sd, not one: at a null on the prior's bound (leak 0, phase 0) a posterior piled up against
     the bound has mean ~1.3 sd away from it (half-normal), and one sd would call it non-null; an
-    unidentified parameter (posterior ~ prior, uniform) has |mean - bound| = 1.73 sd."""
+    unidentified parameter (posterior ~ prior, uniform) has |mean - bound| = 1.73 sd.
+    ``only``: test these parameters only (the nested check's restricting parameters)."""
     from .extensions import get
     ext = get(extension) if isinstance(extension, str) else extension
     idx = {n: i for i, n in enumerate(names)}
     checked = False
     for p in ext.params:
-        if p.null is None:
+        if p.null is None or (only is not None and p.name not in only):
             continue
         if p.name not in idx:
             return False
@@ -251,12 +252,10 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
     (:func:`.pipeline.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
     errors of the two fits, no ``tau``: both sit in one mode, so the mode hopping that ``tau``
     measures is not part of this comparison) and still beats every base-model fit found."""
-    import dataclasses as dc
-    rows = [dc.replace(r, found=True, reason="") if r.name == name else r for r in ranking.rows]
-    note = (f"{name}: named on the local comparison: dlogZ {d_local:.1f} +- {se_local:.1f} against the base model "
-            f"refitted in its material mode (the global error includes a between-run error of {tau:.1f} nats from "
-            f"base runs that landed in different modes)")
-    return dc.replace(ranking, rows=rows, winner=name, notes=list(ranking.notes) + [note])
+    return _named(ranking, name, (
+        f"{name}: named on the local comparison: dlogZ {d_local:.1f} +- {se_local:.1f} against the base model "
+        f"refitted in its material mode (the global error includes a between-run error of {tau:.1f} nats from "
+        f"base runs that landed in different modes)"))
 
 
 def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: float = 3.0,
@@ -295,6 +294,11 @@ def prefer_nested(ranking: RankReport, simpler: str, richer: str, note: str) -> 
     same material mode, is within the errors of it (docs/diagnose.md, section 3: nested check).
     The same fit quality with fewer parameters is the better explanation (Occam; the evidence
     would say so too had the simpler model's own SMC found the mode)."""
+    return _named(ranking, simpler, note)
+
+
+def _named(ranking: RankReport, name: str, note: str) -> RankReport:
+    """A copy of ``ranking`` with ``name``'s row found, ``name`` the winner and ``note`` added."""
     import dataclasses as dc
-    rows = [dc.replace(r, found=True, reason="") if r.name == simpler else r for r in ranking.rows]
-    return dc.replace(ranking, rows=rows, winner=simpler, notes=list(ranking.notes) + [note])
+    rows = [dc.replace(r, found=True, reason="") if r.name == name else r for r in ranking.rows]
+    return dc.replace(ranking, rows=rows, winner=name, notes=list(ranking.notes) + [note])

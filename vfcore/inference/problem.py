@@ -302,6 +302,19 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None, bloc
     return score_results(_simulate_rows(thetas, problem, simulate_fn, block), problem)
 
 
+def aligned_loglik(hr: np.ndarray, problem: Problem) -> tuple[float, np.ndarray]:
+    """Log-likelihood (Eq. 15) and aligned camera-rate segment of one oversampled simulated area
+    ``hr`` (``HR_OVERSAMPLE`` samples per frame) against ``problem``'s observation: the profile /
+    xcorr alignment of ``problem.alignment`` over ``problem.window``. For the many waveforms one
+    simulation yields (screening, integrated extension parameters)."""
+    from vfcore.observe import align
+    from vfcore.result import HR_OVERSAMPLE
+    max_lag, n_cmp = problem.window
+    seg, _, _ = align(hr[::HR_OVERSAMPLE], problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
+                      oversample=HR_OVERSAMPLE, method=problem.alignment)
+    return gaussian_loglik(seg, problem.obs_compared, problem.sigma_e), seg
+
+
 def score_results(results, problem: Problem, observe: Callable | None = None) -> Evaluation:
     """Score simulation results (SimResults, or the exceptions their runs raised) against
     ``problem``'s observation: alignment, Eq. 15 log-likelihood, predictions, flow and contact.
