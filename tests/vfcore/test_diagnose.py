@@ -235,6 +235,15 @@ def test_null_consistent_posteriors():
     assert not null_consistent(("sep_ratio",), [1.15], [0.02], "sep_ratio")
     # no null value in the prior (epithelium stiffness): never null-consistent
     assert not null_consistent(("E_epith_kpa",), [5.0], [50.0], "epithelium")
+    # two modes either side of the null (an integrated lag at equal stiffness): mean +- 2 sd
+    # straddles 0, but the likelihood at 0 is far below the best, and that decides
+    names = ("E_body", "log2_lr_Q", "lr_lag")
+    mean, sd = [10.0, 0.06, 0.004], [1.0, 0.05, 0.07]
+    assert null_consistent(names, mean, sd, "lr_stiffness")
+    assert not null_consistent(names, mean, sd, "lr_stiffness", drops={"lr_lag": 300.0})
+    assert null_consistent(names, mean, sd, "lr_stiffness", drops={"lr_lag": 1.5})
+    # the drop only vetoes: a mean far from the null still fails with a small drop
+    assert not null_consistent(names, [10.0, 0.06, 0.2], [1.0, 0.05, 0.01], "lr_stiffness", drops={"lr_lag": 1.0})
 
 
 def test_rank_null_fit_is_not_named_and_raises_the_reference():

@@ -107,3 +107,31 @@ def test_delayed_slices_equal_interpolation_with_held_ends():
     yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
     for d in (0.0, 3.25, -7.5, 37.9, -38.0, 12.0, 45.5, -120.0):
         np.testing.assert_allclose(_delayed(yp, pad, y.size, d), np.interp(t - d, t, y), atol=1e-12)
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.07])
+def test_null_drop_rejects_a_null_between_two_modes(base_run, lag):
+    """Two folds of equal stiffness, the right one lagging by ``lag`` cycles: its sign is not
+    identified (swapping the folds maps +lag to -lag), so the integrated lag's conditional mean
+    is ~0 within its sd whatever the lag. The null drop (log-likelihood at the best lag minus at
+    lag 0) tells the two apart: hundreds of nats for a real lag, ~0 without one."""
+    from vfcore.diagnose.fit import pair_observer
+    from vfcore.diagnose.rank import null_consistent
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(11)
+    hr0 = np.asarray(base_run.gaw_hr)
+    y = pair_observer(hr0, hr0, FPS)(lag)[55::HR_OVERSAMPLE][:240] + 0.3 * rng.standard_normal(240)
+    pb = Problem(y, FPS, prior, config=CFG)
+    ev = ExtendedEvaluator(pb, "lr_stiffness", integrate=True)
+    out = ev(np.array([[TABLE3.E_cover, 0.0]]))
+    assert out.ok[0]
+    m, s, drop = out.extra[0]
+    if lag:
+        assert abs(m) < 2 * s and s > 0.5 * lag              # the mean +- sd test cannot see it
+        assert drop > 50.0
+        assert not null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness",
+                                   drops={"lr_lag": drop})
+    else:
+        assert 0.0 <= drop < 2.0
+        assert null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness",
+                               drops={"lr_lag": drop})

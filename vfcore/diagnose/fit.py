@@ -270,7 +270,10 @@ class ExtendedEvaluator:
     parameters and the remaining extension parameters (``self.prior``), and each draw's
     log-likelihood is the log marginal likelihood. Its prediction is read at the quadrature's
     best point; ``Evaluation.extra`` holds, per draw, the conditional posterior mean and sd of
-    each integrated parameter (``mean_1, sd_1, mean_2, ...``, in ``self.integrated`` order).
+    each integrated parameter (``mean_1, sd_1, mean_2, ...``, in ``self.integrated`` order), then
+    per parameter its *null drop*: the log-likelihood at the quadrature's best point minus that
+    at the same point with this parameter set to its null value (``ExtParam.null``; nan when it
+    has none). :func:`.rank.null_consistent` uses it to reject nulls that lie between modes.
     """
 
     def __init__(self, problem: Problem, extension: str, integrate: bool = False):
@@ -378,7 +381,8 @@ class ExtendedEvaluator:
         ok = np.zeros(k, dtype=bool)
         gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
         flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
-        extra = np.full((k, 2 * len(names)), np.nan)
+        extra = np.full((k, 3 * len(names)), np.nan)
+        nulls = [{e.name: e.null for e in ext.params}[n] for n in names]
         messages = []
         for i, r in enumerate(results):
             try:
@@ -416,13 +420,20 @@ class ExtendedEvaluator:
                 if not math.isfinite(q.log_mean):
                     raise RuntimeError("no integrated parameter value gives a finite likelihood")
                 gaw[i] = score(q.best)[1]
+                drops = np.full(len(names), np.nan)
+                for j, nv in enumerate(nulls):
+                    if nv is not None and lo[j] <= nv <= hi[j]:
+                        at_null = np.array(q.best, dtype=float)
+                        at_null[j] = nv
+                        drops[j] = q.best_ll - fn(at_null[None, :])[0]
             except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble
                 messages.append(f"{i}: {type(exc).__name__}: {exc}")
                 continue
             loglik[i] = q.log_mean
             ok[i] = True
-            extra[i, 0::2] = q.mean
-            extra[i, 1::2] = q.sd
+            extra[i, 0:2 * len(names):2] = q.mean
+            extra[i, 1:2 * len(names):2] = q.sd
+            extra[i, 2 * len(names):] = drops
             flow[i], cmean[i], cmax[i] = _cycle_means(r)
         return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax,
                           extra=extra, messages=tuple(messages))
@@ -431,7 +442,8 @@ class ExtendedEvaluator:
 def integrated_summary(post, names) -> dict[str, dict[str, float]]:
     """Posterior mean and sd of integrated parameters from the final particles' conditional
     means and sds (``Evaluation.extra``): a mixture over the resampled particles,
-    ``var = mean(sd_i^2 + m_i^2) - mean(m_i)^2``."""
+    ``var = mean(sd_i^2 + m_i^2) - mean(m_i)^2``; ``null_drop``: the median over the particles of
+    the log-likelihood drop at the parameter's null value (nan: no null)."""
     rp = post.resampled_predictive()
     if rp is None or rp.extra is None:
         raise ValueError("the posterior carries no integrated-parameter summaries")
@@ -442,6 +454,10 @@ def integrated_summary(post, names) -> dict[str, dict[str, float]]:
         m, s = ex[:, 2 * j], ex[:, 2 * j + 1]
         mu = float(np.mean(m))
         out[n] = {"mean": mu, "sd": float(math.sqrt(max(float(np.mean(s * s + m * m)) - mu * mu, 0.0)))}
+        if ex.shape[1] >= 3 * len(names):
+            d = ex[:, 2 * len(names) + j]
+            d = d[np.isfinite(d)]
+            out[n]["null_drop"] = float(np.median(d)) if d.size else math.nan
     return out
 
 
@@ -453,6 +469,13 @@ def param_table(post) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     mean = np.concatenate([np.asarray(post.mean, float), [v["mean"] for v in integ.values()]])
     sd = np.concatenate([np.asarray(post.sd, float), [v["sd"] for v in integ.values()]])
     return names, mean, sd
+
+
+def null_drops(post) -> dict[str, float]:
+    """Median log-likelihood drop at the null value of each integrated parameter of a fit
+    (:func:`integrated_summary`'s ``null_drop``; empty for a fit with none)."""
+    integ = post.info.get("integrated") or {}
+    return {n: v["null_drop"] for n, v in integ.items() if math.isfinite(v.get("null_drop", math.nan))}
 
 
 def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, seed: int = 0, map=map,

@@ -35,7 +35,7 @@ import numpy as np
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
-from .fit import ExtendedEvaluator, fit_extended, observe_extended, param_table
+from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
 from .rank import (NO_FINDING, RankReport, null_consistent, prefer_nested, promote_local, rank_extensions,
                    residual_removed)
@@ -366,7 +366,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         g = _pred(post)
         s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
         s["rms_improvement"] = 1.0 - s["residual_rms"] / before["residual_rms"]
-        s["null_consistent"] = null_consistent(*param_table(post), name, null_sd)
+        s["null_consistent"] = null_consistent(*param_table(post), name, null_sd, drops=null_drops(post))
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
         return s
@@ -418,7 +418,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         for simpler, restrict in get(w).nests:
             if simpler not in cand:
                 continue
-            if not null_consistent(names, mean, sd, w, null_sd, only=restrict):
+            if not null_consistent(names, mean, sd, w, null_sd, only=restrict, drops=null_drops(refits[w])):
                 continue
             t1 = time.perf_counter()
             zb, sb, near = base_near(problem, refits[w], n_particles=refit_n, seed=seed + 131071, map=map,

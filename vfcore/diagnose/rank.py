@@ -54,7 +54,7 @@ def _lz(x) -> tuple[float, float]:
     return float(v), float(s)
 
 
-def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None) -> bool:
+def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None, drops=None) -> bool:
     """Whether a fit of ``extension`` (an :class:`.extensions.Extension` or its name) puts every
     extension parameter that has a null value (``ExtParam.null``) within ``null_sd`` posterior
     standard deviations of it. ``names``/``mean``/``sd``: the posterior's parameter names, means
@@ -63,7 +63,15 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None)
     Two sd, not one: at a null on the prior's bound (leak 0, phase 0) a posterior piled up against
     the bound has mean ~1.3 sd away from it (half-normal), and one sd would call it non-null; an
     unidentified parameter (posterior ~ prior, uniform) has |mean - bound| = 1.73 sd.
-    ``only``: test these parameters only (the nested check's restricting parameters)."""
+    ``only``: test these parameters only (the nested check's restricting parameters).
+
+    ``drops``: name -> median log-likelihood drop at the null value of an integrated parameter
+    (:func:`.fit.null_drops`). The mean +- sd test is a normal approximation; it also passes a
+    posterior with two modes on either side of the null (the lag of ``lr_stiffness`` at equal
+    stiffness: the folds can be swapped, so +lag and -lag fit alike and 0 lies between). A
+    parameter whose null is more than ``2 null_sd^2`` nats below the best (``null_sd``
+    = 2: 8 nats, the drop of a Gaussian 4 sd out; within 2 sd it is at most 2 nats) is therefore
+    not null-consistent, whatever its mean and sd."""
     from .extensions import get
     ext = get(extension) if isinstance(extension, str) else extension
     idx = {n: i for i, n in enumerate(names)}
@@ -78,6 +86,8 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None)
         if not (math.isfinite(m) and math.isfinite(s_)):
             return False
         if abs(m - p.null) > null_sd * s_:
+            return False
+        if drops is not None and p.name in drops and drops[p.name] > 2.0 * null_sd ** 2:
             return False
         checked = True
     return checked
@@ -279,9 +289,9 @@ def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: flo
     r0 = rep(base_post)
     res = {n: residual_removed(r0, rep(p)) for n, p in ext_posts.items()}
     from .extensions import get
-    from .fit import param_table
+    from .fit import null_drops, param_table
     nx = {n: len(get(p.info.get("extension", n)).params) for n, p in ext_posts.items()}
-    nul = {n: null_consistent(*param_table(p), p.info.get("extension", n), null_sd)
+    nul = {n: null_consistent(*param_table(p), p.info.get("extension", n), null_sd, drops=null_drops(p))
            for n, p in ext_posts.items()}
     return rank_extensions(base_post, ext_posts, residual=res, n_extra=nx,
                            rms={n: rms_of(p) for n, p in ext_posts.items()}, base_rms=rms_of(base_post),
