@@ -201,6 +201,35 @@ def test_rank_names_large_gain():
     assert rep.rows[1].found and not rep.rows[2].found    # exposure: d = 5 > 3 and > 3 * 0.42
 
 
+def test_one_standard_error_rule_names_the_simpler_of_two_indistinguishable_fits():
+    """Two found extensions whose evidence differs by less than one standard error: the one with
+    fewer parameters is named (the richer one stays a rival); a gap beyond one se, equal
+    parameter counts, or a simpler fit that was not found leave the winner alone."""
+    from vfcore.diagnose.rank import prefer_parsimonious
+    base = _Post(-1000.0, 0.5)
+    nx = {"subglottal": 2, "epithelium": 1, "zipper": 2, "leak": 1}
+
+    def rep(z_epith, se=30.0, **kw):
+        fits = {"subglottal": _Post(-500.0, se), "epithelium": _Post(z_epith, se), "zipper": _Post(-520.0, se),
+                "leak": _Post(-990.0, 0.5)}
+        return rank_extensions(base, fits, n_extra=nx, k_se=3.0, **kw)
+    r = rep(-510.0)                                  # 10 +- 42 below: indistinguishable
+    assert r.winner == "subglottal"
+    p = prefer_parsimonious(r, 1.0)
+    assert p.winner == "epithelium" and p.physics == "epithelium"
+    assert "one-standard-error" in p.notes[-1] and "subglottal" in p.notes[-1]
+    assert "subglottal" in [f for f, _, _ in p.rivals]
+    assert prefer_parsimonious(r, 0.0).winner == "subglottal"          # off
+    assert prefer_parsimonious(rep(-560.0), 1.0).winner == "subglottal"  # 60 +- 42: beyond one se
+    # equal counts (zipper, 20 +- 42 below) never displace the winner
+    assert prefer_parsimonious(rep(-560.0), 1.0).rows[0].name == "subglottal"
+    # a 1-parameter fit within one se that is not found (RMS only 10 % lower) is not named
+    fits = {"subglottal": _Post(-500.0, 30.0), "leak": _Post(-505.0, 30.0)}
+    r = rank_extensions(base, fits, n_extra=nx, rms={"subglottal": 0.5, "leak": 0.9}, base_rms=1.0)
+    assert r.winner == "subglottal" and not next(x for x in r.rows if x.name == "leak").found
+    assert prefer_parsimonious(r, 1.0).winner == "subglottal"
+
+
 def test_rank_big_evidence_small_rms_gain_is_not_named():
     """The effect-size rule: a decisive evidence gain with a residual only 10 % smaller is not a
     finding; with 30 % or more it is; the larger dlogZ among qualifying fits wins."""

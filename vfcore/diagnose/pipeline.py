@@ -37,8 +37,8 @@ from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
-from .rank import (NO_FINDING, RankReport, null_consistent, prefer_nested, promote_local, rank_extensions,
-                   residual_removed)
+from .rank import (NO_FINDING, RankReport, null_consistent, prefer_nested, prefer_parsimonious, promote_local,
+                   rank_extensions, residual_removed)
 
 __all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near", "base_fit"]
 
@@ -285,7 +285,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              base: Posterior | None = None, smc_options: dict | None = None,
              screen_options: dict | None = None, refit_forward: bool = True,
              refit_particles: int | None = None, escalate_tau: float | None = 10.0,
-             escalate_factor: int = 2, integrate: bool = True, nested_check: bool = True) -> DiagnoseReport:
+             escalate_factor: int = 2, integrate: bool = True, nested_check: bool = True,
+             parsimony_se: float = 1.0) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -326,6 +327,9 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     that entry is refitted in the winner's material mode (:func:`base_near` with ``extension``);
     if its evidence bound is within ``k_se`` errors of the winner's, the simpler entry is named
     (:func:`.rank.prefer_nested`; docs/diagnose.md, section 3).
+    ``parsimony_se``: last, a found extension with fewer parameters whose evidence is within this
+    many standard errors of the winner's is named instead (one-standard-error rule,
+    :func:`.rank.prefer_parsimonious`; docs/diagnose.md, section 3); 0 turns it off.
     """
     t0 = time.perf_counter()
     opts = dict(smc_options or {})
@@ -479,6 +483,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     # at zero phase difference is a scale error) is compared with that entry refitted in its mode.
     if ranking.winner is not None and nested_check:
         ranking = nested(ranking, local)
+    ranking = prefer_parsimonious(ranking, parsimony_se)
     notes.extend(ranking.notes)
     return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
                           n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)

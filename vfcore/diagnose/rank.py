@@ -307,6 +307,38 @@ def prefer_nested(ranking: RankReport, simpler: str, richer: str, note: str) -> 
     return _named(ranking, simpler, note)
 
 
+def prefer_parsimonious(ranking: RankReport, k: float = 1.0) -> RankReport:
+    """``ranking`` with the winner replaced by a found extension with fewer parameters whose
+    log-evidence is within ``k`` standard errors of the winner's (``se``: both fits' errors in
+    quadrature, the reference cancels): the one-standard-error rule of model selection (Breiman
+    et al. 1984, *Classification and Regression Trees* section 3.4.3; Hastie, Tibshirani &
+    Friedman, *Elements of Statistical Learning* 2nd ed. section 7.10). When the evidence cannot
+    tell two explanations apart, the one with fewer free parameters is named and the other is
+    reported as a rival. Among several, the fewest parameters, then the largest evidence.
+    ``k <= 0`` or no winner: unchanged."""
+    if ranking.winner is None or not k > 0:
+        return ranking
+    w = next(r for r in ranking.rows if r.name == ranking.winner)
+    if w.n_extra is None:
+        return ranking
+    best = None
+    for r in ranking.rows:
+        if r.name == w.name or not r.found or r.n_extra is None or r.n_extra >= w.n_extra:
+            continue
+        gap, se = w.delta - r.delta, math.hypot(w.log_evidence_se, r.log_evidence_se)
+        if not (math.isfinite(gap) and math.isfinite(se) and gap <= k * se):
+            continue
+        if best is None or (r.n_extra, -r.delta) < (best.n_extra, -best.delta):
+            best = r
+    if best is None:
+        return ranking
+    gap, se = w.delta - best.delta, math.hypot(w.log_evidence_se, best.log_evidence_se)
+    return _named(ranking, best.name, (
+        f"{best.name} ({best.n_extra} parameter{'s' if best.n_extra != 1 else ''}) named instead of {w.name} "
+        f"({w.n_extra}): log-evidence {gap:.1f} +- {se:.1f} below it, within {k:g} standard error"
+        f"{'s' if k != 1 else ''} (one-standard-error rule: the simpler explanation)"))
+
+
 def _named(ranking: RankReport, name: str, note: str) -> RankReport:
     """A copy of ``ranking`` with ``name``'s row found, ``name`` the winner and ``note`` added."""
     import dataclasses as dc
