@@ -160,6 +160,14 @@ def score(a) -> None:
     if len(eff_p) < len(eff):
         print(f"\n* effect not present (absorbed by the base model to < {1.02:.2f} sigma; generator presence rule)")
         print(f"effect cases with the effect present named correctly: {sum(r[3] for r in eff_p)}/{len(eff_p)}")
+    audit_p = cases_dir / "audit.json"
+    if audit_p.exists():
+        # presence re-tested with a stronger absorption search (generate.py --audit)
+        aud = json.loads(audit_p.read_text())["cases"]
+        eff_a = [r for r in eff if aud.get(r[0], {}).get("present", presence[r[0]][0])]
+        moved = [r[0] for r in eff if aud.get(r[0], {}).get("present", presence[r[0]][0]) != presence[r[0]][0]]
+        print(f"effect cases present under the audit (audit.json: stronger absorption search; changed: "
+              f"{', '.join(moved) or 'none'}) named correctly: {sum(r[3] for r in eff_a)}/{len(eff_a)}")
     ctl = [r for r in rows if r[1] == "control"]
     named = [r for r in rows if r[2] is not None and r[2] != "rejected"]
     print(f"{'' if len(eff_p) < len(eff) else chr(10)}all effect cases named correctly: {sum(r[3] for r in eff)}/{len(eff)}")

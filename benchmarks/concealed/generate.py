@@ -45,7 +45,7 @@ __all__ = [
     "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",
     "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile", "zipper_area",
     "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale", "oscillates",
-    "amplitude", "phonates", "unabsorbed_rms", "PRESENCE_SIGMA",
+    "amplitude", "phonates", "unabsorbed_rms", "PRESENCE_SIGMA", "AUDIT_SEARCH", "audit_presence",
     "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
 ]
 
@@ -345,13 +345,15 @@ def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
 
 
 def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimConfig = BASE_CONFIG,
-                   n_sobol: int = 64, n_starts: int = 1, maxfev: int = 80, seed: int = 0) -> tuple[float, dict]:
+                   n_sobol: int = 64, n_starts: int = 1, maxfev: int = 80, seed: int = 0,
+                   starts: list[dict] | None = None) -> tuple[float, dict]:
     """RMS (mm^2) of what the BASE model cannot absorb of a clean waveform: the minimum over the
     material parameters (E_body, E_cover, p_sub in ``TRUTH_BOUNDS``, the rest at TABLE3) and over
     the sub-frame lag of ``RMS(clean - base)``. A scrambled-Sobol design of ``n_sobol`` points
-    (plus ``truth`` when given) is simulated in lock-step, then a bounded Nelder-Mead polishes the
-    ``n_starts`` best points (``maxfev`` simulations each). It is an upper bound on the true
-    minimum (a better optimiser could only absorb more). Returns ``(rms, best material values)``."""
+    (plus ``truth`` and the material dicts in ``starts`` when given) is simulated in lock-step,
+    then a bounded Nelder-Mead polishes the ``n_starts`` best design points, the truth and every
+    ``starts`` point (``maxfev`` simulations each). It is an upper bound on the true minimum (a
+    better optimiser could only absorb more). Returns ``(rms, best material values)``."""
     import warnings
 
     from scipy.optimize import minimize
@@ -377,13 +379,18 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
         U = qmc.Sobol(len(names), scramble=True, seed=seed).random(n_sobol)
     if truth is not None:
         U = np.vstack([U, (np.array([getattr(truth, n) for n in names]) - lo) / (hi - lo)])
+    n_ranked = len(U)
+    if starts:
+        U = np.vstack([U, np.clip((np.array([[float(st[n]) for n in names] for st in starts]) - lo) / (hi - lo),
+                                  0.0, 1.0)])
     res = simulate_many([params_of(u) for u in U], config, block=32)
     sse = np.array([sse_of(r) for r in res])
     best_u, best = U[int(np.argmin(sse))], float(np.min(sse))
-    starts = list(np.argsort(sse, kind="stable")[:n_starts])
-    if truth is not None and len(U) - 1 not in starts:
-        starts.insert(0, len(U) - 1)       # the truth: usually next to the absorbing optimum
-    for j in starts:
+    polish = [int(j) for j in np.argsort(sse[:n_ranked], kind="stable")[:n_starts]]
+    if truth is not None and n_ranked - 1 not in polish:
+        polish.insert(0, n_ranked - 1)     # the truth: usually next to the absorbing optimum
+    polish += list(range(n_ranked, len(U)))    # and every given start
+    for j in polish:
         if not math.isfinite(sse[j]):
             continue
         r = minimize(lambda u: sse_of(simulate(params_of(u), config)), U[j], method="Nelder-Mead",
@@ -653,15 +660,78 @@ def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = No
     np.savez(out / "truth.npz", **arrays)
 
 
+#: Absorption search of :func:`audit_presence`: a denser design and more polished starts than the
+#: generator's (64 points, the truth polished). Stop 12: in the seed-0 suite the diagnosis's own
+#: base fit of case 07 (frame rate 1.039) reached a residual of 0.650 mm^2 against sigma 0.555,
+#: i.e. an unabsorbed part of ~0.34 mm^2 = 0.61 sigma, where the generator had measured 2.08 mm^2
+#: (3.7 sigma) from the truth: the base model absorbs a time stretch in another material mode,
+#: along the f0 ridge, which a local search from the truth does not reach.
+AUDIT_SEARCH = {"n_sobol": 512, "n_starts": 6, "maxfev": 150}
+
+
+def _audit_one(args):
+    cid, t, config, search = args
+    if t.get("label") == "control":
+        return cid, {"present": False}
+    starts = [t["truth"]] + ([t["absorbing_fit"]] if t.get("absorbing_fit") else [])
+    u, fit = unabsorbed_rms(np.asarray(t["clean"], dtype=float), None, config, starts=starts, **search)
+    before = float(t.get("unabsorbed_rms_mm2", math.nan))
+    if math.isfinite(before) and before < u:       # never report a worse search than the generator's
+        u, fit = before, t.get("absorbing_fit", {})
+    return cid, {"unabsorbed_rms_mm2": u, "generated_unabsorbed_rms_mm2": before, "sigma_mm2": t["sigma_mm2"],
+                 "present": bool(u >= PRESENCE_SIGMA * float(t["sigma_mm2"])), "absorbing_fit": fit}
+
+
+def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig = BASE_CONFIG,
+                   search: dict | None = None) -> dict:
+    """Re-test the presence rule of an existing suite with a stronger absorption search
+    (:data:`AUDIT_SEARCH`; the truth and the generator's absorbing fit are polished too, so the
+    unabsorbed RMS can only go down) and write ``audit.json`` beside ``truth.json``. The
+    recordings are not touched; only which effects count as present changes. Like the rest of
+    the generator, it reads the clean waveform and knows nothing of the fitting code."""
+    suite = Path(suite)
+    hidden = json.loads((suite / "truth.json").read_text())
+    search = dict(AUDIT_SEARCH if search is None else search)
+    jobs = [(cid, t, config, search) for cid, t in sorted(hidden["cases"].items())]
+    if workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(workers) as ex:
+            out = dict(ex.map(_audit_one, jobs))
+    else:
+        out = dict(map(_audit_one, jobs))
+    doc = {"search": search, "presence_sigma": PRESENCE_SIGMA, "cases": out}
+    tmp = suite / "audit.json.tmp"
+    tmp.write_text(json.dumps(doc, indent=1, default=float))
+    tmp.replace(suite / "audit.json")
+    return doc
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", required=True)
+    ap.add_argument("--out", help="directory of the suite to write")
+    ap.add_argument("--audit", metavar="SUITE",
+                    help="re-test an existing suite's presence rule with a stronger absorption search "
+                         "(writes SUITE/audit.json; the recordings are unchanged)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes (same cases for any number)")
     ap.add_argument("--no-presence", action="store_true",
                     help="skip the presence rule (stop-9 suites: effects may be absorbed by the base model)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
+    if a.audit:
+        doc = audit_presence(a.audit, workers=a.workers)
+        print(f"audit of {a.audit} in {time.perf_counter() - t0:.1f} s (search {doc['search']})")
+        old = json.loads((Path(a.audit) / "truth.json").read_text())["cases"]
+        for cid, r in doc["cases"].items():
+            if old[cid]["label"] == "control":
+                continue
+            s_ = r["sigma_mm2"]
+            print(f"  {cid} {old[cid]['label']:11s} unabsorbed {r['generated_unabsorbed_rms_mm2'] / s_:5.2f} -> "
+                  f"{r['unabsorbed_rms_mm2'] / s_:5.2f} sigma  {'present' if r['present'] else 'NOT PRESENT'}"
+                  + ("  (changed)" if r["present"] != old[cid]["present"] else ""))
+        return 0
+    if not a.out:
+        ap.error("--out is required (or --audit SUITE)")
     cases = generate_suite(a.seed, presence=not a.no_presence, workers=a.workers)
     write_suite(cases, a.out, a.seed)
     dt = time.perf_counter() - t0

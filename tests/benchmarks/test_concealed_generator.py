@@ -256,3 +256,31 @@ def test_asymmetry_is_entrained(base):
     a1 = G.asymmetric_area(base, right, tt, 0.1, t[G.N_OBS // 2])
     a2 = G.asymmetric_area(base, right, tt + per, 0.1, t[G.N_OBS // 2])
     assert np.sqrt(np.mean((a1 - a2) ** 2)) < 0.05 * np.ptp(a1)
+
+
+def test_audit_polishes_the_given_starts_and_can_only_lower_the_unabsorbed_rms(tmp_path):
+    """The presence audit re-tests an existing suite: the generator's absorbing fit is among its
+    starts, so a waveform the base model reproduces exactly at those materials comes out fully
+    absorbed (not present) even when the recorded truth and the design are elsewhere; a control
+    stays a control; audit.json is written, truth.json untouched."""
+    import json
+    absorbing = {"E_body": 12.0, "E_cover": 600.0, "p_sub": 1000.0}
+    r = simulate(Params(**{**TABLE3.as_dict(), **absorbing}), CFG)
+    clean = G.sample_hr(np.asarray(r.gaw_hr), G.hr_times(r), G.frame_times(G.N_OBS, 97.3, CFG.fps))
+    far = {**TABLE3.as_dict(), "E_body": 9.5, "E_cover": 900.0, "p_sub": 1700.0}
+    # the start alone finds it with a design of 2 points and 4 Nelder-Mead steps
+    u, fit = G.unabsorbed_rms(clean, None, CFG, n_sobol=2, n_starts=1, maxfev=4, starts=[absorbing])
+    assert u < 1e-6 and fit == pytest.approx(absorbing)
+    hidden = {"seed": 0, "n_obs": G.N_OBS, "cases": {
+        "00": {"label": "frame_rate", "truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": 3.0,
+               "present": True, "absorbing_fit": absorbing, "clean": clean.tolist()},
+        "01": {"label": "control", "truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": float("nan"),
+               "present": False, "absorbing_fit": {}, "clean": clean.tolist()}}}
+    (tmp_path / "truth.json").write_text(json.dumps(hidden))
+    before = (tmp_path / "truth.json").read_text()
+    doc = G.audit_presence(tmp_path, config=CFG, search={"n_sobol": 2, "n_starts": 1, "maxfev": 4})
+    c = doc["cases"]["00"]
+    assert c["unabsorbed_rms_mm2"] < 1e-6 and not c["present"] and c["generated_unabsorbed_rms_mm2"] == 3.0
+    assert doc["cases"]["01"] == {"present": False}
+    assert json.loads((tmp_path / "audit.json").read_text())["cases"]["00"]["present"] is False
+    assert (tmp_path / "truth.json").read_text() == before
