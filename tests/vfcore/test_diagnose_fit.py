@@ -103,6 +103,11 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     from vfcore.diagnose.fit import param_table
     names, mean, sd = param_table(rep.refits["leak"])          # leak integrated per simulation
     assert names[-1] == "leak_mm2" and abs(mean[-1] - 1.5) < 0.3 and sd[-1] < 0.3
+    # the report carries the leak's null drop: no leak at all is far below the best (200 frames
+    # 1.5 mm^2 off, sigma_e 1: ~200 * 1.5^2 / 2 = 225 nats), so the fit is not null-consistent
+    drop = rep.after["leak"]["params"]["leak_mm2"]["null_drop"]
+    assert drop > 100.0 and not rep.after["leak"]["null_consistent"]
+    assert "null_drop" not in rep.after["leak"]["params"]["E_cover"]
     assert ctl.winner is None and ctl.verdict == "no missing physics found", ctl.to_dict()["ranking"]
     assert rep.n_simulations > rep.base.n_simulations
 

@@ -57,12 +57,14 @@ def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float) ->
     y = np.asarray(obs, dtype=float)[: g.shape[1]]
     loc = locate(y, g, fps)
     pv = measure_pvalues(g, y, fps, sigma_e=sigma_e)
+    drops = null_drops(post)
     return {
         "residual_rms": float(np.sqrt(np.mean((y - g.mean(axis=0)) ** 2))),
         "phase_rms": loc.phase_rms, "dominant_phase": loc.dominant_phase,
         "concentration": loc.concentration(),
         "pvalues": {k: v.p_two_sided for k, v in pv.items()},
-        "params": {n: {"mean": float(m), "sd": float(s)} for n, m, s in zip(*param_table(post))},
+        "params": {n: {"mean": float(m), "sd": float(s), **({"null_drop": drops[n]} if n in drops else {})}
+                   for n, m, s in zip(*param_table(post))},
         "log_evidence": float(post.log_evidence), "log_evidence_se": float(post.log_evidence_se),
         "n_simulations": int(post.n_simulations),
     }
