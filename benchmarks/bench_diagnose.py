@@ -164,8 +164,9 @@ def score(a) -> None:
     if audit_p.exists():
         # presence re-tested with a stronger absorption search (generate.py --audit)
         aud = json.loads(audit_p.read_text())["cases"]
-        eff_a = [r for r in eff if aud.get(r[0], {}).get("present", presence[r[0]][0])]
-        moved = [r[0] for r in eff if aud.get(r[0], {}).get("present", presence[r[0]][0]) != presence[r[0]][0]]
+        audited = {r[0]: aud.get(r[0], {}).get("present", presence[r[0]][0]) for r in eff}
+        eff_a = [r for r in eff if audited[r[0]]]
+        moved = [r[0] for r in eff if audited[r[0]] != presence[r[0]][0]]
         print(f"effect cases present under the audit (audit.json: stronger absorption search; changed: "
               f"{', '.join(moved) or 'none'}) named correctly: {sum(r[3] for r in eff_a)}/{len(eff_a)}")
     ctl = [r for r in rows if r[1] == "control"]

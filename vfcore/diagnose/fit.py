@@ -382,7 +382,8 @@ class ExtendedEvaluator:
         gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
         flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
         extra = np.full((k, 3 * len(names)), np.nan)
-        nulls = [{e.name: e.null for e in ext.params}[n] for n in names]
+        null_of = {e.name: e.null for e in ext.params}
+        nulls = [null_of[n] for n in names]
         messages = []
         for i, r in enumerate(results):
             try:
