@@ -8,7 +8,9 @@ GAW files while fitting; ``truth.json`` is opened afterwards, for scoring only (
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --workers 2
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --score
 
-Defaults (docs/diagnose.md, section 5): 0.35 s simulated with 0.15 s discarded, 2 base SMC runs of
+Defaults (docs/diagnose.md, section 5): the simulated window of the suite's public forward-model
+settings (``cases.json`` "model": 0.55 s simulated with 0.25 s discarded, the paper's and
+``SimConfig``'s default; runs before stop 13 used 0.35 / 0.15 s), 2 base SMC runs of
 40 particles (larger evidence kept), every observation-level extension screened above 3 nats and
 every forward-level one refitted with 24 particles, naming rule with min_rms_gain 0.30.
 
@@ -36,12 +38,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 
-def _problem(meta: dict, case: dict, cases_dir: Path, duration: float, sigma_e: float, discard: float | None = None):
+def _problem(meta: dict, case: dict, cases_dir: Path, duration: float | None, sigma_e: float,
+             discard: float | None = None):
+    """The fitting problem of one case: its GAW and fps, the default prior with the suite's fixed
+    parameters, and the suite's public forward-model settings (``cases.json`` "model"); ``duration``
+    and ``discard`` override the simulated window when given."""
     from vfcore.config import SimConfig
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
     m = meta["model"]
-    cfg = SimConfig(mesh=m["mesh"], dt=m["dt"], duration=duration,
+    cfg = SimConfig(mesh=m["mesh"], dt=m["dt"], duration=m["duration"] if duration is None else duration,
                     discard=m["discard"] if discard is None else discard, fps=case["fps"])
     prior = Prior.default(fixed=meta["fixed"])
     y = np.loadtxt(cases_dir / case["file"], delimiter=",", skiprows=1, ndmin=1)
@@ -191,9 +197,11 @@ def main(argv=None) -> int:
                     help="observation-level refits (0 = every one screened above 3 nats; forward-level: all)")
     ap.add_argument("--refit-particles", type=int, default=24)
     ap.add_argument("--min-rms-gain", type=float, default=0.30)
-    ap.add_argument("--duration", type=float, default=0.35)
-    ap.add_argument("--discard", type=float, default=0.15,
-                    help="simulated transient discarded, s (limit cycle established by 0.15 s; docs/diagnose.md)")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="simulated time, s (default: the suite's cases.json model setting, 0.55)")
+    ap.add_argument("--discard", type=float, default=None,
+                    help="simulated transient discarded, s (default: the suite's setting, 0.25; some truths "
+                         "are not a settled limit cycle by 0.15 s, docs/diagnose.md section 5)")
     ap.add_argument("--sigma-e", type=float, default=1.0)
     ap.add_argument("--escalate-tau", type=float, default=10.0,
                     help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
