@@ -201,7 +201,7 @@ def main(argv=None) -> int:
                     help="simulated time, s (default: the suite's cases.json model setting, 0.55)")
     ap.add_argument("--discard", type=float, default=None,
                     help="simulated transient discarded, s (default: the suite's setting, 0.25; some truths "
-                         "are not a settled limit cycle by 0.15 s, docs/diagnose.md section 5)")
+                         "are not a settled limit cycle by 0.15 s, docs/diagnose.md section 4)")
     ap.add_argument("--sigma-e", type=float, default=1.0)
     ap.add_argument("--escalate-tau", type=float, default=10.0,
                     help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
