@@ -133,11 +133,13 @@ def diagnose_cmd(
                                                          "parameters neither estimated nor fixed take Table 3 values")] = None,
         mesh: Annotated[str, typer.Option(help="coarse | medium | fine")] = "coarse",
         dt: Annotated[float, typer.Option(help="time step, s")] = 1e-4,
-        duration: Annotated[float, typer.Option(help="simulated time, s")] = 0.45,
+        duration: Annotated[float, typer.Option(help="simulated time, s (the paper's 0.55)")] = 0.55,
         discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = 0.25,
         sigma_e: Annotated[float, typer.Option(help="observation noise sd, mm^2")] = 1.0,
-        particles: Annotated[int, typer.Option(help="SMC particles of each fit")] = 40,
-        max_refits: Annotated[int, typer.Option(help="most observation-level extensions refitted")] = 2,
+        particles: Annotated[int, typer.Option(help="SMC particles of each base fit")] = 40,
+        refit_particles: Annotated[int, typer.Option(help="SMC particles of each extended fit")] = 24,
+        max_refits: Annotated[Optional[int], typer.Option(
+            help="most observation-level extensions refitted, best screened first (default: all)")] = None,
         candidates: Annotated[Optional[str], typer.Option(
             help="comma-separated extensions to screen (default: every implemented one)")] = None,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
@@ -153,7 +155,9 @@ def diagnose_cmd(
             raise _fail(f"--candidates: {exc}") from None
     if particles < 4:
         raise _fail(f"--particles must be >= 4, got {particles}")
-    if max_refits < 0:
+    if refit_particles < 4:
+        raise _fail(f"--refit-particles must be >= 4, got {refit_particles}")
+    if max_refits is not None and max_refits < 0:
         raise _fail(f"--max-refits must be >= 0, got {max_refits}")
     if workers < 1:
         raise _fail(f"--workers must be >= 1, got {workers}")
@@ -165,12 +169,14 @@ def diagnose_cmd(
     t0 = time.perf_counter()
     try:
         if workers == 1:
-            report = diagnose(problem, candidates=cand, n_particles=particles, max_refits=max_refits, seed=seed)
+            report = diagnose(problem, candidates=cand, n_particles=particles, refit_particles=refit_particles,
+                              max_refits=max_refits, seed=seed)
         else:
             from concurrent.futures import ProcessPoolExecutor
             chunk = max(1, math.ceil(particles / (2 * workers)))
             with ProcessPoolExecutor(workers) as pool:
-                report = diagnose(problem, candidates=cand, n_particles=particles, max_refits=max_refits,
+                report = diagnose(problem, candidates=cand, n_particles=particles, refit_particles=refit_particles,
+                                  max_refits=max_refits,
                                   seed=seed, map=pool.map, chunk_size=chunk)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)

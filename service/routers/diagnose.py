@@ -144,8 +144,11 @@ class DiagnoseRequest(BaseModel):
     candidates: list[str] | None = Field(
         default=None, min_length=1, max_length=50,
         description="catalogued, implemented extensions to screen (default: all implemented ones)")
-    n_particles: int = Field(default=40, ge=10, le=400, description="SMC particles of each fit")
-    max_refits: int = Field(default=2, ge=0, le=5, description="most observation-level extensions refitted")
+    n_particles: int = Field(default=40, ge=10, le=400, description="SMC particles of each base fit")
+    refit_particles: int = Field(default=24, ge=4, le=400, description="SMC particles of each extended fit")
+    max_refits: int | None = Field(default=None, ge=0, le=6,
+                                   description="most observation-level extensions refitted, best screened "
+                                               "first (default: all six)")
     seed: int = Field(default=0, ge=0, lt=2**63)
 
     @field_validator("candidates")
@@ -175,7 +178,8 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         client = manager.client
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
-                          map=dask_map(client), chunk_size=chunk, max_refits=req.max_refits)
+                          map=dask_map(client), chunk_size=chunk, max_refits=req.max_refits,
+                          refit_particles=req.refit_particles)
         d = jsonable(report.to_dict())
         d["request"] = req.model_dump()
         plot_atomic(report, problem, png)

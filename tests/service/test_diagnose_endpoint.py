@@ -46,7 +46,7 @@ def test_diagnose_rules(service):
     # body validation: unknown / unimplemented candidates are named, ranges enforced, extras refused
     r = http.post(f"/jobs/{toy}/diagnose", json={"candidates": ["leak", "warp_drive"]}, headers=auth("alice"))
     assert r.status_code == 422 and "warp_drive" in r.text and "leak'" not in r.text.split("known")[0], r.text
-    for body in ({"n_particles": 5}, {"n_particles": 401}, {"max_refits": 6}, {"candidates": []},
+    for body in ({"n_particles": 5}, {"n_particles": 401}, {"max_refits": 7}, {"refit_particles": 3}, {"candidates": []},
                  {"colour": "red"}):
         assert http.post(f"/jobs/{toy}/diagnose", json=body, headers=auth("alice")).status_code == 422, body
     # a job that is not done: 409
