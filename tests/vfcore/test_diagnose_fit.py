@@ -109,6 +109,10 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     assert drop > 100.0 and not rep.after["leak"]["null_consistent"]
     assert "null_drop" not in rep.after["leak"]["params"]["E_cover"]
     assert ctl.winner is None and ctl.verdict == "no missing physics found", ctl.to_dict()["ranking"]
+    # no screening cut by default: the best-screened observation-level entry is refitted in the
+    # clean recording too (max_refits=1), whatever its score, and still not named
+    best = max(("leak", "scale"), key=lambda n: ctl.screening[n]["score"])
+    assert set(ctl.refits) == {best, "sep_ratio"}, (ctl.screening, list(ctl.refits))
     assert rep.n_simulations > rep.base.n_simulations
 
 
