@@ -303,7 +303,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     posterior, so an observation-level effect that the base absorbs by moving them (a frame-rate
     error is an f0 shift, which the moduli match; a scale error is an amplitude change, which
     p_sub matches) screens at or below zero and a cut hides it (measured: held-out seed-1 cases
-    10, frame rate, -3.9 nats, and 14, scale, +1.0 nats; docs/diagnose.md section 3, stop 14).
+    10, frame rate, -3.9 nats, and 14, scale, +1.0 nats; docs/diagnose.md section 4, "Refit").
     ``refit_particles`` (default ``n_particles``): SMC particles of the refits.
 
     ``base_runs``: independent base SMC runs (seeds ``seed``, ``seed + 7919``, ...); the one with
