@@ -168,16 +168,15 @@ def diagnose_cmd(
                   f"candidates {cand or 'all implemented'}, {workers} worker(s)")
     t0 = time.perf_counter()
     try:
+        kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
+                  seed=seed)
         if workers == 1:
-            report = diagnose(problem, candidates=cand, n_particles=particles, refit_particles=refit_particles,
-                              max_refits=max_refits, seed=seed)
+            report = diagnose(problem, **kw)
         else:
             from concurrent.futures import ProcessPoolExecutor
             chunk = max(1, math.ceil(particles / (2 * workers)))
             with ProcessPoolExecutor(workers) as pool:
-                report = diagnose(problem, candidates=cand, n_particles=particles, refit_particles=refit_particles,
-                                  max_refits=max_refits,
-                                  seed=seed, map=pool.map, chunk_size=chunk)
+                report = diagnose(problem, map=pool.map, chunk_size=chunk, **kw)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)
         raise typer.Exit(1) from None

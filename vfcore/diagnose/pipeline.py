@@ -371,9 +371,12 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     if refit_forward:
         chosen += [n for n in cand if get(n).kind == "forward"]
     if not chosen:
-        why = ("max_refits=0" if max_refits == 0 else
-               f"no extension raised the best log-likelihood by more than {screen_min} nats at the base posterior"
-               if screen_min is not None and obs_ranked else "no candidate can be evaluated on this recording")
+        if max_refits == 0:
+            why = "max_refits=0"
+        elif screen_min is not None and obs_ranked:
+            why = f"no extension raised the best log-likelihood by more than {screen_min} nats at the base posterior"
+        else:
+            why = "no candidate can be evaluated on this recording"
         notes.append(f"nothing refitted: {why}")
     refits, after = {}, {}
     loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
