@@ -200,3 +200,50 @@ def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run
     assert rep.after["scale"]["box_refit_of"] == "asymmetry"
     assert any(n.startswith("nested check: asymmetry") for n in rep.notes)
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
+
+
+def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, monkeypatch):
+    """Blind run with a hidden separation ratio (1.1 against the model's 1.3). The first
+    separation-ratio refit is made to fail as a sampler that missed the mode does (its evidence
+    set 5,000 nats below what it found, so below the base): diagnose refits it on a box around
+    the base's material mode, keeps that bound and names the separation ratio. Unfailed, the
+    refit is left alone (one refit only), recovers 1.1, and its evidence is not below the bound."""
+    import dataclasses as dc
+    import math
+
+    from vfcore.diagnose import pipeline
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(5)
+    run = simulate(TABLE3, dc.replace(CFG, sep_ratio=1.1))
+    y = np.asarray(run.gaw_hr[41::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
+    real, calls = pipeline.fit_extended, []
+
+    def failing_first(problem, extension, **kw):
+        post = real(problem, extension, **kw)
+        calls.append(extension)
+        if fail and len(calls) == 1:
+            post.log_evidence = float(post.log_evidence) - 5000.0
+        return post
+
+    monkeypatch.setattr(pipeline, "fit_extended", failing_first)
+    pb = Problem(y, FPS, prior, config=CFG)
+    fail = True
+    rep = pipeline.diagnose(pb, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
+    assert calls == ["sep_ratio", "sep_ratio"], calls
+    res = rep.after["sep_ratio"]["rescued"]
+    lo, hi = res["box"]["E_cover"]
+    m, h = float(rep.base.mean[0]), 0.15 * (950.0 - 250.0)     # +- 15 % of the prior width, clipped to it
+    assert abs(lo - max(250.0, m - h)) < 1e-9 and abs(hi - min(950.0, m + h)) < 1e-9
+    assert res["first_log_evidence"] < float(rep.base.log_evidence) - 1000.0
+    assert float(rep.refits["sep_ratio"].log_evidence) > float(rep.base.log_evidence)
+    assert any(n.startswith("rescue: the sep_ratio refit") for n in rep.notes)
+    assert rep.winner == "sep_ratio", rep.to_dict()["ranking"]
+    assert rep.after["sep_ratio"]["params"]["sep_ratio"]["mean"] < 1.2     # moved off the model's 1.3
+    calls.clear()
+    fail = False
+    rep2 = pipeline.diagnose(pb, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
+    assert calls == ["sep_ratio"] and "rescued" not in rep2.after["sep_ratio"]
+    assert abs(rep2.after["sep_ratio"]["params"]["sep_ratio"]["mean"] - 1.1) < 0.05
+    # the rescue's value is a lower bound: not above the whole-prior estimate beyond the errors
+    se = math.hypot(float(rep.refits["sep_ratio"].log_evidence_se), float(rep2.refits["sep_ratio"].log_evidence_se))
+    assert float(rep.refits["sep_ratio"].log_evidence) <= float(rep2.refits["sep_ratio"].log_evidence) + 3 * se
