@@ -11,8 +11,11 @@ GAW files while fitting; ``truth.json`` is opened afterwards, for scoring only (
 Defaults (docs/diagnose.md, section 5): the simulated window of the suite's public forward-model
 settings (``cases.json`` "model": 0.55 s simulated with 0.25 s discarded, the paper's and
 ``SimConfig``'s default; runs before stop 13 used 0.35 / 0.15 s), 2 base SMC runs of
-40 particles (larger evidence kept), every observation-level extension screened above 3 nats and
-every forward-level one refitted with 24 particles, naming rule with min_rms_gain 0.30.
+40 particles (larger evidence kept), every catalogue entry refitted with 24 particles (until
+stop 13 only observation-level entries screened above 3 nats), a forward-level refit that ended
+far below the base rescued around the base's material mode (since stop 15), naming rule with
+min_rms_gain 0.30. The particle counts are ``vfcore.diagnose.defaults``, which the CLI and the
+service default to as well.
 
 Per case it writes ``<out>/case_XX.json`` (the diagnosis report; existing reports are kept, so an
 interrupted run resumes) and a figure ``case_XX.png``. ``--score`` prints the per-case table,
@@ -191,11 +194,12 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--score", action="store_true", help="score existing reports against truth.json")
-    ap.add_argument("--particles", type=int, default=40)
+    from vfcore.diagnose.defaults import BASE_PARTICLES, REFIT_PARTICLES
+    ap.add_argument("--particles", type=int, default=BASE_PARTICLES)
     ap.add_argument("--base-runs", type=int, default=2, help="independent base SMC runs, largest evidence kept")
     ap.add_argument("--max-refits", type=int, default=0,
-                    help="observation-level refits (0 = every one screened above 3 nats; forward-level: all)")
-    ap.add_argument("--refit-particles", type=int, default=24)
+                    help="observation-level refits, best screened first (0 = every one; forward-level: all)")
+    ap.add_argument("--refit-particles", type=int, default=REFIT_PARTICLES)
     ap.add_argument("--min-rms-gain", type=float, default=0.30)
     ap.add_argument("--duration", type=float, default=None,
                     help="simulated time, s (default: the suite's cases.json model setting, 0.55)")

@@ -11,6 +11,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from vfcore.diagnose.defaults import BASE_PARTICLES, DISCARD_S, DURATION_S, MAX_REFITS, REFIT_PARTICLES
+
 console = Console()
 
 
@@ -133,13 +135,13 @@ def diagnose_cmd(
                                                          "parameters neither estimated nor fixed take Table 3 values")] = None,
         mesh: Annotated[str, typer.Option(help="coarse | medium | fine")] = "coarse",
         dt: Annotated[float, typer.Option(help="time step, s")] = 1e-4,
-        duration: Annotated[float, typer.Option(help="simulated time, s (the paper's 0.55)")] = 0.55,
-        discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = 0.25,
+        duration: Annotated[float, typer.Option(help="simulated time, s (the paper's 0.55)")] = DURATION_S,
+        discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = DISCARD_S,
         sigma_e: Annotated[float, typer.Option(help="observation noise sd, mm^2")] = 1.0,
-        particles: Annotated[int, typer.Option(help="SMC particles of each base fit")] = 40,
-        refit_particles: Annotated[int, typer.Option(help="SMC particles of each extended fit")] = 24,
+        particles: Annotated[int, typer.Option(help="SMC particles of each base fit")] = BASE_PARTICLES,
+        refit_particles: Annotated[int, typer.Option(help="SMC particles of each extended fit")] = REFIT_PARTICLES,
         max_refits: Annotated[Optional[int], typer.Option(
-            help="most observation-level extensions refitted, best screened first (default: all)")] = None,
+            help="most observation-level extensions refitted, best screened first (default: all)")] = MAX_REFITS,
         candidates: Annotated[Optional[str], typer.Option(
             help="comma-separated extensions to screen (default: every implemented one)")] = None,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,

@@ -22,6 +22,7 @@ import numpy as np
 from fastapi import APIRouter, Body, HTTPException, Request, Response, status
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from vfcore.diagnose.defaults import BASE_PARTICLES, MAX_REFITS, REFIT_PARTICLES
 from worker.jobspec import JobSpec
 
 from ..deps import JobIdDep, ManagerDep, UserDep
@@ -144,9 +145,9 @@ class DiagnoseRequest(BaseModel):
     candidates: list[str] | None = Field(
         default=None, min_length=1, max_length=50,
         description="catalogued, implemented extensions to screen (default: all implemented ones)")
-    n_particles: int = Field(default=40, ge=10, le=400, description="SMC particles of each base fit")
-    refit_particles: int = Field(default=24, ge=4, le=400, description="SMC particles of each extended fit")
-    max_refits: int | None = Field(default=None, ge=0, le=6,
+    n_particles: int = Field(default=BASE_PARTICLES, ge=10, le=400, description="SMC particles of each base fit")
+    refit_particles: int = Field(default=REFIT_PARTICLES, ge=4, le=400, description="SMC particles of each extended fit")
+    max_refits: int | None = Field(default=MAX_REFITS, ge=0, le=6,
                                    description="most observation-level extensions refitted, best screened "
                                                "first (default: all six)")
     seed: int = Field(default=0, ge=0, lt=2**63)

@@ -73,3 +73,29 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     assert d["n_simulations"] > 0
     assert (out / "diagnosis.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "missing physics: leak" in r.output and "Screening" in r.output
+
+
+def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypatch):
+    """`vfinfer diagnose`, POST /jobs/{id}/diagnose and the benchmark script take their defaults
+    from vfcore.diagnose.defaults, so the benchmark's rates describe the default use."""
+    import inspect
+    import sys
+    from pathlib import Path
+
+    from service.cli_diagnose import diagnose_cmd
+    from service.routers.diagnose import DiagnoseRequest
+    from vfcore.diagnose import defaults as D
+    sig = inspect.signature(diagnose_cmd).parameters
+    req = DiagnoseRequest()
+    assert (sig["particles"].default, sig["refit_particles"].default, sig["max_refits"].default) == \
+        (D.BASE_PARTICLES, D.REFIT_PARTICLES, D.MAX_REFITS)
+    assert (sig["duration"].default, sig["discard"].default) == (D.DURATION_S, D.DISCARD_S)
+    assert (req.n_particles, req.refit_particles, req.max_refits) == (D.BASE_PARTICLES, D.REFIT_PARTICLES,
+                                                                       D.MAX_REFITS)
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    from benchmarks import bench_diagnose
+    seen = {}
+    monkeypatch.setattr(bench_diagnose, "run", lambda a: seen.update(vars(a)))
+    bench_diagnose.main(["--cases", "c", "--out", "o"])
+    assert (seen["particles"], seen["refit_particles"]) == (D.BASE_PARTICLES, D.REFIT_PARTICLES)
+    assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
