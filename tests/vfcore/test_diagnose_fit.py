@@ -235,6 +235,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     m, h = float(rep.base.mean[0]), 0.15 * (950.0 - 250.0)     # +- 15 % of the prior width, clipped to it
     assert abs(lo - max(250.0, m - h)) < 1e-9 and abs(hi - min(950.0, m + h)) < 1e-9
     assert res["first_log_evidence"] < float(rep.base.log_evidence) - 1000.0
+    assert res["first_n_simulations"] > 0
     assert float(rep.refits["sep_ratio"].log_evidence) > float(rep.base.log_evidence)
     assert any(n.startswith("rescue: the sep_ratio refit") for n in rep.notes)
     assert rep.winner == "sep_ratio", rep.to_dict()["ranking"]

@@ -427,6 +427,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             if math.isfinite(z1) and z1 >= z0 - max(min_gain, k_se * gap_se):
                 continue
             t1 = time.perf_counter()
+            first_sims = int(refits[name].n_simulations)
             zb, sb, near = base_near(problem, base, n_particles=refit_n, seed=seed + 262147 + j, map=map,
                                      chunk_size=chunk_size, half_width=rescue_half_width, extension=name,
                                      integrate=integrate, **opts)
@@ -441,6 +442,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                 refits[name] = near
                 after[name] = summarise(name, near, t1)
                 after[name]["rescued"] = {"first_log_evidence": z1, "first_log_evidence_se": s1,
+                                          "first_n_simulations": first_sims,
                                           "box": near.info["box"],
                                           "log_box_probability": near.info["log_box_probability"]}
 
