@@ -510,8 +510,7 @@ def sampled_null_drops(problem: Problem, post, extension: str, *, m: int = 8, ma
     value (``ExtParam.null``), the up to ``m`` heaviest distinct particles of ``post`` are
     re-simulated as they are and with that parameter at its null; the drop is the median over the
     particles of ``loglik(particle) - loglik(particle at the null)``. Costs ``m (1 + k)``
-    simulations for ``k`` such parameters, in one batch through ``map`` (which may re-split it, as
-    the benchmark's balanced map does; the parts are concatenated in order). Returns ``(drops, number
+    simulations for ``k`` such parameters, in one task through ``map``. Returns ``(drops, number
     of simulations)``.
 
     :func:`.rank.null_consistent` decides these parameters by the drop (``sampled_drops``), not
@@ -544,9 +543,9 @@ def sampled_null_drops(problem: Problem, post, extension: str, *, m: int = 8, ma
         b[:, j] = null
         rows.append(b)
     ev = ExtendedEvaluator(problem, extension, integrate=integrate)
-    parts = list(map(ev, [np.vstack(rows)]))        # a map may re-split the batch; rows keep their order
-    ll = np.concatenate([np.asarray(r.loglik, dtype=float) for r in parts])
-    ok = np.concatenate([np.asarray(r.ok, dtype=bool) for r in parts])
+    (res,) = list(map(ev, [np.vstack(rows)]))
+    ll = np.asarray(res.loglik, dtype=float)
+    ok = np.asarray(res.ok, dtype=bool)
     k = len(best)
     out = {}
     for t, (name, _, _) in enumerate(targets):
