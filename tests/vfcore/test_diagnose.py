@@ -275,25 +275,6 @@ def test_null_consistent_posteriors():
     assert not null_consistent(names, [10.0, 0.06, 0.2], [1.0, 0.05, 0.01], "lr_stiffness", drops={"lr_lag": 1.0})
 
 
-def test_null_consistent_decides_sampled_parameters_by_their_likelihood_drop():
-    """A sampled parameter with a measured drop at its null is decided by the drop, not the sd:
-    a collapsed posterior 80 sd from the null whose null costs 2 nats is at the null; one within
-    1 sd whose null costs 50 nats is not. Parameters without a drop keep the sd test."""
-    from vfcore.diagnose.rank import null_consistent
-    one = (("sep_ratio",), [1.2987], [1.6e-5], "sep_ratio")
-    assert not null_consistent(*one)
-    assert null_consistent(*one, sampled_drops={"sep_ratio": 2.0})
-    assert null_consistent(*one, sampled_drops={"sep_ratio": -30.0})        # the null fits better
-    assert not null_consistent(("sep_ratio",), [1.3], [0.1], "sep_ratio", sampled_drops={"sep_ratio": 50.0})
-    assert null_consistent(*one, sampled_drops={"sep_ratio": 8.0})          # 2 null_sd^2, inclusive
-    assert not null_consistent(*one, sampled_drops={"sep_ratio": 8.01})
-    assert not null_consistent(*one, sampled_drops={"sep_ratio": float("nan")})   # no drop: the sd test
-    # two parameters: each must pass its own test
-    names = ("f_sub_hz", "log10_Z_sub")
-    assert null_consistent(names, [450.0, 5.4], [1.0, 0.001], "subglottal", sampled_drops={"log10_Z_sub": 1.0})
-    assert not null_consistent(names, [450.0, 5.0], [1.0, 0.1], "subglottal", sampled_drops={"log10_Z_sub": 9.0})
-
-
 def test_rank_null_fit_is_not_named_and_raises_the_reference():
     """A refit at its null value that beats the base found a better material mode: it is not
     named, and the other gains are measured against it (evidence and RMS)."""

@@ -248,34 +248,3 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     # the rescue's value is a lower bound: not above the whole-prior estimate beyond the errors
     se = math.hypot(float(rep.refits["sep_ratio"].log_evidence_se), float(rep2.refits["sep_ratio"].log_evidence_se))
     assert float(rep.refits["sep_ratio"].log_evidence) <= float(rep2.refits["sep_ratio"].log_evidence) + 3 * se
-
-
-def test_sampled_null_drop_of_a_forward_fit_against_its_own_likelihood(base_run):
-    """The null drop of a sampled forward parameter is the log-likelihood lost by re-simulating
-    the heaviest particles at the null: ~0 for particles at sep_ratio 1.3 +- 2e-5 (a collapsed
-    fit of the base model), large for particles at 1.05 on a recording simulated at 1.3 whose
-    fit at 1.05 is poor (then the null is *better*: a negative drop), and large and positive for
-    particles at 1.05 on a recording simulated at 1.05."""
-    from types import SimpleNamespace
-    from vfcore.diagnose.fit import sampled_null_drops
-    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
-
-    def problem(sep):
-        run = simulate(TABLE3, extended_config(CFG, "sep_ratio", {"sep_ratio": sep})) if sep != 1.3 else base_run
-        assert run.ok, run.message
-        y = np.asarray(run.gaw_hr[37::HR_OVERSAMPLE][:200])
-        return Problem(y + 0.2 * np.random.default_rng(5).standard_normal(200), FPS, prior, config=CFG)
-
-    def post(sep_values):
-        th = np.array([[TABLE3.E_cover * (1 + 1e-4 * i), s] for i, s in enumerate(sep_values)])
-        return SimpleNamespace(names=("E_cover", "sep_ratio"), samples=th, log_weights=-np.arange(len(th), dtype=float))
-
-    collapsed = post([1.3 + 2e-5, 1.3 - 2e-5, 1.3 + 1e-5, 1.3])
-    at_105 = post([1.05, 1.05 + 1e-3, 1.05 - 1e-3, 1.05 + 2e-3])
-    d, n = sampled_null_drops(problem(1.3), collapsed, "sep_ratio", m=3)
-    assert n == 6 and set(d) == {"sep_ratio"} and abs(d["sep_ratio"]) < 2.0
-    d_wrong, _ = sampled_null_drops(problem(1.3), at_105, "sep_ratio", m=3)
-    d_right, _ = sampled_null_drops(problem(1.05), at_105, "sep_ratio", m=3)
-    assert d_wrong["sep_ratio"] < -8.0 and d_right["sep_ratio"] > 8.0, (d_wrong, d_right)
-    # no sampled parameter with a null (epithelium has none): nothing simulated
-    assert sampled_null_drops(problem(1.3), post([1.3]), "epithelium") == ({}, 0)

@@ -35,7 +35,7 @@ import numpy as np
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
-from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table, sampled_null_drops
+from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
 from .rank import (NO_FINDING, RankReport, null_consistent, prefer_nested, prefer_parsimonious, promote_local,
                    rank_extensions, residual_removed)
@@ -290,8 +290,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              refit_particles: int | None = None, escalate_tau: float | None = 10.0,
              escalate_factor: int = 2, integrate: bool = True, nested_check: bool = True,
              parsimony_se: float = 0.0, rescue_forward: bool = True,
-             rescue_half_width: float = 0.15, null_by_likelihood: bool = True,
-             null_particles: int = 8) -> DiagnoseReport:
+             rescue_half_width: float = 0.15) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -355,10 +354,6 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     three-mode subglottal tract): the first 48-particle refit ended at -12,932 nats, 9,235 below
     the base; the box refit gave >= -1,590, 2,275 above it, in 2,192 simulations
     (docs/diagnose.md section 4, "Rescue").
-    ``null_by_likelihood``: a forward-level fit's sampled parameters with a null value are tested
-    for it by re-simulating its ``null_particles`` heaviest particles at the null
-    (:func:`.fit.sampled_null_drops`; ``null_particles (1 + k)`` simulations per fit) instead of by
-    the posterior sd, which a collapsed SMC makes arbitrarily small (docs/diagnose.md section 3).
     """
     t0 = time.perf_counter()
     opts = dict(smc_options or {})
@@ -400,19 +395,11 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
 
     def summarise(name: str, post: Posterior, t1: float) -> dict:
-        nonlocal n_sims
         s = fit_summary(post, problem.obs_compared, problem.fps, problem.sigma_e)
         g = _pred(post)
         s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
         s["rms_improvement"] = 1.0 - s["residual_rms"] / before["residual_rms"]
-        sampled = {}
-        if null_by_likelihood and get(name).kind == "forward":
-            sampled, k = sampled_null_drops(problem, post, name, m=null_particles, map=map, integrate=integrate)
-            n_sims += k
-            for n, d in sampled.items():
-                s["params"][n]["null_drop"] = d
-        s["null_consistent"] = null_consistent(*param_table(post), name, null_sd, drops=null_drops(post),
-                                               sampled_drops=sampled)
+        s["null_consistent"] = null_consistent(*param_table(post), name, null_sd, drops=null_drops(post))
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
         return s

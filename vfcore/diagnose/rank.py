@@ -54,8 +54,7 @@ def _lz(x) -> tuple[float, float]:
     return float(v), float(s)
 
 
-def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None, drops=None,
-                    sampled_drops=None) -> bool:
+def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None, drops=None) -> bool:
     """Whether a fit of ``extension`` (an :class:`.extensions.Extension` or its name) puts every
     extension parameter that has a null value (``ExtParam.null``) within ``null_sd`` posterior
     standard deviations of it. ``names``/``mean``/``sd``: the posterior's parameter names, means
@@ -72,14 +71,7 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
     stiffness: the folds can be swapped, so +lag and -lag fit alike and 0 lies between). A
     parameter whose null is more than ``2 null_sd^2`` nats below the best (``null_sd``
     = 2: 8 nats, the drop of a Gaussian 4 sd out; within 2 sd it is at most 2 nats) is therefore
-    not null-consistent, whatever its mean and sd.
-
-    ``sampled_drops``: name -> the same median drop for a parameter the SMC *sampled*
-    (:func:`.fit.sampled_null_drops`, re-simulated at the null). Such a parameter is decided by
-    the drop alone (at most ``2 null_sd^2`` nats: at its null): with a few dozen particles the
-    SMC can collapse to a posterior sd far below what the likelihood resolves, and the sd test
-    would then call a value indistinguishable from the null non-null (a base-model mode found by
-    an extended fit, named as a gain)."""
+    not null-consistent, whatever its mean and sd."""
     from .extensions import get
     ext = get(extension) if isinstance(extension, str) else extension
     idx = {n: i for i, n in enumerate(names)}
@@ -89,11 +81,6 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
             continue
         if p.name not in idx:
             return False
-        if sampled_drops is not None and p.name in sampled_drops and math.isfinite(sampled_drops[p.name]):
-            if sampled_drops[p.name] > 2.0 * null_sd ** 2:
-                return False
-            checked = True
-            continue
         i = idx[p.name]
         m, s_ = float(mean[i]), float(sd[i])
         if not (math.isfinite(m) and math.isfinite(s_)):
