@@ -79,7 +79,6 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     """`vfinfer diagnose`, POST /jobs/{id}/diagnose and the benchmark script take their defaults
     from vfcore.diagnose.defaults, so the benchmark's rates describe the default use."""
     import inspect
-    import sys
     from pathlib import Path
 
     from service.cli_diagnose import diagnose_cmd
@@ -92,7 +91,7 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     assert (sig["duration"].default, sig["discard"].default) == (D.DURATION_S, D.DISCARD_S)
     assert (req.n_particles, req.refit_particles, req.max_refits) == (D.BASE_PARTICLES, D.REFIT_PARTICLES,
                                                                        D.MAX_REFITS)
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2]))     # undone after the test
     from benchmarks import bench_diagnose
     seen = {}
     monkeypatch.setattr(bench_diagnose, "run", lambda a: seen.update(vars(a)))
