@@ -12,8 +12,9 @@ Defaults (docs/diagnose.md, section 5): the simulated window of the suite's publ
 settings (``cases.json`` "model": 0.55 s simulated with 0.25 s discarded, the paper's and
 ``SimConfig``'s default; runs before stop 13 used 0.35 / 0.15 s), 2 base SMC runs of
 40 particles (larger evidence kept), every catalogue entry refitted with 24 particles (until
-stop 13 only observation-level entries screened above 3 nats), a forward-level refit that ended
-far below the base rescued around the base's material mode (since stop 15), naming rule with
+stop 13 only observation-level entries screened above 3 nats), a refit that ended far below the
+base rescued around the base's material mode (forward-level entries since stop 15, every entry and
+without the between-run error in the trigger since stop 17), naming rule with
 min_rms_gain 0.30. The particle counts are ``vfcore.diagnose.defaults``, which the CLI and the
 service default to as well.
 
