@@ -21,8 +21,10 @@ ROOT = Path(__file__).resolve().parents[2]
 def _start(data_dir: Path, port: int) -> subprocess.Popen:
     env = {**os.environ, "VFINFER_DATA_DIR": str(data_dir), "VFINFER_ALLOW_TOY": "1", "VFINFER_N_WORKERS": "2",
            "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1"}
-    p = subprocess.Popen([sys.executable, "-m", "service.cli", "serve", "--port", str(port)], cwd=ROOT, env=env,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    log = data_dir.parent / f"serve_{port}_{time.time_ns()}.log"       # kept for the error message
+    with open(log, "wb") as fh:
+        p = subprocess.Popen([sys.executable, "-m", "service.cli", "serve", "--port", str(port)], cwd=ROOT, env=env,
+                             stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
     t0 = time.time()
     while True:
         try:
@@ -30,9 +32,12 @@ def _start(data_dir: Path, port: int) -> subprocess.Popen:
                 return p
         except (httpx.HTTPError, KeyError, ValueError):
             pass
-        if time.time() - t0 > 90 or p.poll() is not None:
+        if time.time() - t0 > 180 or p.poll() is not None:
+            rc = p.poll()
             _kill(p)
-            raise RuntimeError("service did not start")
+            tail = log.read_text(errors="replace")[-3000:]
+            raise RuntimeError(f"service did not start on port {port} within {time.time() - t0:.0f} s "
+                               f"(exit code {rc}); its output:\n{tail}")
         time.sleep(0.2)
 
 
