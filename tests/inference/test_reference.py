@@ -20,7 +20,7 @@ def test_reference_density_is_normalised_and_matches_its_samples(prior3):
     rng = np.random.default_rng(0)
     mu = prior3.lo + 0.9 * prior3.width            # near a corner: much of the Gaussian is truncated
     ref = GaussianReference(prior3, mu, np.diag((0.2 * prior3.width) ** 2), eps=0.1)
-    assert 0.05 < ref.p_inside < 0.5
+    assert 0.05 < ref.p_inside[0] < 0.5
     u = prior3.sample(400_000, rng)               # E_p[q / p] = 1: q integrates to one on the box
     r = np.exp(ref.logpdf(u) - prior3.logpdf(u))
     assert abs(r.mean() - 1.0) < 4 * r.std() / math.sqrt(r.size)
@@ -71,9 +71,15 @@ def test_smc_from_reference_exact(prior3, offset_sd):
 def test_reference_from_posterior_covers_the_fit(prior3):
     toy = LinearGaussianToy(prior3, n_obs=6, noise=0.05, seed=0)
     post = smc(toy, prior3, n_particles=100, seed=5)
-    ref = reference_from_posterior(prior3, post, inflate=2.0)
+    ref = reference_from_posterior(prior3, post, inflate=2.0, wide=0.1)
     assert np.allclose(ref.mean, post.mean, rtol=1e-9, atol=0.0)
-    assert np.all(np.sqrt(np.diag(ref.cov)) >= 2.0 * post.sd * (1 - 1e-9))
+    assert ref.cov.shape == (2, 3, 3)
+    assert np.all(np.sqrt(np.diag(ref.cov[0])) >= 2.0 * post.sd * (1 - 1e-9))
+    assert np.all(np.sqrt(np.diag(ref.cov[1])) >= 0.1 * prior3.width * (1 - 1e-9))
+    # the two-component reference is a normalised density too
+    u = prior3.sample(200_000, np.random.default_rng(3))
+    r = np.exp(ref.logpdf(u) - prior3.logpdf(u))
+    assert abs(r.mean() - 1.0) < 4 * r.std() / math.sqrt(r.size)
     wrong = Prior({"p_sub": (400.0, 1800.0), "rho": (1000.0, 1100.0), "eta": (1.0, 5.0)})
     with pytest.raises(ValueError, match="not the first ones"):
         reference_from_posterior(wrong, post)

@@ -40,40 +40,45 @@ __all__ = ["GaussianReference", "reference_from_posterior"]
 class GaussianReference:
     """Defensive truncated-Gaussian reference on ``prior``'s box (module docstring).
 
-    ``mean``, ``cov``: of the Gaussian over the first ``len(mean)`` dimensions of ``prior``
-    (the remaining ones are uniform). ``eps``: the prior's weight in the mixture."""
+    ``mean``: of the Gaussian over the first ``len(mean)`` dimensions of ``prior`` (the remaining
+    ones are uniform). ``cov``: one covariance ``(g, g)``, or several ``(k, g, g)`` about the same
+    mean, mixed with equal weights (a narrow one that starts the sampler in a fitted mode and a
+    wide one that lets it reach a shifted one). ``eps``: the prior's weight in the mixture."""
 
     def __init__(self, prior: Prior, mean, cov, *, eps: float = 0.1, n_mc: int = 1 << 17, seed: int = 0):
         if not isinstance(prior, Prior):
             raise ValueError("reference needs a Prior")
         mean = np.atleast_1d(np.asarray(mean, dtype=float))
-        cov = np.atleast_2d(np.asarray(cov, dtype=float))
+        cov = np.asarray(cov, dtype=float)
         g = mean.size
         if not 1 <= g <= prior.ndim:
             raise ValueError(f"the Gaussian covers {g} dimensions; the prior has {prior.ndim}")
-        if cov.shape != (g, g):
-            raise ValueError(f"cov must be {g} x {g}, got {cov.shape}")
-        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+        covs = cov.reshape((1, g, g)) if cov.shape in ((g, g), (1, g, g)) else cov
+        if covs.ndim != 3 or covs.shape[1:] != (g, g) or covs.shape[0] < 1:
+            raise ValueError(f"cov must be {g} x {g} or k x {g} x {g}, got {cov.shape}")
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(covs))):
             raise ValueError("reference mean and covariance must be finite")
         if not 0.0 < eps < 1.0:
             raise ValueError(f"eps must lie in (0, 1), got {eps}")
         try:
-            self._chol = np.linalg.cholesky(cov)
+            self._chols = [np.linalg.cholesky(c) for c in covs]
         except np.linalg.LinAlgError as exc:
             raise ValueError("reference covariance is not positive definite") from exc
-        self.prior, self.mean, self.cov, self.eps, self.g = prior, mean, cov, float(eps), g
+        self.prior, self.mean, self.cov, self.eps, self.g = prior, mean, covs, float(eps), g
         self._lo, self._hi = prior.lo[:g], prior.hi[:g]
-        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0x5EF,)))
-        z = self._gauss(int(n_mc), rng)
-        p_in = float(np.mean(self._inside(z)))
-        if p_in <= 0.0:
-            raise ValueError("the reference Gaussian has no mass inside the prior box")
-        self.p_inside = p_in
-        self.log_norm_var = (1.0 - p_in) / (p_in * int(n_mc))
-        self._log_det = float(np.sum(np.log(np.diag(self._chol))))
+        self.p_inside, self.log_norm_var = [], 0.0
+        for c, ch in enumerate(self._chols):
+            rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0x5EF, c)))
+            p_in = float(np.mean(self._inside(self._gauss(ch, int(n_mc), rng))))
+            if p_in <= 0.0:
+                raise ValueError("the reference Gaussian has no mass inside the prior box")
+            self.p_inside.append(p_in)
+            # delta method; the components' normalisers enter a mixture, bounded by the sum
+            self.log_norm_var += (1.0 - p_in) / (p_in * int(n_mc))
+        self._log_det = [float(np.sum(np.log(np.diag(ch)))) for ch in self._chols]
 
-    def _gauss(self, n: int, rng) -> np.ndarray:
-        return self.mean + rng.standard_normal((n, self.g)) @ self._chol.T
+    def _gauss(self, chol, n: int, rng) -> np.ndarray:
+        return self.mean + rng.standard_normal((n, self.g)) @ chol.T
 
     def _inside(self, x: np.ndarray) -> np.ndarray:
         return np.all((x >= self._lo) & (x <= self._hi), axis=1)
@@ -81,40 +86,51 @@ class GaussianReference:
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` draws from ``q`` (rejection for the truncation)."""
         out = self.prior.sample(n, rng)                    # uniform part, and the defensive draws
-        gauss = rng.random(n) >= self.eps
-        need = int(np.count_nonzero(gauss))
-        got: list[np.ndarray] = []
-        while need > 0:
-            z = self._gauss(max(2 * need, 64), rng)
-            z = z[self._inside(z)]
-            got.append(z[:need])
-            need -= got[-1].shape[0]
-        if got:
-            out[gauss, : self.g] = np.concatenate(got)
+        k = len(self._chols)
+        comp = np.where(rng.random(n) >= self.eps, rng.integers(0, k, n), -1)
+        for c, ch in enumerate(self._chols):
+            rows = np.flatnonzero(comp == c)
+            need, got = rows.size, []
+            while need > 0:
+                z = self._gauss(ch, max(2 * need, 64), rng)
+                z = z[self._inside(z)]
+                got.append(z[:need])
+                need -= got[-1].shape[0]
+            if rows.size:
+                out[rows, : self.g] = np.concatenate(got)
         return out
 
     def logpdf(self, thetas) -> np.ndarray:
         """Normalised log density of ``q`` (``-inf`` outside the prior box)."""
+        from scipy.linalg import solve_triangular
         x = np.atleast_2d(np.asarray(thetas, dtype=float))
         lp = self.prior.logpdf(x)
-        from scipy.linalg import solve_triangular
-        z = solve_triangular(self._chol, (x[:, : self.g] - self.mean).T, lower=True)
-        lg = (-0.5 * np.sum(z * z, axis=0) - self._log_det - 0.5 * self.g * math.log(2 * math.pi)
-              - math.log(self.p_inside))
-        # the uniform dimensions of the Gaussian component: the prior's density over them
+        k = len(self._chols)
+        # the uniform dimensions of the Gaussian components: the prior's density over them
         lu = -float(np.sum(np.log(self.prior.width[self.g:])))
-        out = logsumexp(np.stack([math.log1p(-self.eps) + lg + lu, math.log(self.eps) + lp]), axis=0)
+        terms = [math.log(self.eps) + lp]
+        for ch, ld, p_in in zip(self._chols, self._log_det, self.p_inside):
+            z = solve_triangular(ch, (x[:, : self.g] - self.mean).T, lower=True)
+            lg = -0.5 * np.sum(z * z, axis=0) - ld - 0.5 * self.g * math.log(2 * math.pi) - math.log(p_in)
+            terms.append(math.log1p(-self.eps) - math.log(k) + lg + lu)
+        out = logsumexp(np.stack(terms), axis=0)
         return np.where(np.isfinite(lp), out, -np.inf)
 
 
 def reference_from_posterior(prior: Prior, post, *, inflate: float = 2.0, floor: float = 0.01,
-                             eps: float = 0.1, seed: int = 0) -> GaussianReference:
+                             wide: float | None = 0.1, eps: float = 0.1, seed: int = 0) -> GaussianReference:
     """A :class:`GaussianReference` on ``prior`` from a fitted posterior ``post`` whose parameters
-    are the first ones of ``prior`` (a base fit, for an extended model's prior): weighted mean and
-    covariance of ``post``'s particles, each sd floored at ``floor`` of the prior width (a
-    collapsed ensemble still gives a proper Gaussian), the whole covariance scaled by
-    ``inflate**2`` (the reference must be wider than the posterior it stands in for: the
-    extended model's posterior is shifted and wider)."""
+    are the first ones of ``prior`` (a base fit, for an extended model's prior), about the
+    weighted mean of ``post``'s particles:
+
+    - *narrow*: their covariance, each sd floored at ``floor`` of the prior width (a collapsed
+      ensemble still gives a proper Gaussian), scaled by ``inflate**2``; it starts the sampler in
+      the fitted mode;
+    - *wide* (unless ``wide`` is None): independent, sd ``wide`` of each prior width (or the narrow
+      one's, if larger); it reaches a mode shifted by a few tenths of the prior (an effect the base
+      fit absorbed by moving its material parameters), as the stop-16 box of +-0.15 did.
+
+    The two are mixed with equal weights, and ``eps`` of the prior (module docstring)."""
     x = np.asarray(post.samples, dtype=float)
     w = np.exp(np.asarray(post.log_weights, dtype=float) - logsumexp(post.log_weights))
     g = x.shape[1]
@@ -124,6 +140,8 @@ def reference_from_posterior(prior: Prior, post, *, inflate: float = 2.0, floor:
     mu = w @ x
     dev = x - mu
     cov = (dev * w[:, None]).T @ dev
-    fl = (floor * prior.width[:g]) ** 2
-    cov = cov + np.diag(fl)
-    return GaussianReference(prior, mu, inflate ** 2 * cov, eps=eps, seed=seed)
+    cov = inflate ** 2 * (cov + np.diag((floor * prior.width[:g]) ** 2))
+    covs = [cov]
+    if wide is not None:
+        covs.append(np.diag(np.maximum((wide * prior.width[:g]) ** 2, np.diag(cov))))
+    return GaussianReference(prior, mu, np.stack(covs), eps=eps, seed=seed)
