@@ -45,3 +45,17 @@ def test_sensitivity_rejects_bad_input():
         sensitivity(pb, [1.0, 2.0])
     with pytest.raises(ValueError, match="step"):
         sensitivity(pb, [9.0, 700.0, 900.0], step=0.0)
+
+
+def test_local_check_counts_the_roughness_as_an_error():
+    """Held-out seed-4 case 06: leak beat the base refitted in its mode by 1,426 +- 0.8 nats and was
+    named on the local comparison; the base fit's vibration was irregular (a 1e-6 relative change
+    moved the log-likelihood by up to 81,000 nats). With the roughness in the error it is not
+    named; at a regular base's roughness (0.01 nats) it is."""
+    from vfcore.diagnose.rank import local_passes
+    ok, se = local_passes(1426.0, 0.7, 0.4, 80994.6)
+    assert not ok and se > 80000
+    ok, se = local_passes(1426.0, 0.7, 0.4, 0.01)
+    assert ok and se < 1.0
+    assert not local_passes(2.5, 0.1, 0.1, 0.0)[0]            # below min_gain = 3 nats
+    assert not local_passes(float("nan"), 0.1, 0.1, 0.0)[0]

@@ -268,6 +268,20 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
         f"base runs that landed in different modes)"))
 
 
+def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: float = 0.0, *,
+                 min_gain: float = 3.0, k_se: float = 3.0) -> tuple[bool, float]:
+    """The evidence test of the local check: ``(passes, se)`` with ``se`` the delta-method errors of
+    the refit and of the base refitted in its mode, and the likelihood's ``roughness`` at the base
+    fit (:func:`.regularity.sensitivity`; 0 for a regular vibration), in quadrature. On an
+    irregular likelihood there is no smooth local mode for the two fits to share, and how far the
+    log-likelihood jumps between neighbouring points is an error of their comparison (held-out
+    seed-4 case 06: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; docs/diagnose.md
+    section 4, "Regularity")."""
+    se = math.hypot(float(se_refit), float(se_bound), float(roughness))
+    ok = math.isfinite(d_local) and math.isfinite(se) and d_local > min_gain and d_local > k_se * se
+    return bool(ok), se
+
+
 def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: float = 3.0,
                  min_rms_gain: float = 0.30, null_sd: float = 2.0) -> RankReport:
     """:func:`rank_extensions` from fitted posteriors carrying predictions: the localised residual
