@@ -400,7 +400,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     fits "in one mode" without the between-run error) adds the largest change, the *roughness*,
     in quadrature to its error. Measured (docs/diagnose.md section 4, "Regularity"): 4 of the 13
     held-out seed-4 base fits were irregular, among them case 06, whose wrong name (leak, +1,426
-    nats locally) came from the local check at a roughness of 81,000 nats; 16 of 50 oscillating
+    nats locally) came from the local check at a roughness of 81,000 nats; 15 of 50 oscillating
     prior draws were irregular, 7 of the 8 at p_sub >= 1,500 Pa.
     """
     if rescue_method not in ("reference", "box"):

@@ -1,0 +1,81 @@
+"""Where is the fold model's vibration irregular? The regularity check over the prior.
+
+For ``--n`` scrambled-Sobol draws of the free parameters of the Table 2 prior (the concealed
+suites' fixed values for the rest), in the suites' simulated window, each draw's waveform plus
+noise (``--sigma`` mm^2, 500 frames at 2 kHz) is the recording, and
+:func:`vfcore.diagnose.regularity.sensitivity` measures how much a relative 1e-6 change of the
+parameters moves the log-likelihood (the *roughness*; > 1 nat = irregular). Prints one line per
+draw and the irregular fraction per subglottal-pressure band (docs/diagnose.md section 4,
+"Regularity").
+
+    python benchmarks/bench_regularity.py --n 64 --seed 7
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+FIXED = {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}
+BANDS = ((400.0, 800.0), (800.0, 1200.0), (1200.0, 1500.0), (1500.0, 1800.0))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, default=64)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--sigma", type=float, default=0.5)
+    ap.add_argument("--duration", type=float, default=0.55)
+    ap.add_argument("--discard", type=float, default=0.25)
+    a = ap.parse_args(argv)
+    from scipy.stats import qmc
+
+    from vfcore.config import SimConfig
+    from vfcore.diagnose.regularity import sensitivity
+    from vfcore.forward import simulate
+    from vfcore.inference import Prior
+    from vfcore.inference.problem import Problem
+    from vfcore.result import HR_OVERSAMPLE
+    prior = Prior.default(fixed=FIXED)
+    cfg = SimConfig(mesh="coarse", dt=1e-4, duration=a.duration, discard=a.discard)
+    th = prior.lo + qmc.Sobol(prior.ndim, scramble=True, seed=a.seed).random(a.n) * prior.width
+    rows, failed, still = [], 0, 0
+    t0 = time.perf_counter()
+    for i, t in enumerate(th):
+        r = simulate(prior.to_params(t), cfg)
+        if not r.ok:
+            failed += 1
+            print(f"{i:3d} {np.round(t, 1)} simulation failed", flush=True)
+            continue
+        y = np.asarray(r.gaw_hr[::HR_OVERSAMPLE][5:505], float)
+        y = y + a.sigma * np.random.default_rng(i).standard_normal(y.size)
+        try:
+            pb = Problem(y, 2000.0, prior, config=cfg)
+        except ValueError:
+            still += 1
+            print(f"{i:3d} {np.round(t, 1)} no oscillation", flush=True)
+            continue
+        s = sensitivity(pb, t, seed=i)
+        rows.append((t, s.max_change))
+        print(f"{i:3d} {np.round(t, 1)} roughness {s.max_change:.3g} nats{'  IRREGULAR' if s.irregular else ''}",
+              flush=True)
+    names = prior.names
+    p = np.array([t[names.index("p_sub")] for t, _ in rows])
+    irr = np.array([c > 1.0 for _, c in rows])
+    print(f"\n{a.n} draws: {failed} failed, {still} did not oscillate, {len(rows)} oscillated, "
+          f"{int(irr.sum())} irregular ({time.perf_counter() - t0:.0f} s)")
+    for lo, hi in BANDS:
+        m = (p >= lo) & (p < hi)
+        print(f"  p_sub {lo:6.0f}-{hi:6.0f} Pa: {int(irr[m].sum())} of {int(m.sum())} irregular")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
