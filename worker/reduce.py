@@ -99,11 +99,35 @@ def posterior_summary(post, pred: dict | None = None) -> dict:
     })
 
 
+def regularity_of(root, post) -> dict | None:
+    """The regularity check (vfcore.diagnose.regularity; 3 simulations) at the posterior's heaviest
+    sample of an FE job: is the fitted vibration regular, so that the waveform likelihood is a
+    smooth function of the parameters? ``None`` for a toy job; an error is reported, not raised
+    (docs/inference.md, "Irregular vibration")."""
+    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
+    if spec.model != "fe":
+        return None
+    try:
+        from vfcore.diagnose.regularity import sensitivity
+        theta = np.asarray(post.samples, dtype=float)[int(np.argmax(post.log_weights))]
+        return sensitivity(spec.to_problem(), theta, seed=spec.seed).to_dict()
+    except Exception as exc:  # noqa: BLE001 - a check must not fail the job; recorded
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
 def publish_posterior(store_path: str, post) -> dict:
     """Write the posterior arrays, summary, CSV and figures into the store; return the summary."""
     root = st.open_store(Path(store_path))
+    reg = regularity_of(root, post)
+    if reg is not None and reg.get("irregular"):
+        post.warnings = list(post.warnings) + [
+            f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters changes "
+            f"the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough here and the "
+            "posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')"]
     pred, bands = _predictive_summary(post)
     summary = posterior_summary(post, pred)
+    if reg is not None:
+        summary["regularity"] = _clean(reg)
     pg = root.require_group("posterior")
     for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
                       ("log_weights", np.asarray(post.log_weights, dtype=float)),
