@@ -430,7 +430,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         sens = sensitivity(problem, _best_particles(base, 1)[0], seed=seed)
         n_sims += sens.n_simulations
         before["regularity"] = sens.to_dict()
-        rough = sens.max_change if math.isfinite(sens.max_change) else math.inf
+        rough = sens.max_change                            # inf when a perturbed run failed
         if sens.irregular:
             notes.append(f"the base fit's vibration is irregular: a relative change of {sens.step:g} in its "
                          f"parameters changes the log-likelihood by up to {sens.max_change:.1f} nats, so the "

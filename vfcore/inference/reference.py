@@ -131,16 +131,12 @@ def reference_from_posterior(prior: Prior, post, *, inflate: float = 2.0, floor:
       fit absorbed by moving its material parameters), as the stop-16 box of +-0.15 did.
 
     The two are mixed with equal weights, and ``eps`` of the prior (module docstring)."""
-    x = np.asarray(post.samples, dtype=float)
-    w = np.exp(np.asarray(post.log_weights, dtype=float) - logsumexp(post.log_weights))
-    g = x.shape[1]
+    g = len(post.names)
     if tuple(prior.names[:g]) != tuple(post.names):
         raise ValueError(f"the posterior's parameters {tuple(post.names)} are not the first ones of the prior "
                          f"{tuple(prior.names)}")
-    mu = w @ x
-    dev = x - mu
-    cov = (dev * w[:, None]).T @ dev
-    cov = inflate ** 2 * (cov + np.diag((floor * prior.width[:g]) ** 2))
+    mu = np.asarray(post.mean, dtype=float)
+    cov = inflate ** 2 * (np.asarray(post.cov, dtype=float) + np.diag((floor * prior.width[:g]) ** 2))
     covs = [cov]
     if wide is not None:
         covs.append(np.diag(np.maximum((wide * prior.width[:g]) ** 2, np.diag(cov))))
