@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -118,76 +117,42 @@ def run(a) -> None:
             pool.join()
 
 
-def _rivals(d: dict) -> list:
-    """Rivals of a report written before they were stored (rebuilt from its ranking rows)."""
-    from vfcore.diagnose.rank import CandidateRow, RankReport
-    if not d.get("winner"):
-        return []
-    rows = [CandidateRow(**r) for r in d["ranking"]]
-    rep = RankReport(math.nan, math.nan, rows, d["winner"], 3.0, 3.0)
-    return [{"physics": f, "gap": g, "se": e} for f, g, e in rep.rivals]
-
-
 def score(a) -> None:
-    from vfcore.diagnose.extensions import physics_of
-    out, cases_dir = Path(a.out), Path(a.cases)
-    truth = json.loads((cases_dir / "truth.json").read_text())
-    truth = truth.get("cases", truth)
-    if isinstance(truth, list):
-        truth = {t["id"]: t for t in truth}
-    rows, presence = [], {}
-    for cid, t in sorted(truth.items()):
-        p = out / f"case_{cid}.json"
-        if not p.exists():
-            continue
-        d = json.loads(p.read_text())
-        label = t.get("label") or t.get("effect")
-        present = bool(t.get("present", True)) if label != "control" else False
-        presence[cid] = (present, t.get("unabsorbed_rms_mm2", float("nan")), t.get("sigma_mm2", float("nan")))
-        if "error" in d:
-            rows.append((cid, label, "rejected", False, float("nan"), float("nan"), 0, 0.0,
-                         t.get("effect_loglik", float("nan")), "-"))
-            continue
-        win = d["winner"]
-        gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), float("nan")) if win else float("nan")
-        imp = d["refits"][win]["rms_improvement"] if win else float("nan")
-        physics = d.get("physics") or physics_of(win)   # the winner's family (lr_stiffness -> asymmetry)
-        ok = (win is None) if label == "control" else (physics == label)
-        ref = d.get("reference", "base")
-        rivals = d["rivals"] if "rivals" in d else _rivals(d)
-        if rivals:
-            ref += "; rivals: " + ", ".join(r["physics"] for r in rivals)
-        rows.append((cid, label, win, ok, gain, imp, d["n_simulations"], d["wall_s"],
-                     t.get("effect_loglik", float("nan")), ref))
-    print(f"{'case':<5}{'truth':<12}{'named':<12}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}{'wall s':>8}"
-          f"{'effect ll':>11}{'unabs/sd':>9}  reference")
-    for cid, lab, win, ok, g, imp, n, w, el, ref in rows:
-        pr, un, sd = presence[cid]
-        print(f"{cid:<5}{lab:<12}{str(win):<12}{'Y' if ok else 'N':<4}{g:9.1f}{100 * imp:8.0f}%{n:7d}{w:8.0f}"
-              f"{el:11.1f}{un / sd:9.2f}{'' if pr or lab == 'control' else '*'}  {ref}")
-    eff = [r for r in rows if r[1] != "control"]
-    eff_p = [r for r in eff if presence[r[0]][0]]
-    if len(eff_p) < len(eff):
-        print(f"\n* effect not present (absorbed by the base model to < {1.02:.2f} sigma; generator presence rule)")
-        print(f"effect cases with the effect present named correctly: {sum(r[3] for r in eff_p)}/{len(eff_p)}")
-    audit_p = cases_dir / "audit.json"
-    if audit_p.exists():
-        # presence re-tested with a stronger absorption search (generate.py --audit)
-        aud = json.loads(audit_p.read_text())["cases"]
-        audited = {r[0]: aud.get(r[0], {}).get("present", presence[r[0]][0]) for r in eff}
-        eff_a = [r for r in eff if audited[r[0]]]
-        moved = [r[0] for r in eff if audited[r[0]] != presence[r[0]][0]]
-        print(f"effect cases present under the audit (audit.json: stronger absorption search; changed: "
-              f"{', '.join(moved) or 'none'}) named correctly: {sum(r[3] for r in eff_a)}/{len(eff_a)}")
-    ctl = [r for r in rows if r[1] == "control"]
-    named = [r for r in rows if r[2] is not None and r[2] != "rejected"]
-    print(f"{'' if len(eff_p) < len(eff) else chr(10)}all effect cases named correctly: {sum(r[3] for r in eff)}/{len(eff)}")
-    print(f"false alarms in controls: {sum(not r[3] for r in ctl)}/{len(ctl)}")
-    if named:
-        print(f"named effects with RMS improvement >= 30%: {sum(r[5] >= 0.3 for r in named)}/{len(named)}; "
-              f"with dlogZ > 0: {sum(r[4] > 0 for r in named)}/{len(named)}")
-    print(f"simulations per case: mean {np.mean([r[6] for r in rows]):.0f}; wall per case: mean "
-          f"{np.mean([r[7] for r in rows]):.0f} s (as run: see --workers); total {sum(r[7] for r in rows) / 60:.1f} min")
+    """Per-case table and summary (benchmarks/scoring.py) of one suite, or of several pooled:
+    ``--cases`` and ``--out`` then take comma-separated lists of equal length."""
+    from benchmarks.scoring import PRESENCE_SD, format_summary, load_suite, summarise
+    cdirs, odirs = [c for c in a.cases.split(",") if c], [o for o in a.out.split(",") if o]
+    if len(cdirs) != len(odirs):
+        raise SystemExit(f"--score: {len(cdirs)} --cases directories but {len(odirs)} --out directories")
+    recs = []
+    for c, o in zip(cdirs, odirs):
+        recs += load_suite(c, o, suite=f"{Path(c).name}" if len(cdirs) > 1 else None)
+    multi = len(cdirs) > 1
+    print(f"{'case':<{14 if multi else 5}}{'truth':<12}{'named':<13}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}"
+          f"{'wall s':>8}{'effect ll':>11}{'unabs/sd':>9}{'base':>6}  reference")
+    for r in recs:
+        cid = f"{r.suite}/{r.case}" if multi else r.case
+        ref = r.reference + ("; rivals: " + ", ".join(r.rivals) if r.rivals else "")
+        reg = {None: "?", True: "irr", False: "reg"}[r.irregular]
+        print(f"{cid:<{14 if multi else 5}}{r.label:<12}{str(r.winner):<13}{'Y' if r.ok else 'N':<4}{r.gain:9.1f}"
+              f"{100 * r.rms_improvement:8.0f}%{r.n_simulations:7d}{r.wall_s:8.0f}{r.effect_loglik:11.1f}"
+              f"{r.strength_sd:9.2f}{'' if r.present or r.label == 'control' else '*'}{reg:>5}  {ref}")
+    if any(r.label != "control" and not r.present for r in recs):
+        print(f"\n* effect not present (absorbed by the base model to < {PRESENCE_SD:.2f} sigma; generator presence "
+              "rule): not counted in the present-effect rate")
+    for c, o in zip(cdirs, odirs):
+        audit_p = Path(c) / "audit.json"
+        if audit_p.exists():
+            # presence re-tested with a stronger absorption search (generate.py --audit)
+            aud = json.loads(audit_p.read_text())["cases"]
+            eff = [r for r in load_suite(c, o) if r.label != "control"]
+            audited = [r for r in eff if aud.get(r.case, {}).get("present", r.present)]
+            moved = [r.case for r in eff if aud.get(r.case, {}).get("present", r.present) != r.present]
+            print(f"{Path(c).name}: effect cases present under the audit (audit.json; changed: "
+                  f"{', '.join(moved) or 'none'}) named correctly: {sum(r.ok for r in audited)}/{len(audited)}")
+    print()
+    print(format_summary(summarise(recs)))
+    print("(wall per case as run: see --workers)")
 
 
 def main(argv=None) -> int:

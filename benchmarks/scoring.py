@@ -1,0 +1,212 @@
+"""Scoring of concealed-effect benchmark runs (``bench_diagnose.py --score``), one suite or several pooled.
+
+A *suite* is a generator output directory (``cases.json``, ``truth.json``; benchmarks/concealed)
+and the directory of diagnosis reports run on it (``case_XX.json``). :func:`load_suite` joins the
+two into one record per reported case; :func:`summarise` counts over any list of records, so
+several held-out suites pool by concatenating their records.
+
+Besides the issue's figures (effect cases named right, false alarms in controls, RMS and
+log-evidence of every named effect, cost), the summary splits the detection rate by
+
+- the truth's effect (per-effect recall),
+- the effect's strength: the generator's unabsorbed RMS over the noise sd (the part of the effect
+  the best base-model fit cannot absorb; ``WEAK_SD`` separates weak from strong),
+- the base fit's regularity (``report["base"]["regularity"]``, written since stop 19; older
+  reports count as unknown),
+
+each with its 95 % Wilson interval (``scipy.stats.binomtest``), and counts the rescue refits
+(fired, kept, by method) from the reports' notes. The reports are read only; the truth is opened
+here, after the diagnosis, never by the fitting code.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["CaseRecord", "load_suite", "summarise", "wilson", "format_summary", "WEAK_SD"]
+
+#: unabsorbed effect RMS (in noise sds) below which an effect counts as weak
+WEAK_SD = 2.0
+#: the generator's presence rule: an effect the base model absorbs to below this many sds is absent
+PRESENCE_SD = 1.02
+
+_RESCUE = re.compile(r"rescue: the (\w+) refit ended at log Z (\S+), below the base's (\S+); refitted (.*?): "
+                     r"log Z (?:>=|=) (\S+) \+- (\S+)")
+
+
+@dataclass
+class CaseRecord:
+    """One diagnosed case joined with its truth."""
+    suite: str
+    case: str
+    label: str                       # the truth's effect, or "control"
+    present: bool                    # generator presence rule (False for controls)
+    strength_sd: float               # unabsorbed effect RMS / noise sd (nan for controls)
+    winner: str | None               # the named extension, None (no missing physics), or "rejected"
+    physics: str | None              # the winner's catalogue entry (lr_stiffness -> asymmetry)
+    ok: bool
+    gain: float                      # log-evidence gain of the winner (nan if none)
+    rms_improvement: float           # of the winner (nan if none)
+    n_simulations: int
+    wall_s: float
+    effect_loglik: float
+    irregular: bool | None           # base fit's regularity, None when the report predates the check
+    rivals: list = field(default_factory=list)
+    reference: str = "base"
+    rescues: list = field(default_factory=list)   # (extension, method, kept)
+
+
+def _truth_table(cases_dir: Path) -> dict:
+    truth = json.loads((cases_dir / "truth.json").read_text())
+    truth = truth.get("cases", truth)
+    if isinstance(truth, list):
+        truth = {t["id"]: t for t in truth}
+    return truth
+
+
+def _rescues(notes) -> list:
+    out = []
+    for n in notes:
+        m = _RESCUE.match(n)
+        if m:
+            method = "reference" if "reference" in m.group(4) else "box"
+            out.append((m.group(1), method, "not higher" not in n))
+    return out
+
+
+def _rivals(d: dict) -> list:
+    """Rival physics of a report: stored since stop 14, rebuilt from the ranking rows before."""
+    if "rivals" in d:
+        return [r["physics"] for r in d["rivals"]]
+    if not d.get("winner"):
+        return []
+    from vfcore.diagnose.rank import CandidateRow, RankReport
+    rows = [CandidateRow(**r) for r in d["ranking"]]
+    return [f for f, _, _ in RankReport(math.nan, math.nan, rows, d["winner"], 3.0, 3.0).rivals]
+
+
+def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseRecord]:
+    """Records of every case of ``cases_dir``'s truth that has a report in ``out_dir`` (cases not
+    yet diagnosed are skipped). Raises ``FileNotFoundError`` naming a missing ``truth.json``."""
+    from vfcore.diagnose.extensions import physics_of
+    cases_dir, out_dir = Path(cases_dir), Path(out_dir)
+    if not (cases_dir / "truth.json").exists():
+        raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
+    suite = suite or cases_dir.name
+    recs = []
+    for cid, t in sorted(_truth_table(cases_dir).items()):
+        p = out_dir / f"case_{cid}.json"
+        if not p.exists():
+            continue
+        d = json.loads(p.read_text())
+        label = t.get("label") or t.get("effect")
+        control = label == "control"
+        present = False if control else bool(t.get("present", True))
+        strength = (float(t.get("unabsorbed_rms_mm2", math.nan)) / float(t.get("sigma_mm2", math.nan))
+                    if not control else math.nan)
+        el = float(t.get("effect_loglik", math.nan))
+        if "error" in d:
+            recs.append(CaseRecord(suite, cid, label, present, strength, "rejected", None, False, math.nan,
+                                   math.nan, 0, 0.0, el, None))
+            continue
+        win = d.get("winner")
+        physics = (d.get("physics") or physics_of(win)) if win else None
+        ok = (win is None) if control else (physics == label)
+        gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), math.nan) if win else math.nan
+        imp = d["refits"][win]["rms_improvement"] if win else math.nan
+        reg = d.get("base", {}).get("regularity")
+        recs.append(CaseRecord(
+            suite, cid, label, present, strength, win, physics, ok, float(gain), float(imp),
+            int(d.get("n_simulations", 0)), float(d.get("wall_s", 0.0)), el,
+            None if reg is None else bool(reg["irregular"]),
+            _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", []))))
+    return recs
+
+
+def wilson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion ``k / n`` (nan, nan for n = 0)."""
+    if n == 0:
+        return math.nan, math.nan
+    from scipy.stats import binomtest
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
+def _rate(recs) -> dict:
+    k, n = sum(r.ok for r in recs), len(recs)
+    lo, hi = wilson(k, n)
+    return {"named": k, "of": n, "rate": k / n if n else math.nan, "wilson95": [lo, hi]}
+
+
+def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
+    """Counts over ``recs`` (one suite or several pooled); see the module docstring."""
+    eff = [r for r in recs if r.label != "control"]
+    present = [r for r in eff if r.present]
+    ctl = [r for r in recs if r.label == "control"]
+    named = [r for r in recs if r.winner not in (None, "rejected")]
+    by_label = {lab: _rate([r for r in present if r.label == lab]) for lab in sorted({r.label for r in present})}
+    strength = {f"weak (< {weak_sd:g} sd)": _rate([r for r in present if r.strength_sd < weak_sd]),
+                f"strong (>= {weak_sd:g} sd)": _rate([r for r in present if r.strength_sd >= weak_sd])}
+    regularity = {"regular": _rate([r for r in present if r.irregular is False]),
+                  "irregular": _rate([r for r in present if r.irregular is True]),
+                  "unknown": _rate([r for r in present if r.irregular is None])}
+    confusion: dict = {}
+    for r in present:
+        if not r.ok:
+            key = f"{r.label} -> {r.physics or 'none'}"
+            confusion[key] = confusion.get(key, 0) + 1
+    resc = {}
+    for r in recs:
+        for _, method, kept in r.rescues:
+            m = resc.setdefault(method, {"fired": 0, "kept": 0})
+            m["fired"] += 1
+            m["kept"] += int(kept)
+    fa = sum(not r.ok for r in ctl)
+    return {
+        "suites": sorted({r.suite for r in recs}),
+        "cases": len(recs),
+        "present": _rate(present),
+        "all_effect_cases": _rate(eff),
+        "false_alarms": {"count": fa, "of": len(ctl), "wilson95": list(wilson(fa, len(ctl)))},
+        "named_rms_ge_30pct": [sum(r.rms_improvement >= 0.3 for r in named), len(named)],
+        "named_positive_gain": [sum(r.gain > 0 for r in named), len(named)],
+        "by_effect": by_label,
+        "by_strength": strength,
+        "by_base_regularity": regularity,
+        "misses": dict(sorted(confusion.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "rescues": resc,
+        "simulations_per_case": float(np.mean([r.n_simulations for r in recs])) if recs else math.nan,
+        "wall_s_per_case": float(np.mean([r.wall_s for r in recs])) if recs else math.nan,
+    }
+
+
+def _fmt_rate(x: dict) -> str:
+    if not x["of"]:
+        return "0/0"
+    lo, hi = x["wilson95"]
+    return f"{x['named']}/{x['of']} ({100 * x['rate']:.0f} %, Wilson 95 % {100 * lo:.0f}-{100 * hi:.0f} %)"
+
+
+def format_summary(s: dict) -> str:
+    """The summary as printed by ``bench_diagnose.py --score``."""
+    lines = [f"suites: {', '.join(s['suites'])}; {s['cases']} cases",
+             f"effect present, named right: {_fmt_rate(s['present'])}",
+             f"all effect cases named right: {_fmt_rate(s['all_effect_cases'])}",
+             f"false alarms in controls: {s['false_alarms']['count']}/{s['false_alarms']['of']}",
+             f"named effects with RMS improvement >= 30 %: {s['named_rms_ge_30pct'][0]}/{s['named_rms_ge_30pct'][1]}; "
+             f"with dlogZ > 0: {s['named_positive_gain'][0]}/{s['named_positive_gain'][1]}",
+             "by effect (present cases): " + "; ".join(f"{k} {v['named']}/{v['of']}" for k, v in s["by_effect"].items()),
+             "by strength: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_strength"].items()),
+             "by base regularity: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_base_regularity"].items()
+                                                if v["of"]),
+             "misses (truth -> named): " + (", ".join(f"{k} x{v}" for k, v in s["misses"].items()) or "none"),
+             "rescue refits: " + (", ".join(f"{m} fired {v['fired']} kept {v['kept']}" for m, v in s["rescues"].items())
+                                  or "none"),
+             f"simulations per case: mean {s['simulations_per_case']:.0f}; wall per case: mean "
+             f"{s['wall_s_per_case']:.0f} s"]
+    return "\n".join(lines)

@@ -1,0 +1,125 @@
+"""Scoring of concealed-effect benchmark runs (benchmarks/scoring.py, bench_diagnose.py --score)."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from benchmarks import bench_diagnose  # noqa: E402
+from benchmarks.scoring import format_summary, load_suite, summarise, wilson  # noqa: E402
+
+BOX_NOTE = ("rescue: the leak refit ended at log Z -900.0, below the base's -500.0; refitted around the base's "
+            "material mode: log Z >= -480.0 +- 0.5")
+REF_NOTE = ("rescue: the epithelium refit ended at log Z -1275.9, below the base's -616.0; refitted from the base "
+            "posterior (reference-started SMC): log Z = -700.1 +- 0.8 (not higher; the first refit is kept)")
+
+
+def _report(winner, *, physics=None, gain=50.0, rms=0.5, notes=(), irregular=None, sims=1000, wall=10.0):
+    d = {"verdict": "...", "winner": winner, "physics": physics, "rivals": [],
+         "base": {"log_evidence": -500.0}, "refits": {}, "ranking": [], "reference": "base",
+         "n_simulations": sims, "wall_s": wall, "notes": list(notes)}
+    if irregular is not None:
+        d["base"]["regularity"] = {"irregular": irregular}
+    if winner:
+        d["refits"][winner] = {"rms_improvement": rms}
+        d["ranking"] = [{"name": winner, "delta": gain}]
+    return d
+
+
+def _truth(label, *, present=True, unabs=3.0, sigma=1.0):
+    return {"label": label, "present": present, "unabsorbed_rms_mm2": unabs, "sigma_mm2": sigma,
+            "effect_loglik": 100.0}
+
+
+def _suite(tmp_path: Path, name: str, cases: dict) -> tuple[Path, Path]:
+    cdir, odir = tmp_path / name, tmp_path / f"{name}_out"
+    cdir.mkdir()
+    odir.mkdir()
+    (cdir / "truth.json").write_text(json.dumps({"cases": {cid: t for cid, (t, _) in cases.items()}}))
+    for cid, (_, rep) in cases.items():
+        if rep is not None:
+            (odir / f"case_{cid}.json").write_text(json.dumps(rep))
+    return cdir, odir
+
+
+@pytest.fixture
+def suite(tmp_path):
+    return _suite(tmp_path, "s1", {
+        "00": (_truth("leak", unabs=3.0), _report("leak", irregular=False, notes=[BOX_NOTE])),
+        # lr_stiffness is an asymmetry model: a zipper named as it is a miss
+        "01": (_truth("zipper", unabs=1.5), _report("lr_stiffness", physics="asymmetry", irregular=True)),
+        "02": (_truth("control"), _report(None, notes=[REF_NOTE])),
+        "03": (_truth("control"), _report("scale", rms=0.2, gain=-1.0)),
+        "04": (_truth("scale", present=False, unabs=0.5), _report(None)),
+        # the physics field is absent: the scorer maps lr_stiffness to asymmetry itself
+        "05": (_truth("asymmetry", unabs=1.0), _report("lr_stiffness", irregular=False)),
+        "06": (_truth("subglottal", unabs=5.0), {"error": "GAW has NaN at frame 3", "winner": None}),
+        "07": (_truth("epithelium", unabs=4.0), None),          # not diagnosed yet: skipped
+    })
+
+
+def test_wilson_matches_the_closed_form():
+    for k, n in [(10, 16), (0, 4), (38, 62), (16, 16)]:
+        z, p = 1.959963984540054, k / n
+        c = (p + z * z / (2 * n)) / (1 + z * z / n)
+        h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+        lo, hi = wilson(k, n)
+        assert lo == pytest.approx(c - h, abs=1e-9) and hi == pytest.approx(c + h, abs=1e-9)
+    assert all(math.isnan(x) for x in wilson(0, 0))
+
+
+def test_records_join_reports_and_truth(suite):
+    recs = {r.case: r for r in load_suite(*suite)}
+    assert sorted(recs) == ["00", "01", "02", "03", "04", "05", "06"]
+    assert recs["00"].ok and recs["00"].irregular is False and recs["00"].rescues == [("leak", "box", True)]
+    assert not recs["01"].ok and recs["01"].physics == "asymmetry"
+    assert recs["02"].ok and recs["02"].rescues == [("epithelium", "reference", False)]
+    assert not recs["03"].ok                                  # a false alarm
+    assert recs["05"].ok and recs["05"].physics == "asymmetry"
+    assert recs["06"].winner == "rejected" and not recs["06"].ok
+    assert recs["01"].strength_sd == pytest.approx(1.5) and math.isnan(recs["02"].strength_sd)
+
+
+def test_summary_counts(suite):
+    s = summarise(load_suite(*suite))
+    # present effect cases: 00 (right), 01 (wrong), 05 (right), 06 (rejected); 04 is absent
+    assert (s["present"]["named"], s["present"]["of"]) == (2, 4)
+    assert (s["all_effect_cases"]["named"], s["all_effect_cases"]["of"]) == (2, 5)
+    assert (s["false_alarms"]["count"], s["false_alarms"]["of"]) == (1, 2)
+    assert (s["by_effect"]["zipper"]["named"], s["by_effect"]["zipper"]["of"]) == (0, 1)
+    assert s["by_strength"]["weak (< 2 sd)"]["named"] == 1 and s["by_strength"]["weak (< 2 sd)"]["of"] == 2
+    assert s["by_strength"]["strong (>= 2 sd)"]["of"] == 2
+    assert s["by_base_regularity"]["irregular"]["of"] == 1 and s["by_base_regularity"]["unknown"]["of"] == 1
+    assert s["misses"] == {"subglottal -> none": 1, "zipper -> asymmetry": 1}
+    assert s["rescues"] == {"box": {"fired": 1, "kept": 1}, "reference": {"fired": 1, "kept": 0}}
+    # named: 00, 01, 03, 05; 03's gain is negative and its RMS gain 20 %
+    assert s["named_rms_ge_30pct"] == [3, 4] and s["named_positive_gain"] == [3, 4]
+    assert "2/4 (50 %" in format_summary(s)
+
+
+def test_suites_pool(tmp_path, suite):
+    other = _suite(tmp_path, "s2", {"00": (_truth("leak"), _report("leak")),
+                                    "01": (_truth("control"), _report(None))})
+    s = summarise(load_suite(*suite) + load_suite(*other))
+    assert (s["present"]["named"], s["present"]["of"]) == (3, 5)
+    assert (s["false_alarms"]["count"], s["false_alarms"]["of"]) == (1, 3)
+    assert s["suites"] == ["s1", "s2"]
+
+
+def test_cli_score_pools_and_rejects_unequal_lists(tmp_path, suite, capsys):
+    other = _suite(tmp_path, "s2", {"00": (_truth("leak"), _report("leak"))})
+    bench_diagnose.main(["--score", "--cases", f"{suite[0]},{other[0]}", "--out", f"{suite[1]},{other[1]}"])
+    out = capsys.readouterr().out
+    assert "s2/00" in out and "effect present, named right: 3/5" in out
+    with pytest.raises(SystemExit, match="2 --cases directories but 1 --out"):
+        bench_diagnose.main(["--score", "--cases", f"{suite[0]},{other[0]}", "--out", str(suite[1])])
+
+
+def test_missing_truth_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no truth.json"):
+        load_suite(tmp_path, tmp_path)
