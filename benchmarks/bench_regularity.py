@@ -23,8 +23,24 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-FIXED = {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}
+from benchmarks.concealed.generate import BASE_CONFIG, public_fixed  # noqa: E402
+
+FIXED = public_fixed()       # the concealed suites' fixed parameters
+CFG = BASE_CONFIG            # and their forward model: coarse mesh, dt 1e-4, 0.55 s with 0.25 s discarded
 BANDS = ((400.0, 800.0), (800.0, 1200.0), (1200.0, 1500.0), (1500.0, 1800.0))
+
+
+def recording(theta, prior, cfg, *, sigma: float, seed: int, n: int = 500, fps: float = 2000.0):
+    """The simulated GAW at ``theta`` sampled at ``fps`` (``n`` frames after 5 skipped) plus white
+    noise of sd ``sigma`` (``seed``); ``None`` when the simulation fails."""
+    from vfcore.forward import simulate
+    from vfcore.result import HR_OVERSAMPLE
+    r = simulate(prior.to_params(theta), cfg)
+    if not r.ok:
+        return None
+    step = int(round(cfg.fps * HR_OVERSAMPLE / fps))
+    y = np.asarray(r.gaw_hr[::step][5:5 + n], float)
+    return y + sigma * np.random.default_rng(seed).standard_normal(y.size)
 
 
 def main(argv=None) -> int:
@@ -37,25 +53,22 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from scipy.stats import qmc
 
-    from vfcore.config import SimConfig
+    import dataclasses as dc
+
     from vfcore.diagnose.regularity import sensitivity
-    from vfcore.forward import simulate
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
-    from vfcore.result import HR_OVERSAMPLE
     prior = Prior.default(fixed=FIXED)
-    cfg = SimConfig(mesh="coarse", dt=1e-4, duration=a.duration, discard=a.discard)
+    cfg = dc.replace(CFG, duration=a.duration, discard=a.discard)
     th = prior.lo + qmc.Sobol(prior.ndim, scramble=True, seed=a.seed).random(a.n) * prior.width
     rows, failed, still = [], 0, 0
     t0 = time.perf_counter()
     for i, t in enumerate(th):
-        r = simulate(prior.to_params(t), cfg)
-        if not r.ok:
+        y = recording(t, prior, cfg, sigma=a.sigma, seed=i)
+        if y is None:
             failed += 1
             print(f"{i:3d} {np.round(t, 1)} simulation failed", flush=True)
             continue
-        y = np.asarray(r.gaw_hr[::HR_OVERSAMPLE][5:505], float)
-        y = y + a.sigma * np.random.default_rng(i).standard_normal(y.size)
         try:
             pb = Problem(y, 2000.0, prior, config=cfg)
         except ValueError:

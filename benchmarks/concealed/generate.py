@@ -628,6 +628,12 @@ def generate_suite(seed: int, counts: dict | None = None, config: SimConfig = BA
 
 
 # ------------------------------------------------------------------ output
+def public_fixed() -> dict:
+    """The parameters a suite holds fixed (Table 3 values, all but ``TRUTH_BOUNDS``'s), as written
+    to the public ``cases.json``."""
+    return {k: v for k, v in TABLE3.as_dict().items() if k not in TRUTH_BOUNDS}
+
+
 def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = None,
                 config: SimConfig = BASE_CONFIG) -> None:
     out = Path(out)
@@ -636,8 +642,7 @@ def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = No
         "description": "GAW observations (mm^2) for model diagnosis; fit the base model to each case",
         "model": {"mesh": config.mesh, "dt": config.dt, "duration": config.duration,
                   "discard": config.discard},
-        "estimated": list(TRUTH_BOUNDS), "fixed": {k: v for k, v in TABLE3.as_dict().items()
-                                                    if k not in TRUTH_BOUNDS},
+        "estimated": list(TRUTH_BOUNDS), "fixed": public_fixed(),
         "cases": [{"id": c.id, "file": f"case_{c.id}.csv", "fps": c.fps, "n_frames": int(c.gaw.size)}
                   for c in cases],
     }

@@ -1,26 +1,24 @@
 """The regularity check of the base fit (vfcore.diagnose.regularity)."""
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from vfcore.config import SimConfig
 from vfcore.diagnose.regularity import sensitivity
-from vfcore.forward import simulate
 from vfcore.inference import Prior
 from vfcore.inference.problem import Problem
-from vfcore.result import HR_OVERSAMPLE
 
-FIXED = {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}
-CFG = SimConfig(mesh="coarse", dt=1e-4, duration=0.55, discard=0.25)   # the concealed suites' window
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.bench_regularity import CFG, FIXED, recording  # noqa: E402  (the suites' window and fixed values)
+
 FPS = 2000.0
 
 
 def _problem_at(theta, prior, seed):
-    run = simulate(prior.to_params(theta), CFG)
-    rng = np.random.default_rng(seed)
-    y = np.asarray(run.gaw_hr[::HR_OVERSAMPLE][5:505], float) + 0.5 * rng.standard_normal(500)
-    return Problem(y, FPS, prior, config=CFG)
+    return Problem(recording(theta, prior, CFG, sigma=0.5, seed=seed), FPS, prior, config=CFG)
 
 
 def test_regular_and_irregular_vibration_told_apart():
