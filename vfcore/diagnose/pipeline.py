@@ -344,7 +344,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     their log-evidences beyond their reported errors) exceeds ``escalate_tau`` nats, the sampler is
     hopping between material modes; ``max(2, base_runs)`` more base runs are made with
     ``escalate_factor`` times the particles, and the refits and mode checks use ``escalate_factor``
-    times ``refit_particles``. Measured (docs/diagnose.md section 5, run C): an epithelium case
+    times ``refit_particles``. Measured (docs/diagnose_history.md, stop 9, run C): an epithelium case
     named subglottal at 40/24 particles (base runs 1,700 nats apart) was named right at 80/48.
     ``None`` = never.
     ``integrate``: the refits integrate each extension's waveform-level parameters (camera, leak,

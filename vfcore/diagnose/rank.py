@@ -11,7 +11,7 @@ For the reference fit (log Z_0 +- s_0; normally the base fit, see below) and an 
 2. **effect size**: its residual RMS is at least ``min_rms_gain`` (30 %) below the reference
    fit's: ``1 - rms_e / rms_0 >= min_rms_gain``. With hundreds of frames the evidence alone
    calls a 1-10 % improvement "decisive" (measured: a scale case with 10 % and an asymmetry case
-   named leak with 4 %, docs/diagnose.md section 5); the issue asks every named effect to remove
+   named leak with 4 %, docs/diagnose_history.md, stop 8); the issue asks every named effect to remove
    >= 30 % of the residual RMS. Applied whenever ``rms`` is given (the pipeline always gives it).
 3. **not at its null value**: an extended fit whose extension parameters all sit at their null
    value (``ExtParam.null``: the value at which the extension *is* the base model) within
