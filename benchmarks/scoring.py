@@ -137,10 +137,13 @@ def wilson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     return float(ci.low), float(ci.high)
 
 
-def _rate(recs) -> dict:
-    k, n = sum(r.ok for r in recs), len(recs)
+def _count(k: int, n: int) -> dict:
     lo, hi = wilson(k, n)
     return {"named": k, "of": n, "rate": k / n if n else math.nan, "wilson95": [lo, hi]}
+
+
+def _rate(recs) -> dict:
+    return _count(sum(r.ok for r in recs), len(recs))
 
 
 def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
@@ -167,11 +170,14 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
             m["fired"] += 1
             m["kept"] += int(kept)
     fa = sum(not r.ok for r in ctl)
+    shortlist = [r for r in present if r.ok or (r.physics is not None and r.label in r.rivals)]
     return {
         "suites": sorted({r.suite for r in recs}),
         "cases": len(recs),
         "present": _rate(present),
         "all_effect_cases": _rate(eff),
+        # the truth named, or listed among the winner's rivals (entries the evidence does not separate from it)
+        "named_or_rival": _count(len(shortlist), len(present)),
         "false_alarms": {"count": fa, "of": len(ctl), "wilson95": list(wilson(fa, len(ctl)))},
         "named_rms_ge_30pct": [sum(r.rms_improvement >= 0.3 for r in named), len(named)],
         "named_positive_gain": [sum(r.gain > 0 for r in named), len(named)],
@@ -197,6 +203,7 @@ def format_summary(s: dict) -> str:
     lines = [f"suites: {', '.join(s['suites'])}; {s['cases']} cases",
              f"effect present, named right: {_fmt_rate(s['present'])}",
              f"all effect cases named right: {_fmt_rate(s['all_effect_cases'])}",
+             f"present effect named or among the winner's rivals: {_fmt_rate(s['named_or_rival'])}",
              f"false alarms in controls: {s['false_alarms']['count']}/{s['false_alarms']['of']}",
              f"named effects with RMS improvement >= 30 %: {s['named_rms_ge_30pct'][0]}/{s['named_rms_ge_30pct'][1]}; "
              f"with dlogZ > 0: {s['named_positive_gain'][0]}/{s['named_positive_gain'][1]}",

@@ -19,8 +19,10 @@ REF_NOTE = ("rescue: the epithelium refit ended at log Z -1275.9, below the base
             "posterior (reference-started SMC): log Z = -700.1 +- 0.8 (not higher; the first refit is kept)")
 
 
-def _report(winner, *, physics=None, gain=50.0, rms=0.5, notes=(), irregular=None, sims=1000, wall=10.0):
-    d = {"verdict": "...", "winner": winner, "physics": physics, "rivals": [],
+def _report(winner, *, physics=None, gain=50.0, rms=0.5, notes=(), irregular=None, sims=1000, wall=10.0,
+            rivals=()):
+    d = {"verdict": "...", "winner": winner, "physics": physics,
+         "rivals": [{"physics": p, "gap": 1.0, "se": 2.0} for p in rivals],
          "base": {"log_evidence": -500.0}, "refits": {}, "ranking": [], "reference": "base",
          "n_simulations": sims, "wall_s": wall, "notes": list(notes)}
     if irregular is not None:
@@ -58,6 +60,8 @@ def suite(tmp_path):
         "04": (_truth("scale", present=False, unabs=0.5), _report(None)),
         # the physics field is absent: the scorer maps lr_stiffness to asymmetry itself
         "05": (_truth("asymmetry", unabs=1.0), _report("lr_stiffness", irregular=False)),
+        # named wrong, but the truth is listed as a rival the evidence does not separate
+        "08": (_truth("scale", unabs=2.5), _report("zipper", rivals=["scale", "sep_ratio"])),
         "06": (_truth("subglottal", unabs=5.0), {"error": "GAW has NaN at frame 3", "winner": None}),
         "07": (_truth("epithelium", unabs=4.0), None),          # not diagnosed yet: skipped
     })
@@ -75,7 +79,8 @@ def test_wilson_matches_the_closed_form():
 
 def test_records_join_reports_and_truth(suite):
     recs = {r.case: r for r in load_suite(*suite)}
-    assert sorted(recs) == ["00", "01", "02", "03", "04", "05", "06"]
+    assert sorted(recs) == ["00", "01", "02", "03", "04", "05", "06", "08"]
+    assert not recs["08"].ok and recs["08"].rivals == ["scale", "sep_ratio"]
     assert recs["00"].ok and recs["00"].irregular is False and recs["00"].rescues == [("leak", "box", True)]
     assert not recs["01"].ok and recs["01"].physics == "asymmetry"
     assert recs["02"].ok and recs["02"].rescues == [("epithelium", "reference", False)]
@@ -87,26 +92,27 @@ def test_records_join_reports_and_truth(suite):
 
 def test_summary_counts(suite):
     s = summarise(load_suite(*suite))
-    # present effect cases: 00 (right), 01 (wrong), 05 (right), 06 (rejected); 04 is absent
-    assert (s["present"]["named"], s["present"]["of"]) == (2, 4)
-    assert (s["all_effect_cases"]["named"], s["all_effect_cases"]["of"]) == (2, 5)
+    # present effect cases: 00 (right), 01 (wrong), 05 (right), 06 (rejected), 08 (wrong, truth a rival)
+    assert (s["present"]["named"], s["present"]["of"]) == (2, 5)
+    assert (s["all_effect_cases"]["named"], s["all_effect_cases"]["of"]) == (2, 6)
+    assert (s["named_or_rival"]["named"], s["named_or_rival"]["of"]) == (3, 5)
     assert (s["false_alarms"]["count"], s["false_alarms"]["of"]) == (1, 2)
     assert (s["by_effect"]["zipper"]["named"], s["by_effect"]["zipper"]["of"]) == (0, 1)
     assert s["by_strength"]["weak (< 2 sd)"]["named"] == 1 and s["by_strength"]["weak (< 2 sd)"]["of"] == 2
-    assert s["by_strength"]["strong (>= 2 sd)"]["of"] == 2
-    assert s["by_base_regularity"]["irregular"]["of"] == 1 and s["by_base_regularity"]["unknown"]["of"] == 1
-    assert s["misses"] == {"subglottal -> none": 1, "zipper -> asymmetry": 1}
+    assert s["by_strength"]["strong (>= 2 sd)"]["of"] == 3
+    assert s["by_base_regularity"]["irregular"]["of"] == 1 and s["by_base_regularity"]["unknown"]["of"] == 2
+    assert s["misses"] == {"scale -> zipper": 1, "subglottal -> none": 1, "zipper -> asymmetry": 1}
     assert s["rescues"] == {"box": {"fired": 1, "kept": 1}, "reference": {"fired": 1, "kept": 0}}
-    # named: 00, 01, 03, 05; 03's gain is negative and its RMS gain 20 %
-    assert s["named_rms_ge_30pct"] == [3, 4] and s["named_positive_gain"] == [3, 4]
-    assert "2/4 (50 %" in format_summary(s)
+    # named: 00, 01, 03, 05, 08; 03's gain is negative and its RMS gain 20 %
+    assert s["named_rms_ge_30pct"] == [4, 5] and s["named_positive_gain"] == [4, 5]
+    assert "2/5 (40 %" in format_summary(s)
 
 
 def test_suites_pool(tmp_path, suite):
     other = _suite(tmp_path, "s2", {"00": (_truth("leak"), _report("leak")),
                                     "01": (_truth("control"), _report(None))})
     s = summarise(load_suite(*suite) + load_suite(*other))
-    assert (s["present"]["named"], s["present"]["of"]) == (3, 5)
+    assert (s["present"]["named"], s["present"]["of"]) == (3, 6)
     assert (s["false_alarms"]["count"], s["false_alarms"]["of"]) == (1, 3)
     assert s["suites"] == ["s1", "s2"]
 
@@ -115,7 +121,7 @@ def test_cli_score_pools_and_rejects_unequal_lists(tmp_path, suite, capsys):
     other = _suite(tmp_path, "s2", {"00": (_truth("leak"), _report("leak"))})
     bench_diagnose.main(["--score", "--cases", f"{suite[0]},{other[0]}", "--out", f"{suite[1]},{other[1]}"])
     out = capsys.readouterr().out
-    assert "s2/00" in out and "effect present, named right: 3/5" in out
+    assert "s2/00" in out and "effect present, named right: 3/6" in out
     with pytest.raises(SystemExit, match="2 --cases directories but 1 --out"):
         bench_diagnose.main(["--score", "--cases", f"{suite[0]},{other[0]}", "--out", str(suite[1])])
 
