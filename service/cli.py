@@ -31,7 +31,7 @@ def _kv(items: list[str] | None, what: str) -> dict[str, str]:
 
 def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
-               fix: list[str] | None, chunk_size: int | None = None, model: str = "fe"):
+               fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed"):
     """A validated JobSpec from CLI options (exit code 2 with the pydantic message on bad input)."""
     from pydantic import ValidationError
 
@@ -47,7 +47,8 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     smp = {"kind": "is", "n_samples": n} if sampler == "is" else {"kind": "smc", "n_particles": particles}
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
             "priors": priors or None, "fixed": fixed, "sampler": smp, "mesh": mesh, "dt": dt,
-            "duration": duration, "discard": discard, "sigma_e": sigma_e, "seed": seed, "chunk_size": chunk_size}
+            "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
+            "chunk_size": chunk_size}
     try:
         return JobSpec.model_validate(body)
     except ValidationError as exc:
@@ -142,6 +143,8 @@ Fix = Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (pap
 Url = Annotated[str, typer.Option(envvar="VFINFER_URL", help="service URL")]
 Token = Annotated[Optional[str], typer.Option(envvar="VFINFER_TOKEN", help="bearer token")]
 Model = Annotated[str, typer.Option(hidden=True, help="'fe' or the 'toy' test double (tests only)")]
+Noise = Annotated[str, typer.Option(help="'fixed': the likelihood uses --sigma-e (paper, Eq. 15); 'marginal': the "
+                                         "noise sd is unknown and integrated out (log-uniform, 0.01-100 mm^2)")]
 
 
 # ------------------------------------------------------------------------------------ commands
@@ -151,10 +154,10 @@ def infer(gaw: Path, fps: Fps = None, sampler: Sampler = "is", n: N = 2000, part
           sigma_e: float = 1.0, seed: int = 0, prior: Prior = None, fix: Fix = None,
           workers: Annotated[int, typer.Option(help="local worker processes")] = 2,
           out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output"),
-          model: Model = "fe") -> None:
+          model: Model = "fe", noise: Noise = "fixed") -> None:
     """Run an inference on this machine (in-process Dask LocalCluster) and print the posterior table."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model)
+                      model=model, noise=noise)
     summary = run_local(spec, out, workers)
     print_table(summary, title=f"Posterior for {gaw.name}")
     console.print(f"products written to {out}/")
@@ -179,10 +182,10 @@ def serve(host: str = "127.0.0.1", port: int = 8000,
 def submit(gaw: Path, url: Url = "http://127.0.0.1:8000", token: Token = None, fps: Fps = None,
            sampler: Sampler = "is", n: N = 2000, particles: Particles = 200, mesh: Mesh = "coarse",
            dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25, sigma_e: float = 1.0, seed: int = 0,
-           prior: Prior = None, fix: Fix = None, model: Model = "fe") -> None:
+           prior: Prior = None, fix: Fix = None, model: Model = "fe", noise: Noise = "fixed") -> None:
     """Submit a job to a running service; prints the job id."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model)
+                      model=model, noise=noise)
     with _http(url, token) as http:
         d = _check(http.post("/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"}))
     console.print(d["id"])

@@ -30,7 +30,7 @@ def _f(x, fmt: str = ".4g") -> str:
 
 
 def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
-                  duration: float, discard: float, sigma_e: float):
+                  duration: float, discard: float, sigma_e: float, noise: str = "fixed"):
     """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line."""
     from vfcore.config import MESHES, SimConfig
     from vfcore.inference import Prior
@@ -78,7 +78,7 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
         raise _fail(f"--dt: camera fps {g.fps:g} exceeds the simulation rate 1/dt={1 / dt:.0f}")
     try:
         prior = Prior.default(fixed=fixed)
-        return Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e),
+        return Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e), noise=noise,
                        config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps)))
     except ValueError as exc:
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
@@ -138,6 +138,7 @@ def diagnose_cmd(
         duration: Annotated[float, typer.Option(help="simulated time, s (the paper's 0.55)")] = DURATION_S,
         discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = DISCARD_S,
         sigma_e: Annotated[float, typer.Option(help="observation noise sd, mm^2")] = 1.0,
+        noise: Annotated[str, typer.Option(help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
         particles: Annotated[int, typer.Option(help="SMC particles of each base fit")] = BASE_PARTICLES,
         refit_particles: Annotated[int, typer.Option(help="SMC particles of each extended fit")] = REFIT_PARTICLES,
         max_refits: Annotated[Optional[int], typer.Option(
@@ -163,7 +164,7 @@ def diagnose_cmd(
         raise _fail(f"--max-refits must be >= 0, got {max_refits}")
     if workers < 1:
         raise _fail(f"--workers must be >= 1, got {workers}")
-    problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e)
+    problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise)
 
     from vfcore.diagnose.pipeline import diagnose, plot_diagnosis
     console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {particles} particles, "

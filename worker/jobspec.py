@@ -109,10 +109,23 @@ class JobSpec(_Strict):
     duration: FiniteFloat = Field(default=0.55, gt=0, le=5.0, description="simulated time, s")
     discard: FiniteFloat = Field(default=0.25, ge=0, le=5.0, description="initial transient discarded, s")
     sigma_e: FiniteFloat = Field(gt=0, le=1e6, description="observation noise sd, mm^2")
+    noise: Literal["fixed", "marginal"] = Field(
+        default="fixed", description="'fixed': the likelihood uses sigma_e (paper, Eq. 15); 'marginal': the noise sd "
+                                     "is unknown, log-uniform on sigma_bounds, and integrated out (docs/inference.md)")
+    sigma_bounds: tuple[FiniteFloat, FiniteFloat] = Field(
+        default=(0.01, 100.0), description="[lo, hi] of the noise sd's log-uniform prior, mm^2 (noise='marginal')")
     seed: int = Field(ge=0, lt=2**63)
     chunk_size: int | None = Field(default=None, ge=1, le=10_000,
                                    description="simulations per worker task (default: sized to run for seconds)")
     toy: ToyOptions | None = None
+
+    @field_validator("sigma_bounds")
+    @classmethod
+    def _check_sigma_bounds(cls, v):
+        lo, hi = v
+        if not 0 < lo < hi:
+            raise ValueError(f"sigma_bounds must satisfy 0 < lo < hi, got [{lo}, {hi}]")
+        return v
 
     @field_validator("priors")
     @classmethod
@@ -196,7 +209,8 @@ class JobSpec(_Strict):
     def _problem(self, prior):
         from vfcore.inference.problem import Problem
         return Problem(obs_gaw=self.observed(), fps=float(self.gaw.fps), prior=prior,
-                       sigma_e=float(self.sigma_e), config=self.sim_config())
+                       sigma_e=float(self.sigma_e), config=self.sim_config(), noise=self.noise,
+                       sigma_bounds=tuple(float(b) for b in self.sigma_bounds))
 
     def to_problem(self):
         """The ``vfcore.inference.Problem`` this job solves (the toy test double scores against it too)."""

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from vfcore.inference.problem import Evaluation, Problem, gaussian_loglik, n_sim_frames
+from vfcore.inference.problem import Evaluation, Problem, n_sim_frames
 from vfcore.observe import align
 from vfcore.params import PARAM_NAMES, TABLE3
 
@@ -61,7 +61,7 @@ class ToyEvaluator:
                 time.sleep(self.delay_s)
             g, flow[i], cmean[i], cmax[i] = toy_gaw(full[i], pb.fps, n)
             seg, _, _ = align(g, pb.obs_gaw, pb.fps, (max_lag, n_cmp), method=pb.alignment)
-            ll[i] = gaussian_loglik(seg, pb.obs_compared, pb.sigma_e)
+            ll[i] = pb.loglik(seg)
             ok[i] = True
             gaw[i] = seg
         return Evaluation(loglik=ll, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax)

@@ -43,6 +43,8 @@ CASES = [
     ("absurd_samples", lambda: _bad(sampler={"kind": "is", "n_samples": 10**12}), "n_samples"),
     ("unknown_sampler", lambda: _bad(sampler={"kind": "mcmc", "n_samples": 5}), "sampler"),
     ("sigma_zero", lambda: _bad(sigma_e=0), "sigma_e"),
+    ("unknown_noise_model", lambda: _bad(noise="student"), "noise"),
+    ("sigma_bounds_reversed", lambda: _bad(noise="marginal", sigma_bounds=[2.0, 0.5]), "sigma_bounds"),
     ("negative_seed", lambda: _bad(seed=-1), "seed"),
     ("bad_mesh", lambda: _bad(mesh="huge"), "mesh"),
     ("unknown_field", lambda: _bad(colour="red"), "colour"),

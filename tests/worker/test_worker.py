@@ -34,6 +34,39 @@ def test_jobspec_roundtrip_and_version():
     assert pb.prior.names == ("E_cover", "p_sub") and pb.sigma_e == 10.0
     with pytest.raises(ValueError, match="version"):
         JobSpec.model_validate({**toy_spec(), "version": 2})
+    assert pb.noise == "fixed"                                   # the paper's Eq. 15 unless asked
+    marg = JobSpec.model_validate({**toy_spec(n=100), "noise": "marginal", "sigma_bounds": [0.05, 50.0]})
+    assert JobSpec.from_json(marg.to_json()) == marg
+    pm = marg.to_problem()
+    assert pm.noise == "marginal" and pm.sigma_bounds == (0.05, 50.0)
+
+
+def test_marginal_noise_job_runs_through_the_worker(tmp_path, client):
+    """The toy job (noise sd 0.5 mm^2 before clipping at zero area) with the noise sd integrated out:
+    the store holds vfcore's marginal log-likelihoods (recomputed here from the stored predictions),
+    and the amplitude parameter's posterior is narrower than under the too-large fixed sigma_e = 1."""
+    from vfcore.inference.problem import marginal_gaussian_loglik
+    base = {**toy_spec(n=400, chunk_size=100), "sigma_e": 1.0}
+    out = {}
+    for noise in ("fixed", "marginal"):
+        spec = JobSpec.model_validate({**base, "noise": noise})
+        path = tmp_path / f"{noise}.zarr"
+        root, pb = prepare(path, noise, spec)
+        run_job(client, noise, path, spec)
+        g = zarr.open_group(str(path), mode="r")["batches/0"]
+        out[noise] = (np.asarray(g["loglik"][...]), np.asarray(g["thetas"][...]), np.asarray(g["gaw"][...]), pb)
+    ll, th, gaw, pb = out["marginal"]
+    assert pb.noise == "marginal"
+    for k in range(3):
+        assert ll[k] == pytest.approx(marginal_gaussian_loglik(gaw[k].astype(float), pb.obs_compared, 0.01, 100.0),
+                                      abs=1e-3)          # the stored predictions are float32
+
+    def sd_of(ll, x):
+        w = np.exp(ll - ll.max())
+        w /= w.sum()
+        return float(np.sqrt(np.sum(w * (x - np.sum(w * x)) ** 2)))
+    i = pb.prior.names.index("p_sub")
+    assert sd_of(ll, th[:, i]) < sd_of(out["fixed"][0], out["fixed"][1][:, i]) / 1.5
 
 
 def test_chunk_size_is_a_function_of_the_spec():

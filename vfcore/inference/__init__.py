@@ -8,8 +8,8 @@ from .importance import (DEFAULT_DRAWS, batch_function, chunks, draw_prior, impo
                          reduce_importance)
 from .posterior import QUANTILE_LEVELS, Posterior
 from .prior import TABLE2_BOUNDS, Prior
-from .problem import (Evaluation, Problem, ProblemEvaluator, evaluate, gaussian_loglik, n_sim_frames,
-                      validate_observation)
+from .problem import (NOISE_MODELS, Evaluation, Problem, ProblemEvaluator, evaluate, gaussian_loglik,
+                      marginal_gaussian_loglik, n_sim_frames, validate_observation)
 from .products import compare, flow_contact_table, plot_marginals, plot_predictive, predictive_bands
 from .sensitivity import dt_mesh_configs, ensemble_size_study, numerics_study, write_table
 from .smc import DEFAULT_PARTICLES, SMCSampler, next_temperature, smc
@@ -23,7 +23,8 @@ __all__ = [
     "reduce_importance",
     "QUANTILE_LEVELS", "Posterior",
     "TABLE2_BOUNDS", "Prior",
-    "Evaluation", "Problem", "ProblemEvaluator", "evaluate", "gaussian_loglik", "n_sim_frames",
+    "NOISE_MODELS", "Evaluation", "Problem", "ProblemEvaluator", "evaluate", "gaussian_loglik",
+    "marginal_gaussian_loglik", "n_sim_frames",
     "validate_observation",
     "compare", "flow_contact_table", "plot_marginals", "plot_predictive", "predictive_bands",
     "dt_mesh_configs", "ensemble_size_study", "numerics_study", "write_table",

@@ -8,6 +8,10 @@ Gaussian noise with standard deviation ``sigma_e`` (mm^2, default 1 mm^2),
 
 over the ``n_compare`` frames fixed by ``vfcore.observe.alignment_window``. Computed in
 log space throughout. A failed simulation has log-likelihood ``-inf``.
+
+``Problem(noise="marginal")`` (not in the paper): ``sigma_e`` is unknown, log-uniform on
+``sigma_bounds``, and integrated out per draw (:func:`marginal_gaussian_loglik`; docs/inference.md,
+"Unknown noise level").
 """
 from __future__ import annotations
 
@@ -67,11 +71,18 @@ def n_sim_frames(config: SimConfig) -> int:
 
 
 # ---------------------------------------------------------------------------- problem
+#: noise models: ``fixed`` sigma_e (Eq. 15) or ``marginal`` (sigma_e integrated out, log-uniform prior)
+NOISE_MODELS = ("fixed", "marginal")
+
+
 @dataclass(frozen=True, eq=False)
 class Problem:
     """One inverse problem. Frozen and picklable: it is shipped to every worker.
 
     ``config.fps`` is set to the observation's ``fps`` (the camera defines the rate).
+    ``noise``: ``"fixed"`` (Eq. 15 with ``sigma_e``) or ``"marginal"`` (the noise sd unknown,
+    log-uniform on ``sigma_bounds`` mm^2 and integrated out; ``sigma_e`` is then only the noise
+    added to predictive bands and p-values where a caller asks for it).
     """
 
     obs_gaw: np.ndarray
@@ -81,6 +92,8 @@ class Problem:
     config: SimConfig = field(default_factory=SimConfig)
     model: str = "fe"
     alignment: str = "profile"
+    noise: str = "fixed"
+    sigma_bounds: tuple = (0.01, 100.0)
 
     def __post_init__(self) -> None:
         y = validate_observation(self.obs_gaw, self.fps)
@@ -100,6 +113,15 @@ class Problem:
             object.__setattr__(self, "config", self.config.replace(fps=self.fps))
         if self.alignment not in ALIGNMENTS:
             raise ValueError(f"alignment must be one of {ALIGNMENTS}, got {self.alignment!r}")
+        if self.noise not in NOISE_MODELS:
+            raise ValueError(f"noise must be one of {NOISE_MODELS}, got {self.noise!r}")
+        try:
+            lo, hi = (float(v) for v in self.sigma_bounds)
+        except (TypeError, ValueError):
+            raise ValueError(f"sigma_bounds must be two numbers (lo, hi) in mm^2, got {self.sigma_bounds!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
+            raise ValueError(f"sigma_bounds must satisfy 0 < lo < hi (finite, mm^2), got {self.sigma_bounds!r}")
+        object.__setattr__(self, "sigma_bounds", (lo, hi))
         if self.model != "fe":
             raise ValueError(f"unknown model {self.model!r}; only 'fe' is available")
         # fails (ValueError) here, before any simulation, if the simulation is too short
@@ -122,7 +144,7 @@ class Problem:
     def to_dict(self) -> dict:
         return {"obs_gaw": self.obs_gaw.tolist(), "fps": self.fps, "sigma_e": self.sigma_e,
                 "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model,
-                "alignment": self.alignment}
+                "alignment": self.alignment, "noise": self.noise, "sigma_bounds": list(self.sigma_bounds)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Problem":
@@ -133,7 +155,15 @@ class Problem:
         return cls(obs_gaw=np.asarray(d["obs_gaw"], dtype=float), fps=d["fps"],
                    prior=Prior.from_dict(d["prior"]), sigma_e=d.get("sigma_e", 1.0),
                    config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"),
-                   alignment=d.get("alignment", "profile"))
+                   alignment=d.get("alignment", "profile"), noise=d.get("noise", "fixed"),
+                   sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))))
+
+    def loglik(self, seg) -> float:
+        """Log-likelihood of an aligned simulated segment ``seg`` (n_compare,) under this problem's
+        noise model: Eq. 15 (``fixed``) or :func:`marginal_gaussian_loglik` (``marginal``)."""
+        if self.noise == "marginal":
+            return marginal_gaussian_loglik(seg, self.obs_compared, *self.sigma_bounds)
+        return gaussian_loglik(seg, self.obs_compared, self.sigma_e)
 
 
 # ---------------------------------------------------------------------------- likelihood
@@ -147,6 +177,66 @@ def gaussian_loglik(sim, obs, sigma: float) -> float:
     if not np.all(np.isfinite(r)):
         return -math.inf
     return float(-0.5 * np.dot(r, r) - obs.size * (math.log(sigma) + 0.5 * math.log(2 * math.pi)))
+
+
+def marginal_gaussian_loglik(sim, obs, sigma_lo: float, sigma_hi: float) -> float:
+    """Eq. 15 with the noise sd integrated out under a log-uniform prior on ``[sigma_lo, sigma_hi]``:
+
+        L = ∫ prod_k N(obs_k | sim_k, s^2) p(s) ds,   p(s) = 1 / (s log(sigma_hi / sigma_lo)),
+
+    which with ``R = sum (obs - sim)^2`` and ``a = n / 2`` is exactly
+
+        log L = -a log(pi R) + log Gamma(a) - log 2 - log log(sigma_hi / sigma_lo)
+                + log[P(a, R / (2 sigma_lo^2)) - P(a, R / (2 sigma_hi^2))],
+
+    ``P`` the regularised lower incomplete gamma function (substitute ``u = R / (2 s^2)``; the
+    scale-invariant prior of Jeffreys, truncated so that the evidence is proper; Bretthorst 1988,
+    "Bayesian Spectrum Analysis and Parameter Estimation", ch. 2; Sivia & Skilling 2006, "Data
+    Analysis", section 3.3). The last term is 0 to double precision unless ``sqrt(R / n)`` lies near
+    or beyond a bound. The noise sd given a draw is then inverse-gamma: ``s^2 | R ~ IG(a, R / 2)``."""
+    from scipy.special import gammainc, gammaincc, gammaln
+    sim = np.asarray(sim, dtype=float)
+    obs = np.asarray(obs, dtype=float)
+    if sim.shape != obs.shape:
+        raise ValueError(f"simulated and observed GAW differ in shape: {sim.shape} vs {obs.shape}")
+    r = sim - obs
+    if not np.all(np.isfinite(r)):
+        return -math.inf
+    n = obs.size
+    if n == 0:
+        return 0.0
+    R, a = float(np.dot(r, r)), 0.5 * n
+    log_norm = math.log(math.log(sigma_hi / sigma_lo))
+    if R == 0.0:                     # the integral of s^(-n-1) alone
+        return float(-a * math.log(2 * math.pi) - math.log(n) - n * math.log(sigma_lo)
+                     + math.log1p(-(sigma_lo / sigma_hi) ** n) - log_norm)
+    x_hi, x_lo = R / (2.0 * sigma_lo ** 2), R / (2.0 * sigma_hi ** 2)
+    if x_hi < a:
+        # the fit is closer than sigma_lo: P(a, x) underflows, take its series in logs; the
+        # -a log(pi R) of the general form cancels against P's x^a, leaving -a log(2 pi sigma_lo^2)
+        lp_hi = _log_p_lower_series(a, x_hi) - a * math.log(x_hi)
+        lp_lo = _log_p_lower_series(a, x_lo) - a * math.log(x_lo)
+        ratio = math.exp(lp_lo - lp_hi + a * math.log(x_lo / x_hi))
+        return float(-a * math.log(2 * math.pi * sigma_lo ** 2) + gammaln(a) - math.log(2.0) - log_norm
+                     + lp_hi + math.log1p(-ratio))
+    # P(a, x_hi) - P(a, x_lo), from whichever tail keeps its digits
+    mass = gammaincc(a, x_lo) - gammaincc(a, x_hi) if x_lo >= a else gammainc(a, x_hi) - gammainc(a, x_lo)
+    if not mass > 0.0:
+        return -math.inf
+    return float(-a * math.log(math.pi * R) + gammaln(a) - math.log(2.0) - log_norm + math.log(mass))
+
+
+def _log_p_lower_series(a: float, x: float) -> float:
+    """``log P(a, x)`` for ``0 < x < a`` from ``P = x^a e^-x / Gamma(a+1) sum_k x^k / ((a+1)..(a+k))``
+    (Abramowitz & Stegun 6.5.29), which converges geometrically there."""
+    from scipy.special import gammaln
+    term = total = 1.0
+    k = 0
+    while term > 1e-17 * total and k < 100000:
+        k += 1
+        term *= x / (a + k)
+        total += term
+    return a * math.log(x) - x - float(gammaln(a + 1.0)) + math.log(total)
 
 
 # ---------------------------------------------------------------------------- evaluation
@@ -312,7 +402,7 @@ def aligned_loglik(hr: np.ndarray, problem: Problem) -> tuple[float, np.ndarray]
     max_lag, n_cmp = problem.window
     seg, _, _ = align(hr[::HR_OVERSAMPLE], problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
                       oversample=HR_OVERSAMPLE, method=problem.alignment)
-    return gaussian_loglik(seg, problem.obs_compared, problem.sigma_e), seg
+    return problem.loglik(seg), seg
 
 
 def score_results(results, problem: Problem, observe: Callable | None = None) -> Evaluation:
@@ -360,7 +450,7 @@ def score_results(results, problem: Problem, observe: Callable | None = None) ->
                                   oversample=HR_OVERSAMPLE, method=problem.alignment)
             else:
                 seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), method=problem.alignment)
-            ll = gaussian_loglik(seg, obs, problem.sigma_e)
+            ll = problem.loglik(seg)
         except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble; counted
             messages.append(f"{i}: {type(exc).__name__}: {exc}")
             continue
