@@ -115,6 +115,32 @@ def regularity_of(root, post) -> dict | None:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
+#: residual RMS / sigma_e beyond which (either way) a fixed-noise job's summary warns
+NOISE_RATIO_WARN = 1.5
+
+
+def noise_check(root, post) -> dict | None:
+    """The fit's residual RMS against the noise model (mm^2): per resampled draw
+    ``sqrt(mean((A - y)^2))`` over the compared frames (with ``noise="marginal"`` this is the noise
+    sd's estimate; with ``"fixed"`` it tells whether ``sigma_e`` fits: a residual ``r`` against
+    ``sigma_e`` makes the posterior about ``r / sigma_e`` times too narrow if the misfit is noise).
+    ``None`` when there are no predictions or no stored observation."""
+    pred = post.resampled_predictive()
+    if pred is None or pred.gaw is None or post.obs_gaw is None:
+        return None
+    g = np.asarray(pred.gaw, dtype=float)
+    y = np.asarray(post.obs_gaw, dtype=float)[: g.shape[1]]
+    g = g[np.all(np.isfinite(g), axis=1)]
+    if g.shape[0] == 0:
+        return None
+    rms = np.sqrt(np.mean((g - y) ** 2, axis=1))
+    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
+    q = np.quantile(rms, [0.05, 0.5, 0.95])
+    return {"noise": spec.noise, "sigma_e": float(spec.sigma_e),
+            "residual_rms": {"unit": "mm2", "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])},
+            "ratio": float(q[1] / spec.sigma_e)}
+
+
 def publish_posterior(store_path: str, post) -> dict:
     """Write the posterior arrays, summary, CSV and figures into the store; return the summary."""
     root = st.open_store(Path(store_path))
@@ -124,10 +150,20 @@ def publish_posterior(store_path: str, post) -> dict:
             f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters changes "
             f"the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough here and the "
             "posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')"]
+    nc = noise_check(root, post)
+    if nc is not None and nc["noise"] == "fixed" and not (1 / NOISE_RATIO_WARN <= nc["ratio"] <= NOISE_RATIO_WARN):
+        r, se = nc["residual_rms"]["q50"], nc["sigma_e"]
+        how = (f"about {r / se:.1f} times too narrow" if r > se else f"about {se / r:.1f} times too wide")
+        post.warnings = list(post.warnings) + [
+            f"NOISE LEVEL: the fit's residual RMS is {r:.3g} mm^2 against sigma_e = {se:g} mm^2; if the misfit is "
+            f"noise, the posterior is {how}; set sigma_e to the recording's noise or use noise='marginal' "
+            "(docs/inference.md, 'Unknown noise level')"]
     pred, bands = _predictive_summary(post)
     summary = posterior_summary(post, pred)
     if reg is not None:
         summary["regularity"] = _clean(reg)
+    if nc is not None:
+        summary["noise_check"] = _clean(nc)
     pg = root.require_group("posterior")
     for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
                       ("log_weights", np.asarray(post.log_weights, dtype=float)),

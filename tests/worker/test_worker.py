@@ -67,6 +67,14 @@ def test_marginal_noise_job_runs_through_the_worker(tmp_path, client):
         return float(np.sqrt(np.sum(w * (x - np.sum(w * x)) ** 2)))
     i = pb.prior.names.index("p_sub")
     assert sd_of(ll, th[:, i]) < sd_of(out["fixed"][0], out["fixed"][1][:, i]) / 1.5
+    # the published summaries: the residual RMS is the noise level (0.5 mm^2 before clipping at zero
+    # area), so the fixed sigma_e = 1 job is warned that its posterior is too wide; the marginal one is not
+    fixed, marg = st.read_summary(tmp_path / "fixed.zarr"), st.read_summary(tmp_path / "marginal.zarr")
+    for s in (fixed, marg):
+        assert 0.25 < s["noise_check"]["residual_rms"]["q50"] < 0.55, s["noise_check"]
+    assert fixed["noise_check"]["noise"] == "fixed" and marg["noise_check"]["noise"] == "marginal"
+    assert any(w.startswith("NOISE LEVEL") and "too wide" in w for w in fixed["warnings"]), fixed["warnings"]
+    assert not any(w.startswith("NOISE LEVEL") for w in marg["warnings"]), marg["warnings"]
 
 
 def test_chunk_size_is_a_function_of_the_spec():
