@@ -124,10 +124,9 @@ def score(a) -> None:
     cdirs, odirs = [c for c in a.cases.split(",") if c], [o for o in a.out.split(",") if o]
     if len(cdirs) != len(odirs):
         raise SystemExit(f"--score: {len(cdirs)} --cases directories but {len(odirs)} --out directories")
-    recs = []
-    for c, o in zip(cdirs, odirs):
-        recs += load_suite(c, o, suite=f"{Path(c).name}" if len(cdirs) > 1 else None)
-    multi = len(cdirs) > 1
+    suites = [(Path(c), load_suite(c, o)) for c, o in zip(cdirs, odirs)]
+    recs = [r for _, rs in suites for r in rs]
+    multi = len(suites) > 1
     print(f"{'case':<{14 if multi else 5}}{'truth':<12}{'named':<13}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}"
           f"{'wall s':>8}{'effect ll':>11}{'unabs/sd':>9}{'base':>6}  reference")
     for r in recs:
@@ -140,15 +139,15 @@ def score(a) -> None:
     if any(r.label != "control" and not r.present for r in recs):
         print(f"\n* effect not present (absorbed by the base model to < {PRESENCE_SD:.2f} sigma; generator presence "
               "rule): not counted in the present-effect rate")
-    for c, o in zip(cdirs, odirs):
-        audit_p = Path(c) / "audit.json"
+    for c, rs in suites:
+        audit_p = c / "audit.json"
         if audit_p.exists():
             # presence re-tested with a stronger absorption search (generate.py --audit)
             aud = json.loads(audit_p.read_text())["cases"]
-            eff = [r for r in load_suite(c, o) if r.label != "control"]
+            eff = [r for r in rs if r.label != "control"]
             audited = [r for r in eff if aud.get(r.case, {}).get("present", r.present)]
             moved = [r.case for r in eff if aud.get(r.case, {}).get("present", r.present) != r.present]
-            print(f"{Path(c).name}: effect cases present under the audit (audit.json; changed: "
+            print(f"{c.name}: effect cases present under the audit (audit.json; changed: "
                   f"{', '.join(moved) or 'none'}) named correctly: {sum(r.ok for r in audited)}/{len(audited)}")
     print()
     print(format_summary(summarise(recs)))

@@ -58,8 +58,16 @@ def reduce_is_job(store_path: str) -> dict:
     return publish_posterior(store_path, post)
 
 
-def _predictive_summary(post) -> tuple[dict, np.ndarray | None]:
-    pred = post.resampled_predictive()
+def _finite_gaw(pred) -> np.ndarray | None:
+    """The resampled draws' predicted GAWs (float64), rows with a non-finite value dropped."""
+    if pred is None or pred.gaw is None:
+        return None
+    g = np.asarray(pred.gaw, dtype=float)
+    return g[np.all(np.isfinite(g), axis=1)]
+
+
+def _predictive_summary(pred) -> tuple[dict, np.ndarray | None]:
+    """Summary quantities and 5/50/95 % GAW bands of ``pred``, a posterior's resampled predictive."""
     out = {}
     bands = None
     if pred is None:
@@ -75,17 +83,15 @@ def _predictive_summary(post) -> tuple[dict, np.ndarray | None]:
         q = np.quantile(a, [0.05, 0.5, 0.95])
         out[name] = {"unit": unit, "mean": float(a.mean()), "sd": float(a.std(ddof=1)) if a.size > 1 else 0.0,
                      "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])}
-    if pred.gaw is not None:
-        g = np.asarray(pred.gaw, dtype=float)
-        g = g[np.all(np.isfinite(g), axis=1)]
-        if g.shape[0]:
-            bands = np.quantile(g, [0.05, 0.5, 0.95], axis=0)
+    g = _finite_gaw(pred)
+    if g is not None and g.shape[0]:
+        bands = np.quantile(g, [0.05, 0.5, 0.95], axis=0)
     return out, bands
 
 
 def posterior_summary(post, pred: dict | None = None) -> dict:
     if pred is None:
-        pred, _ = _predictive_summary(post)
+        pred, _ = _predictive_summary(post.resampled_predictive())
     info = {k: v for k, v in post.info.items() if k in (
         "generations", "n_generations", "n_particles", "temperatures", "max_loglik", "n_draws",
         "failure_messages")}
@@ -99,12 +105,11 @@ def posterior_summary(post, pred: dict | None = None) -> dict:
     })
 
 
-def regularity_of(root, post) -> dict | None:
+def regularity_of(spec: JobSpec, post) -> dict | None:
     """The regularity check (vfcore.diagnose.regularity; 3 simulations) at the posterior's heaviest
     sample of an FE job: is the fitted vibration regular, so that the waveform likelihood is a
     smooth function of the parameters? ``None`` for a toy job; an error is reported, not raised
     (docs/inference.md, "Irregular vibration")."""
-    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
     if spec.model != "fe":
         return None
     try:
@@ -119,22 +124,18 @@ def regularity_of(root, post) -> dict | None:
 NOISE_RATIO_WARN = 1.5
 
 
-def noise_check(root, post) -> dict | None:
+def noise_check(spec: JobSpec, post, pred) -> dict | None:
     """The fit's residual RMS against the noise model (mm^2): per resampled draw
     ``sqrt(mean((A - y)^2))`` over the compared frames (with ``noise="marginal"`` this is the noise
     sd's estimate; with ``"fixed"`` it tells whether ``sigma_e`` fits: a residual ``r`` against
     ``sigma_e`` makes the posterior about ``r / sigma_e`` times too narrow if the misfit is noise).
-    ``None`` when there are no predictions or no stored observation."""
-    pred = post.resampled_predictive()
-    if pred is None or pred.gaw is None or post.obs_gaw is None:
+    ``pred``: the posterior's resampled predictive. ``None`` when there are no predictions or no
+    stored observation."""
+    g = _finite_gaw(pred)
+    if g is None or g.shape[0] == 0 or post.obs_gaw is None:
         return None
-    g = np.asarray(pred.gaw, dtype=float)
     y = np.asarray(post.obs_gaw, dtype=float)[: g.shape[1]]
-    g = g[np.all(np.isfinite(g), axis=1)]
-    if g.shape[0] == 0:
-        return None
     rms = np.sqrt(np.mean((g - y) ** 2, axis=1))
-    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
     q = np.quantile(rms, [0.05, 0.5, 0.95])
     return {"noise": spec.noise, "sigma_e": float(spec.sigma_e),
             "residual_rms": {"unit": "mm2", "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])},
@@ -144,13 +145,15 @@ def noise_check(root, post) -> dict | None:
 def publish_posterior(store_path: str, post) -> dict:
     """Write the posterior arrays, summary, CSV and figures into the store; return the summary."""
     root = st.open_store(Path(store_path))
-    reg = regularity_of(root, post)
+    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
+    resampled = post.resampled_predictive()
+    reg = regularity_of(spec, post)
     if reg is not None and reg.get("irregular"):
         post.warnings = list(post.warnings) + [
             f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters changes "
             f"the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough here and the "
             "posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')"]
-    nc = noise_check(root, post)
+    nc = noise_check(spec, post, resampled)
     if nc is not None and nc["noise"] == "fixed" and not (1 / NOISE_RATIO_WARN <= nc["ratio"] <= NOISE_RATIO_WARN):
         r, se = nc["residual_rms"]["q50"], nc["sigma_e"]
         how = (f"about {r / se:.1f} times too narrow" if r > se else f"about {se / r:.1f} times too wide")
@@ -158,7 +161,7 @@ def publish_posterior(store_path: str, post) -> dict:
             f"NOISE LEVEL: the fit's residual RMS is {r:.3g} mm^2 against sigma_e = {se:g} mm^2; if the misfit is "
             f"noise, the posterior is {how}; set sigma_e to the recording's noise or use noise='marginal' "
             "(docs/inference.md, 'Unknown noise level')"]
-    pred, bands = _predictive_summary(post)
+    pred, bands = _predictive_summary(resampled)
     summary = posterior_summary(post, pred)
     if reg is not None:
         summary["regularity"] = _clean(reg)

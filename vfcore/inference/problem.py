@@ -167,16 +167,23 @@ class Problem:
 
 
 # ---------------------------------------------------------------------------- likelihood
-def gaussian_loglik(sim, obs, sigma: float) -> float:
-    """Eq. 15 in log space: sum of independent N(obs_k | sim_k, sigma^2) log densities."""
+def _residual(sim, obs) -> np.ndarray | None:
+    """``sim - obs`` as float64 (ValueError if their shapes differ); None if it is not finite."""
     sim = np.asarray(sim, dtype=float)
     obs = np.asarray(obs, dtype=float)
     if sim.shape != obs.shape:
         raise ValueError(f"simulated and observed GAW differ in shape: {sim.shape} vs {obs.shape}")
-    r = (sim - obs) / sigma
-    if not np.all(np.isfinite(r)):
+    r = sim - obs
+    return r if np.all(np.isfinite(r)) else None
+
+
+def gaussian_loglik(sim, obs, sigma: float) -> float:
+    """Eq. 15 in log space: sum of independent N(obs_k | sim_k, sigma^2) log densities."""
+    r = _residual(sim, obs)
+    if r is None:
         return -math.inf
-    return float(-0.5 * np.dot(r, r) - obs.size * (math.log(sigma) + 0.5 * math.log(2 * math.pi)))
+    r = r / sigma
+    return float(-0.5 * np.dot(r, r) - r.size * (math.log(sigma) + 0.5 * math.log(2 * math.pi)))
 
 
 def marginal_gaussian_loglik(sim, obs, sigma_lo: float, sigma_hi: float) -> float:
@@ -195,14 +202,10 @@ def marginal_gaussian_loglik(sim, obs, sigma_lo: float, sigma_hi: float) -> floa
     Analysis", section 3.3). The last term is 0 to double precision unless ``sqrt(R / n)`` lies near
     or beyond a bound. The noise sd given a draw is then inverse-gamma: ``s^2 | R ~ IG(a, R / 2)``."""
     from scipy.special import gammainc, gammaincc, gammaln
-    sim = np.asarray(sim, dtype=float)
-    obs = np.asarray(obs, dtype=float)
-    if sim.shape != obs.shape:
-        raise ValueError(f"simulated and observed GAW differ in shape: {sim.shape} vs {obs.shape}")
-    r = sim - obs
-    if not np.all(np.isfinite(r)):
+    r = _residual(sim, obs)
+    if r is None:
         return -math.inf
-    n = obs.size
+    n = r.size
     if n == 0:
         return 0.0
     R, a = float(np.dot(r, r)), 0.5 * n
