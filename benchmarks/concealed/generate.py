@@ -675,36 +675,58 @@ AUDIT_SEARCH = {"n_sobol": 512, "n_starts": 6, "maxfev": 150}
 
 
 def _audit_one(args):
-    cid, t, config, search = args
+    cid, t, config, search, method = args
     if t.get("label") == "control":
         return cid, {"present": False}
     starts = [t["truth"]] + ([t["absorbing_fit"]] if t.get("absorbing_fit") else [])
-    u, fit = unabsorbed_rms(np.asarray(t["clean"], dtype=float), None, config, starts=starts, **search)
+    clean = np.asarray(t["clean"], dtype=float)
+    u, fit, n_sim, by = math.inf, {}, 0, None
+    if method in ("continuation", "both"):
+        from .absorb import continued_unabsorbed_rms
+        u, fit, n_sim = continued_unabsorbed_rms(clean, config, config.fps, starts=starts,
+                                                 **search.get("continuation", search))
+        by = "continuation"
+    # "both": the design search too, unless the continuation already decided the case
+    if method == "design" or (method == "both" and u >= PRESENCE_SIGMA * float(t["sigma_mm2"])):
+        ud, fitd = unabsorbed_rms(clean, None, config, starts=starts, **search.get("design", search))
+        if ud < u:
+            u, fit, by = ud, fitd, "design"
     before = float(t.get("unabsorbed_rms_mm2", math.nan))
     if math.isfinite(before) and before < u:       # never report a worse search than the generator's
-        u, fit = before, t.get("absorbing_fit", {})
+        u, fit, by = before, t.get("absorbing_fit", {}), "generator"
     return cid, {"unabsorbed_rms_mm2": u, "generated_unabsorbed_rms_mm2": before, "sigma_mm2": t["sigma_mm2"],
-                 "present": bool(u >= PRESENCE_SIGMA * float(t["sigma_mm2"])), "absorbing_fit": fit}
+                 "present": bool(u >= PRESENCE_SIGMA * float(t["sigma_mm2"])), "absorbing_fit": fit,
+                 "n_simulations_continuation": n_sim, "smallest_from": by}
 
 
 def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig = BASE_CONFIG,
-                   search: dict | None = None) -> dict:
-    """Re-test the presence rule of an existing suite with a stronger absorption search
-    (:data:`AUDIT_SEARCH`; the truth and the generator's absorbing fit are polished too, so the
-    unabsorbed RMS can only go down) and write ``audit.json`` beside ``truth.json``. The
-    recordings are not touched; only which effects count as present changes. Like the rest of
-    the generator, it reads the clean waveform and knows nothing of the fitting code."""
+                   search: dict | None = None, method: str = "both") -> dict:
+    """Re-test the presence rule of an existing suite with a stronger absorption search and
+    write ``audit.json`` beside ``truth.json``. ``method``: ``"continuation"``
+    (:func:`.absorb.continued_unabsorbed_rms` with :data:`.absorb.CONTINUATION_SEARCH`),
+    ``"design"`` (stop 12; :func:`unabsorbed_rms` with :data:`AUDIT_SEARCH`) or ``"both"``
+    (default since stop 21: the continuation, then the design search wherever the continuation
+    left the effect present; the smaller RMS; ``search`` then has one dict per method). The truth and
+    the generator's absorbing fit are starts too, and a result above the generator's own is
+    replaced by it, so the unabsorbed RMS can only go down. The recordings are not touched; only
+    which effects count as present changes. Like the rest of the generator, it reads the clean
+    waveform and knows nothing of the fitting code."""
+    from .absorb import CONTINUATION_SEARCH
+    if method not in ("continuation", "design", "both"):
+        raise ValueError(f"method must be 'continuation', 'design' or 'both', got {method!r}")
     suite = Path(suite)
     hidden = json.loads((suite / "truth.json").read_text())
-    search = dict(AUDIT_SEARCH if search is None else search)
-    jobs = [(cid, t, config, search) for cid, t in sorted(hidden["cases"].items())]
+    default = {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH,
+               "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH}}[method]
+    search = dict(default if search is None else search)
+    jobs = [(cid, t, config, search, method) for cid, t in sorted(hidden["cases"].items())]
     if workers > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as ex:
             out = dict(ex.map(_audit_one, jobs))
     else:
         out = dict(map(_audit_one, jobs))
-    doc = {"search": search, "presence_sigma": PRESENCE_SIGMA, "cases": out}
+    doc = {"method": method, "search": search, "presence_sigma": PRESENCE_SIGMA, "cases": out}
     tmp = suite / "audit.json.tmp"
     tmp.write_text(json.dumps(doc, indent=1, default=float))
     tmp.replace(suite / "audit.json")
@@ -717,6 +739,9 @@ def main(argv=None) -> int:
     ap.add_argument("--audit", metavar="SUITE",
                     help="re-test an existing suite's presence rule with a stronger absorption search "
                          "(writes SUITE/audit.json; the recordings are unchanged)")
+    ap.add_argument("--audit-method", choices=("both", "continuation", "design"), default="both",
+                    help="absorption search of --audit: window continuation, the stop-12 design, or both "
+                         "(default; the design only where the continuation left the effect present)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes (same cases for any number)")
     ap.add_argument("--no-presence", action="store_true",
@@ -724,8 +749,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     if a.audit:
-        doc = audit_presence(a.audit, workers=a.workers)
-        print(f"audit of {a.audit} in {time.perf_counter() - t0:.1f} s (search {doc['search']})")
+        doc = audit_presence(a.audit, workers=a.workers, method=a.audit_method)
+        print(f"audit of {a.audit} in {time.perf_counter() - t0:.1f} s ({doc['method']}, search {doc['search']})")
         old = json.loads((Path(a.audit) / "truth.json").read_text())["cases"]
         for cid, r in doc["cases"].items():
             if old[cid]["label"] == "control":

@@ -280,7 +280,7 @@ def test_audit_polishes_the_given_starts_and_can_only_lower_the_unabsorbed_rms(t
                "present": False, "absorbing_fit": {}, "clean": clean.tolist()}}}
     (tmp_path / "truth.json").write_text(json.dumps(hidden))
     before = (tmp_path / "truth.json").read_text()
-    doc = G.audit_presence(tmp_path, config=CFG, search={"n_sobol": 2, "n_starts": 1, "maxfev": 4})
+    doc = G.audit_presence(tmp_path, config=CFG, search={"n_sobol": 2, "n_starts": 1, "maxfev": 4}, method="design")
     c = doc["cases"]["00"]
     assert c["unabsorbed_rms_mm2"] < 1e-6 and not c["present"] and c["generated_unabsorbed_rms_mm2"] == 3.0
     assert doc["cases"]["01"] == {"present": False}
