@@ -128,27 +128,21 @@ def score(a) -> None:
     recs = [r for _, rs in suites for r in rs]
     multi = len(suites) > 1
     print(f"{'case':<{14 if multi else 5}}{'truth':<12}{'named':<13}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}"
-          f"{'wall s':>8}{'effect ll':>11}{'unabs/sd':>9}{'base':>6}  reference")
+          f"{'wall s':>8}{'effect ll':>11}{'unabs/sd':>9}{'audit':>6}{'floor':>6}{'base':>5}  reference")
     for r in recs:
         cid = f"{r.suite}/{r.case}" if multi else r.case
         ref = r.reference + ("; rivals: " + ", ".join(r.rivals) if r.rivals else "")
         reg = {None: "?", True: "irr", False: "reg"}[r.irregular]
+        aud = {None: "", True: "pres", False: "abs"}[r.audit_present]
         print(f"{cid:<{14 if multi else 5}}{r.label:<12}{str(r.winner):<13}{'Y' if r.ok else 'N':<4}{r.gain:9.1f}"
               f"{100 * r.rms_improvement:8.0f}%{r.n_simulations:7d}{r.wall_s:8.0f}{r.effect_loglik:11.1f}"
-              f"{r.strength_sd:9.2f}{'' if r.present or r.label == 'control' else '*'}{reg:>5}  {ref}")
+              f"{r.strength_sd:9.2f}{'' if r.present or r.label == 'control' else '*'}{aud:>6}"
+              f"{100 * r.floor_gain:5.0f}%{reg:>5}  {ref}")
     if any(r.label != "control" and not r.present for r in recs):
         print(f"\n* effect not present (absorbed by the base model to < {PRESENCE_SD:.2f} sigma; generator presence "
               "rule): not counted in the present-effect rate")
-    for c, rs in suites:
-        audit_p = c / "audit.json"
-        if audit_p.exists():
-            # presence re-tested with a stronger absorption search (generate.py --audit)
-            aud = json.loads(audit_p.read_text())["cases"]
-            eff = [r for r in rs if r.label != "control"]
-            audited = [r for r in eff if aud.get(r.case, {}).get("present", r.present)]
-            moved = [r.case for r in eff if aud.get(r.case, {}).get("present", r.present) != r.present]
-            print(f"{c.name}: effect cases present under the audit (audit.json; changed: "
-                  f"{', '.join(moved) or 'none'}) named correctly: {sum(r.ok for r in audited)}/{len(audited)}")
+    print("audit: presence under the suite's audit.json (generate.py --audit; pres / abs), blank without one; "
+          "floor: 1 - sigma / RMS of the diagnosis' reference fit, the largest RMS gain any extension could reach")
     print()
     print(format_summary(summarise(recs)))
     print("(wall per case as run: see --workers)")

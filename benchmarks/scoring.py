@@ -15,7 +15,17 @@ log-evidence of every named effect, cost), the summary splits the detection rate
   reports count as unknown),
 
 each with its 95 % Wilson interval (``scipy.stats.binomtest``), and counts the rescue refits
-(fired, kept, by method) from the reports' notes. The reports are read only; the truth is opened
+(fired, kept, by method) from the reports' notes.
+
+Two presence checks beside the generator's own (stop 21):
+
+- the **presence audit** (``audit.json`` of ``generate.py --audit``, written before or without
+  any diagnosis): the rate over the effects still present under its stronger absorption search;
+- the **reference floor** of a case, ``1 - sigma / rms_ref``: the largest residual-RMS gain any
+  extension could reach against the diagnosis' own reference fit (no fit goes below the noise).
+  Below the issue's 30 % the diagnosis' base model has absorbed the effect to within the noise,
+  whatever the generator's search found; misses are split by it. It reads the diagnosis'
+  reports, so it explains misses and is never used to decide which cases count. The reports are read only; the truth is opened
 here, after the diagnosis, never by the fitting code.
 """
 from __future__ import annotations
@@ -28,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CaseRecord", "load_suite", "summarise", "wilson", "format_summary", "WEAK_SD"]
+__all__ = ["CaseRecord", "load_suite", "reference_rms", "summarise", "wilson", "format_summary", "WEAK_SD"]
 
 #: unabsorbed effect RMS (in noise sds) below which an effect counts as weak
 WEAK_SD = 2.0
@@ -59,6 +69,8 @@ class CaseRecord:
     rivals: list = field(default_factory=list)
     reference: str = "base"
     rescues: list = field(default_factory=list)   # (extension, method, kept)
+    audit_present: bool | None = None             # presence under audit.json, None without one
+    floor_gain: float = math.nan                  # 1 - sigma / RMS of the diagnosis' reference fit
 
 
 def _truth_table(cases_dir: Path) -> dict:
@@ -90,6 +102,20 @@ def _rivals(d: dict) -> list:
     return [f for f, _, _ in RankReport(math.nan, math.nan, rows, d["winner"], 3.0, 3.0).rivals]
 
 
+def reference_rms(d: dict) -> float:
+    """Residual RMS (mm^2) of a report's reference fit: the base fit, a base fit near an entry's
+    material mode (``"base near X"``, the mode check), or a null-consistent refit."""
+    ref = d.get("reference", "base")
+    base = d.get("base", {})
+    if ref.startswith("base near "):
+        mc = base.get("mode_checks", {}).get(ref[len("base near "):])
+        if mc is not None:
+            return float(mc["residual_rms"])
+    elif ref in d.get("refits", {}):
+        return float(d["refits"][ref]["residual_rms"])
+    return float(base.get("residual_rms", math.nan))
+
+
 def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseRecord]:
     """Records of every case of ``cases_dir``'s truth that has a report in ``out_dir`` (cases not
     yet diagnosed are skipped). Raises ``FileNotFoundError`` naming a missing ``truth.json``."""
@@ -98,6 +124,8 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
     if not (cases_dir / "truth.json").exists():
         raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
     suite = suite or cases_dir.name
+    audit = (json.loads((cases_dir / "audit.json").read_text())["cases"]
+             if (cases_dir / "audit.json").exists() else {})
     recs = []
     for cid, t in sorted(_truth_table(cases_dir).items()):
         p = out_dir / f"case_{cid}.json"
@@ -120,11 +148,13 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), math.nan) if win else math.nan
         imp = d["refits"][win]["rms_improvement"] if win else math.nan
         reg = d.get("base", {}).get("regularity")
+        aud = None if control or cid not in audit else bool(audit[cid]["present"])
+        floor = 1.0 - float(t.get("sigma_mm2", math.nan)) / reference_rms(d)
         recs.append(CaseRecord(
             suite, cid, label, present, strength, win, physics, ok, float(gain), float(imp),
             int(d.get("n_simulations", 0)), float(d.get("wall_s", 0.0)), el,
             None if reg is None else bool(reg["irregular"]),
-            _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", []))))
+            _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", [])), aud, floor))
     return recs
 
 
@@ -170,6 +200,10 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
             m["fired"] += 1
             m["kept"] += int(kept)
     fa = sum(not r.ok for r in ctl)
+    audited = [r for r in eff if r.audit_present is not None]
+    # suites with an audit: its presence; the others keep the generator's
+    audit_present = [r for r in eff if (r.present if r.audit_present is None else r.audit_present)]
+    missed = [r for r in present if not r.ok]
     shortlist = [r for r in present if r.ok or (r.physics is not None and r.label in r.rivals)]
     return {
         "suites": sorted({r.suite for r in recs}),
@@ -186,6 +220,9 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
         "by_base_regularity": regularity,
         "misses": dict(sorted(confusion.items(), key=lambda kv: (-kv[1], kv[0]))),
         "rescues": resc,
+        "audited_cases": len(audited),
+        "present_under_audit": _rate(audit_present),
+        "misses_floor_below_30pct": [sum(r.floor_gain < 0.3 for r in missed), len(missed)],
         "simulations_per_case": float(np.mean([r.n_simulations for r in recs])) if recs else math.nan,
         "wall_s_per_case": float(np.mean([r.wall_s for r in recs])) if recs else math.nan,
     }
@@ -212,6 +249,11 @@ def format_summary(s: dict) -> str:
              "by base regularity: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_base_regularity"].items()
                                                 if v["of"]),
              "misses (truth -> named): " + (", ".join(f"{k} x{v}" for k, v in s["misses"].items()) or "none"),
+             f"misses whose reference fit leaves < 30 % RMS to gain (1 - sigma/rms_ref): "
+             f"{s['misses_floor_below_30pct'][0]}/{s['misses_floor_below_30pct'][1]}",
+             *([f"effect present under the presence audit ({s['audited_cases']} effect cases audited, "
+                f"the rest by the generator's rule), named right: {_fmt_rate(s['present_under_audit'])}"]
+               if s["audited_cases"] else []),
              "rescue refits: " + (", ".join(f"{m} fired {v['fired']} kept {v['kept']}" for m, v in s["rescues"].items())
                                   or "none"),
              f"simulations per case: mean {s['simulations_per_case']:.0f}; wall per case: mean "

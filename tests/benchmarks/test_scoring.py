@@ -129,3 +129,43 @@ def test_cli_score_pools_and_rejects_unequal_lists(tmp_path, suite, capsys):
 def test_missing_truth_is_named(tmp_path):
     with pytest.raises(FileNotFoundError, match="no truth.json"):
         load_suite(tmp_path, tmp_path)
+
+
+def test_reference_floor_and_presence_audit(tmp_path):
+    """The floor is 1 - sigma / RMS of the report's *reference* fit (base, base near an entry, or a
+    null-consistent refit); audit.json moves cases out of the present set for the audited rate
+    only, and never into the generator's own present-effect rate."""
+    from benchmarks.scoring import reference_rms
+
+    def rep(winner, reference, base_rms=2.0, near=None, null_refit=None):
+        d = _report(winner)
+        d["reference"] = reference
+        d["base"]["residual_rms"] = base_rms
+        if near:
+            d["base"]["mode_checks"] = {near[0]: {"residual_rms": near[1]}}
+        if null_refit:
+            d["refits"][null_refit[0]] = {"residual_rms": null_refit[1], "rms_improvement": 0.0}
+        return d
+
+    r_base = rep(None, "base", base_rms=2.0)
+    r_near = rep(None, "base near scale", base_rms=2.0, near=("scale", 1.25))
+    r_null = rep("leak", "exposure", base_rms=2.0, null_refit=("exposure", 1.6))
+    assert reference_rms(r_base) == 2.0 and reference_rms(r_near) == 1.25 and reference_rms(r_null) == 1.6
+    cdir, odir = _suite(tmp_path, "s", {
+        "00": (_truth("scale", unabs=3.0, sigma=1.0), r_base),     # missed, floor 50 %
+        "01": (_truth("frame_rate", unabs=3.0, sigma=1.0), r_near),  # missed, floor 20 %
+        "02": (_truth("leak", unabs=2.0, sigma=0.8), r_null),      # named right, floor 50 %
+        "03": (_truth("control"), rep(None, "base")),
+    })
+    (cdir / "audit.json").write_text(json.dumps({"cases": {
+        "00": {"present": True}, "01": {"present": False}, "02": {"present": True}, "03": {"present": False}}}))
+    recs = {r.case: r for r in load_suite(cdir, odir)}
+    assert recs["00"].floor_gain == pytest.approx(0.5) and recs["01"].floor_gain == pytest.approx(0.2)
+    assert recs["02"].floor_gain == pytest.approx(0.5)
+    assert recs["01"].audit_present is False and recs["03"].audit_present is None
+    s = summarise(list(recs.values()))
+    assert (s["present"]["named"], s["present"]["of"]) == (1, 3)             # the generator's rule
+    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 2)
+    assert s["audited_cases"] == 3 and s["misses_floor_below_30pct"] == [1, 2]
+    out = format_summary(s)
+    assert "under the presence audit (3 effect cases audited" in out and "1/2 (50 %" in out
