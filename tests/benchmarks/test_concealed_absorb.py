@@ -47,3 +47,28 @@ def test_continuation_absorbs_a_base_waveform_from_an_exact_and_from_a_distant_s
                                                        maxfev=30)
     assert u_off < 0.02 * amp, (u_off, fit_off)
     assert n_off <= 2 + 2 * 5 * 31                     # design + start, then two chains of 5 windows
+
+
+def test_audit_both_stops_at_the_continuation_when_it_decides_and_refuses_unknown_methods(tmp_path):
+    """`--audit-method both`: a waveform the base model reproduces at the generator's absorbing fit
+    is decided (not present) by the continuation, so the design search is not run; audit.json
+    records the method and which search gave the smallest misfit. An unknown method is refused
+    before anything is written."""
+    import json
+    absorbing = {"E_body": 12.0, "E_cover": 600.0, "p_sub": 1000.0}
+    r = simulate(Params(**{**TABLE3.as_dict(), **absorbing}), CFG)
+    clean = G.sample_hr(np.asarray(r.gaw_hr), G.hr_times(r), G.frame_times(G.N_OBS, 97.3, CFG.fps))
+    far = {**TABLE3.as_dict(), "E_body": 9.5, "E_cover": 900.0, "p_sub": 1700.0}
+    hidden = {"seed": 0, "n_obs": G.N_OBS, "cases": {
+        "00": {"label": "scale", "truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": 3.0,
+               "present": True, "absorbing_fit": absorbing, "clean": clean.tolist()}}}
+    (tmp_path / "truth.json").write_text(json.dumps(hidden))
+    with pytest.raises(ValueError, match="method must be"):
+        G.audit_presence(tmp_path, config=CFG, method="grid")
+    assert not (tmp_path / "audit.json").exists()
+    search = {"continuation": {"n_sobol": 1, "n_keep": 0, "maxfev": 2},
+              "design": {"n_sobol": 2, "n_starts": 1, "maxfev": 4}}
+    doc = G.audit_presence(tmp_path, config=CFG, search=search, method="both")
+    c = doc["cases"]["00"]
+    assert doc["method"] == "both" and c["smallest_from"] == "continuation"
+    assert c["unabsorbed_rms_mm2"] < 1e-6 and not c["present"] and c["absorbing_fit"] == pytest.approx(absorbing)
