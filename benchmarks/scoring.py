@@ -25,8 +25,10 @@ Two presence checks beside the generator's own (stop 21):
   extension could reach against the diagnosis' own reference fit (no fit goes below the noise).
   Below the issue's 30 % the diagnosis' base model has absorbed the effect to within the noise,
   whatever the generator's search found; misses are split by it. It reads the diagnosis'
-  reports, so it explains misses and is never used to decide which cases count. The reports are read only; the truth is opened
-here, after the diagnosis, never by the fitting code.
+  reports, so it explains misses and is never used to decide which cases count.
+
+The reports are read only; the truth is opened here, after the diagnosis, never by the fitting
+code.
 """
 from __future__ import annotations
 

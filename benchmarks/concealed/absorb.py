@@ -25,11 +25,10 @@ code (``vfcore.diagnose``), like the rest of the generator.
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
-from vfcore import TABLE3, Params, simulate
+from vfcore import simulate
 from vfcore.measures import estimate_f0
 
 __all__ = ["CONTINUATION_SEARCH", "continued_unabsorbed_rms", "windows"]
@@ -71,25 +70,17 @@ def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list
     Returns ``(rms, best material values, simulations made)``.
     """
     from scipy.optimize import minimize
-    from scipy.stats import qmc
 
     from vfcore.batch import simulate_many
 
-    from .generate import TRUTH_BOUNDS, _aligned_sse
+    from .generate import MaterialSpace, _aligned_sse
 
     y = np.asarray(clean, dtype=float)
     if y.ndim != 1 or y.size < 4 or not np.all(np.isfinite(y)):
         raise ValueError("clean must be a finite 1-D waveform of at least 4 frames")
-    names = list(TRUTH_BOUNDS)
-    lo = np.array([TRUTH_BOUNDS[n][0] for n in names])
-    hi = np.array([TRUTH_BOUNDS[n][1] for n in names])
-    base = TABLE3.as_dict()
+    space = MaterialSpace()
+    names, params_of = space.names, space.params_of
     ws = windows(y.size, fps / estimate_f0(y, fps), cycles0)
-
-    def params_of(u):
-        d = dict(base)
-        d.update({n: float(v) for n, v in zip(names, lo + np.clip(u, 0.0, 1.0) * (hi - lo))})
-        return Params(**d)
 
     best = {"sse": math.inf, "u": None}
     count = [0]
@@ -103,13 +94,10 @@ def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list
             best["sse"], best["u"] = full, np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
         return full if w >= y.size else _aligned_sse(y[:w], res.gaw_hr)
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        U = qmc.Sobol(len(names), scramble=True, seed=seed).random(n_sobol)
+    U = space.sobol(n_sobol, seed)
     n_design = len(U)
     if starts:
-        U = np.vstack([U, np.clip((np.array([[float(st[n]) for n in names] for st in starts]) - lo) / (hi - lo),
-                                  0.0, 1.0)])
+        U = np.vstack([U, space.unit(starts)])
     res = simulate_many([params_of(u) for u in U], config, block=32)
     count[0] += len(U)
     first = np.array([score(u, r, ws[0]) for u, r in zip(U, res)])

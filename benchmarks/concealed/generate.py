@@ -45,7 +45,7 @@ __all__ = [
     "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",
     "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile", "zipper_area",
     "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale", "oscillates",
-    "amplitude", "phonates", "unabsorbed_rms", "PRESENCE_SIGMA", "AUDIT_SEARCH", "audit_presence",
+    "amplitude", "phonates", "MaterialSpace", "unabsorbed_rms", "PRESENCE_SIGMA", "AUDIT_SEARCH", "audit_presence",
     "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
 ]
 
@@ -344,6 +344,37 @@ def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
     return float(max(np.min(rr + 2.0 * u * rd + u * u * dd), 0.0))
 
 
+class MaterialSpace:
+    """The material box of the absorption searches: ``E_body, E_cover, p_sub`` in ``TRUTH_BOUNDS``
+    mapped to the unit cube, the other parameters at TABLE3."""
+
+    def __init__(self):
+        self.names = list(TRUTH_BOUNDS)
+        self.lo = np.array([TRUTH_BOUNDS[n][0] for n in self.names])
+        self.hi = np.array([TRUTH_BOUNDS[n][1] for n in self.names])
+        self._base = TABLE3.as_dict()
+
+    def params_of(self, u) -> Params:
+        """Params at unit-cube point ``u`` (clipped to the box)."""
+        d = dict(self._base)
+        d.update({n: float(v) for n, v in zip(self.names, self.lo + np.clip(u, 0.0, 1.0) * (self.hi - self.lo))})
+        return Params(**d)
+
+    def unit(self, dicts, clip: bool = True) -> np.ndarray:
+        """Unit-cube rows of material dicts, shape (len(dicts), 3)."""
+        u = (np.array([[float(d[n]) for n in self.names] for d in dicts]) - self.lo) / (self.hi - self.lo)
+        return np.clip(u, 0.0, 1.0) if clip else u
+
+    def sobol(self, n: int, seed: int) -> np.ndarray:
+        """``n`` scrambled-Sobol points of the unit cube (scipy warns when n is not a power of 2)."""
+        import warnings
+
+        from scipy.stats import qmc
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            return qmc.Sobol(len(self.names), scramble=True, seed=seed).random(n)
+
+
 def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimConfig = BASE_CONFIG,
                    n_sobol: int = 64, n_starts: int = 1, maxfev: int = 80, seed: int = 0,
                    starts: list[dict] | None = None) -> tuple[float, dict]:
@@ -354,35 +385,22 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
     then a bounded Nelder-Mead polishes the ``n_starts`` best design points, the truth and every
     ``starts`` point (``maxfev`` simulations each). It is an upper bound on the true minimum (a
     better optimiser could only absorb more). Returns ``(rms, best material values)``."""
-    import warnings
-
     from scipy.optimize import minimize
-    from scipy.stats import qmc
 
     from vfcore.batch import simulate_many
-    names = list(TRUTH_BOUNDS)
-    lo = np.array([TRUTH_BOUNDS[n][0] for n in names])
-    hi = np.array([TRUTH_BOUNDS[n][1] for n in names])
+    space = MaterialSpace()
+    names, params_of = space.names, space.params_of
     y = np.asarray(clean, dtype=float)
-    base = TABLE3.as_dict()
-
-    def params_of(u):
-        d = dict(base)
-        d.update({n: float(v) for n, v in zip(names, lo + np.clip(u, 0.0, 1.0) * (hi - lo))})
-        return Params(**d)
 
     def sse_of(res):
         return _aligned_sse(y, res.gaw_hr) if res.ok else math.inf
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        U = qmc.Sobol(len(names), scramble=True, seed=seed).random(n_sobol)
+    U = space.sobol(n_sobol, seed)
     if truth is not None:
-        U = np.vstack([U, (np.array([getattr(truth, n) for n in names]) - lo) / (hi - lo)])
+        U = np.vstack([U, space.unit([{n: getattr(truth, n) for n in names}], clip=False)])
     n_ranked = len(U)
     if starts:
-        U = np.vstack([U, np.clip((np.array([[float(st[n]) for n in names] for st in starts]) - lo) / (hi - lo),
-                                  0.0, 1.0)])
+        U = np.vstack([U, space.unit(starts)])
     res = simulate_many([params_of(u) for u in U], config, block=32)
     sse = np.array([sse_of(r) for r in res])
     best_u, best = U[int(np.argmin(sse))], float(np.min(sse))
