@@ -26,7 +26,6 @@ Output of :func:`write_suite` / the CLI::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import os
@@ -39,7 +38,13 @@ import numpy as np
 
 from vfcore import TABLE3, Params, SimConfig, simulate
 from vfcore.measures import estimate_f0
-from vfcore.result import HR_OVERSAMPLE
+
+from .absorb import AUDIT_SEARCH, MaterialSpace, audit_presence, unabsorbed_rms
+from .config import BASE_CONFIG, N_OBS, N_Y, PRESENCE_SIGMA, TRUTH_BOUNDS
+from .mechanisms import (PIXEL_MM, SUB_C, asymmetric_area, boxcar_average, epithelium_profile,
+                         forward_extensions_available, frame_times, gap_profile, hr_times, leak_area,
+                         quantise_scale, sample_hr, subglottal_modes, zipper_area)
+
 
 __all__ = [
     "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",
@@ -49,20 +54,11 @@ __all__ = [
     "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
 ]
 
-#: Forward-model settings of every case (the fit is expected to use the same).
-BASE_CONFIG = SimConfig(mesh="coarse", dt=1e-4)
-#: Frames per observation.
-N_OBS = 400
-#: Slices along the fold length for the 3D-like effects (leak, zipper).
-N_Y = 20
+
 #: Sub-frame start of the observation in the kept window, frames (uniform).
 OFFSET_RANGE = (60.0, 140.0)
 #: Noise standard deviation, mm^2 (uniform).
 SIGMA_RANGE = (0.3, 1.0)
-#: Material truth drawn uniformly in the default prior (vfcore.inference.prior.TABLE2_BOUNDS);
-#: the other parameters are at TABLE3. Copied here so the generator does not depend on the
-#: inference package (values: Hadwin et al. 2019, Table 2).
-TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)}
 #: Oscillation criterion of a usable case.
 MIN_PEAK_MM2 = 2.0
 #: Phonation criterion of a usable recording: the clean waveform's robust peak-to-trough amplitude
@@ -76,15 +72,6 @@ MIN_AMPLITUDE_SIGMA = 4.0
 #: truth by less than this RMS (mm^2) is redrawn. Exposure has none: at 2000 fps its low-pass is
 #: intrinsically weak on a 60-200 Hz GAW (README), so its cases are near-null by construction.
 MIN_EFFECT_RMS = {"default": 0.5, "control": 0.0, "exposure": 0.0}
-#: Presence rule (stop 10): an effect counts as *present* in a case only when the best base-model
-#: fit of its clean waveform (material parameters free in TRUTH_BOUNDS, any sub-frame lag; see
-#: :func:`unabsorbed_rms`) leaves an RMS of at least ``PRESENCE_SIGMA * sigma``. The factor is the
-#: smallest for which the issue's effect-size criterion can be met at all: if the base absorbs all
-#: but ``e`` of the effect and an extension removes the rest, the residual RMS falls from
-#: ``sqrt(sigma^2 + e^2)`` to ``sigma``, a 30 % gain exactly when ``e = sigma * sqrt(1/0.7^2 - 1)``.
-#: Below it the effect is absorbed by the material parameters to within the noise (the stop-9
-#: scale and frame-rate cases: base residual 0.52-0.74 mm^2 against sigma 0.52-0.69).
-PRESENCE_SIGMA = math.sqrt(1.0 / 0.7 ** 2 - 1.0)
 #: Draws tried for a present effect before the case is kept as *not present* (the draw with the
 #: largest ``unabsorbed / sigma``); exposure at 2000 fps never passes (README).
 PRESENCE_ATTEMPTS = 12
@@ -108,7 +95,6 @@ ZIP_LAG_CYCLES = (0.1, 0.3)
 ZIP_POWER = (1.5, 3.0)
 ZIP_ENV_Q = (0.5, 1.5)
 SUB_TUBE_M = (0.15, 0.25)
-SUB_C = 350.0                       # m/s, speed of sound (warm humid air)
 SUB_Z1 = (0.5e6, 2.0e6)             # Pa s/m^3, first-mode peak impedance
 SUB_ZETA1 = (0.08, 0.15)
 ASYM_Q_RANGES = ((0.6, 0.8), (1.25, 1.5))
@@ -121,7 +107,6 @@ EXPOSURE_FRAC = (0.6, 1.0)
 EXPOSURE_JITTER = (0.02, 0.05)      # relative sd of the per-frame exposure time
 RATE_RANGES = ((0.93, 0.97), (1.03, 1.07))
 SCALE_RANGES = ((0.8, 0.9), (1.1, 1.2))
-PIXEL_MM = 0.02                     # width quantisation step
 
 
 def _uniform(rng, lo_hi) -> float:
@@ -130,170 +115,6 @@ def _uniform(rng, lo_hi) -> float:
 
 def _two_sided(rng, ranges) -> float:
     return _uniform(rng, ranges[int(rng.integers(len(ranges)))])
-
-
-# ------------------------------------------------------------------ sampling helpers
-def hr_times(res) -> np.ndarray:
-    """Times (s, from the start of the kept window) of ``res.gaw_hr``."""
-    return np.arange(np.asarray(res.gaw_hr).size) / (res.fps * HR_OVERSAMPLE)
-
-
-def frame_times(n_obs: int, offset_frames: float, fps: float, rate_ratio: float = 1.0) -> np.ndarray:
-    """Camera instants: frame k at ``(offset + k / rate_ratio) / fps`` (true rate = ratio * fps)."""
-    return (float(offset_frames) + np.arange(n_obs) / float(rate_ratio)) / float(fps)
-
-
-def sample_hr(y_hr: np.ndarray, t_hr: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Linear interpolation of a high-rate signal at ``t``; ``t`` must lie inside ``t_hr``."""
-    t = np.asarray(t, dtype=float)
-    if t.min() < t_hr[0] - 1e-12 or t.max() > t_hr[-1] + 1e-12:
-        raise ValueError(f"sample times [{t.min():.4f}, {t.max():.4f}] s outside the simulated "
-                         f"window [{t_hr[0]:.4f}, {t_hr[-1]:.4f}] s")
-    return np.interp(t, t_hr, y_hr)
-
-
-def _cumint(y_hr, t_hr, t):
-    """Exact integral from t_hr[0] to t of the piecewise-linear interpolant of y_hr."""
-    h = t_hr[1] - t_hr[0]
-    c = np.concatenate([[0.0], np.cumsum(0.5 * h * (y_hr[1:] + y_hr[:-1]))])
-    j = np.clip(np.floor((t - t_hr[0]) / h).astype(int), 0, y_hr.size - 2)
-    s = t - t_hr[j]
-    return c[j] + y_hr[j] * s + (y_hr[j + 1] - y_hr[j]) * s * s / (2.0 * h)
-
-
-def boxcar_average(y_hr, t_hr, t, tau) -> np.ndarray:
-    """Mean of the (piecewise-linear) signal over ``[t - tau/2, t + tau/2]`` per frame (exact)."""
-    t = np.asarray(t, dtype=float)
-    tau = np.broadcast_to(np.asarray(tau, dtype=float), t.shape)
-    a, b = t - tau / 2, t + tau / 2
-    if a.min() < t_hr[0] or b.max() > t_hr[-1]:
-        raise ValueError("exposure window outside the simulated window")
-    out = np.empty_like(t)
-    pos = tau > 0
-    out[pos] = (_cumint(y_hr, t_hr, b[pos]) - _cumint(y_hr, t_hr, a[pos])) / tau[pos]
-    out[~pos] = np.interp(t[~pos], t_hr, y_hr)
-    return out
-
-
-def _slices(length_mm: float, n_y: int = N_Y):
-    dy = length_mm / n_y
-    return (np.arange(n_y) + 0.5) * dy, dy
-
-
-# ------------------------------------------------------------------ leak
-def gap_profile(chink_area_mm2: float, start_frac: float, length_mm: float, n_y: int = N_Y) -> np.ndarray:
-    """Posterior chink: full gap width g(y), mm, on ``n_y`` slices (y = 0 anterior, L posterior):
-    zero anterior of ``start_frac * L``, rising linearly to the posterior end, scaled so that
-    ``sum g dy = chink_area_mm2``."""
-    y, dy = _slices(length_mm, n_y)
-    shape = np.clip((y / length_mm - start_frac) / (1.0 - start_frac), 0.0, None)
-    if chink_area_mm2 == 0 or shape.sum() == 0:
-        return np.zeros(n_y)
-    return shape * chink_area_mm2 / (shape.sum() * dy)
-
-
-def leak_area(width_mm: np.ndarray, gap_mm: np.ndarray, env: np.ndarray | None = None,
-              length_mm: float = BASE_CONFIG.length_mm) -> np.ndarray:
-    """Area of a glottis whose membranous width ``W(t) env(y)`` cannot close below the chink
-    ``g(y)``: ``sum_y max(W(t) env(y), g(y)) dy`` (mm^2)."""
-    gap_mm = np.asarray(gap_mm, dtype=float)
-    n_y = gap_mm.size
-    env = np.ones(n_y) if env is None else np.asarray(env, dtype=float)
-    dy = length_mm / n_y
-    w = np.asarray(width_mm, dtype=float)
-    return np.maximum(w[..., None] * env, gap_mm).sum(axis=-1) * dy
-
-
-# ------------------------------------------------------------------ zipper
-def zipper_area(width_hr: np.ndarray, t_hr: np.ndarray, t_eval: np.ndarray, lag_s: float, power: float,
-                env_q: float, length_mm: float = BASE_CONFIG.length_mm, n_y: int = N_Y,
-                normalise: bool = True) -> np.ndarray:
-    """A-P stack: ``width(y, t) = env(y) W(t - tau(y))`` with ``tau(y) = lag_s (y/L)^power`` and
-    ``env(y) = sin(pi y/L)^env_q`` (normalised to mean 1 when ``normalise``; env_q = 0 -> 1);
-    area ``sum_y max(width, 0) dy`` at the times ``t_eval``."""
-    y, dy = _slices(length_mm, n_y)
-    tau = lag_s * (y / length_mm) ** power
-    env = np.sin(np.pi * y / length_mm) ** env_q
-    if normalise:
-        env = env / env.mean()
-    tt = np.asarray(t_eval, dtype=float)[:, None] - tau[None, :]
-    w = sample_hr(width_hr, t_hr, tt.ravel()).reshape(tt.shape)
-    return np.maximum(w * env, 0.0).sum(axis=1) * dy
-
-
-# ------------------------------------------------------------------ asymmetry
-def _anchor(res, t_ref):
-    """Cycle start (s) of ``res`` nearest ``t_ref``."""
-    ts = np.asarray(res.cycles.t_start) if res.cycles is not None else np.empty(0)
-    if ts.size == 0:
-        raise ValueError("no cycles to anchor the entrainment")
-    return float(ts[np.argmin(np.abs(ts - t_ref))])
-
-
-def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre: float) -> np.ndarray:
-    """Glottal area of a left fold (SimResult ``left``) and a right fold (``right``, simulated with
-    scaled stiffness) each contributing half its symmetric glottal width. The right fold is
-    entrained 1:1 to the left fold's f0 by a linear time warp anchored at cycle starts near
-    ``t_centre`` and lags it by ``lag_cycles`` of the left cycle:
-    ``t_R = tR0 + (t - tL0 - lag/f0_L) f0_L/f0_R``, so one left period ``1/f0_L`` spans one right
-    period ``1/f0_R``; width ``max(W_L/2 + W_R(t_R)/2, 0)``.
-
-    (Stops 7-9 had the ratio inverted, ``f0_R/f0_L``: the right fold then ran at ``f0_R^2/f0_L``,
-    a two-frequency beating waveform rather than an entrained pair; found in stop 10 when the
-    fitted two-fold model could not approach the generated asymmetry cases even at the true
-    right fold. ``test_asymmetry_is_entrained`` checks the combined f0.)"""
-    L = left.config.length_mm
-    t_hr = hr_times(left)
-    wl = sample_hr(np.asarray(left.gaw_hr) / L, t_hr, t_eval)
-    if right is left:
-        f_l = f_r = left.f0
-    else:
-        f_l, f_r = left.f0, right.f0
-    ratio = f_l / f_r
-    tl0 = _anchor(left, t_centre)
-    tr0 = tl0 if right is left else _anchor(right, t_centre)
-    t_r = tr0 + (np.asarray(t_eval) - tl0 - lag_cycles / f_l) * ratio
-    wr = sample_hr(np.asarray(right.gaw_hr) / right.config.length_mm, hr_times(right), t_r)
-    return np.maximum(0.5 * wl + 0.5 * wr, 0.0) * L
-
-
-# ------------------------------------------------------------------ forward-model extensions
-def forward_extensions_available() -> dict[str, bool]:
-    """Whether this vfcore's SimConfig has the epithelium / subglottal fields (issue 5 forward work)."""
-    names = {f.name for f in dataclasses.fields(SimConfig)}
-    return {"epithelium": {"epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile"} <= names,
-            "subglottal": "subglottal_modes" in names}
-
-
-def epithelium_profile(medial_ratio: float, width_mm: float, mesh: str = BASE_CONFIG.mesh) -> tuple:
-    """Per free-surface edge stiffness multipliers, 1 on the inferior/superior surfaces rising to
-    ``medial_ratio`` on the medial surface (Gaussian in arc length about the most medial node)."""
-    from vfcore.mesh import load_mesh
-    m = load_mesh(mesh)
-    p = np.asarray(m.points)[np.asarray(m.surface)] * 1e3        # mm, (x, z)
-    seg = np.hypot(*np.diff(p, axis=0).T)
-    s_node = np.concatenate([[0.0], np.cumsum(seg)])
-    s_mid = 0.5 * (s_node[1:] + s_node[:-1])
-    s_med = s_node[int(np.argmax(p[:, 0]))]
-    prof = 1.0 + (medial_ratio - 1.0) * np.exp(-((s_mid - s_med) / width_mm) ** 2)
-    return tuple(float(x) for x in prof)
-
-
-def subglottal_modes(tube_m: float, z1: float, zeta1: float, n_modes: int = 3, c: float = SUB_C) -> tuple:
-    """Modes of a uniform tube closed at the lung end and open at the glottis (quarter-wave):
-    ``f_k = (2k-1) c / (4 L)``, ``Z_k = Z1 / (2k-1)``, ``zeta_k = zeta1 (1 + 0.5 (k-1))``."""
-    return tuple(((2 * k - 1) * c / (4.0 * tube_m), min(1.0, zeta1 * (1 + 0.5 * (k - 1))), z1 / (2 * k - 1))
-                 for k in range(1, n_modes + 1))
-
-
-# ------------------------------------------------------------------ camera
-def quantise_scale(area_mm2: np.ndarray, scale: float, length_mm: float = BASE_CONFIG.length_mm,
-                   pixel_mm: float = PIXEL_MM) -> np.ndarray:
-    """Scale error ``s`` on the area, then the width (area / L) quantised to ``pixel_mm``."""
-    w = scale * np.asarray(area_mm2, dtype=float) / length_mm
-    if pixel_mm > 0:
-        w = np.round(w / pixel_mm) * pixel_mm
-    return w * length_mm
 
 
 # ------------------------------------------------------------------ cases
@@ -323,103 +144,6 @@ def phonates(clean, noisy, sigma: float, fps: float) -> bool:
         return False
     f0 = estimate_f0(y, fps)
     return bool(math.isfinite(f0) and f0 > 0 and y.size * f0 / fps >= 2.0)
-
-
-def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
-    """Smallest sum of squares between ``y`` (frames) and ``gaw_hr`` (HR_OVERSAMPLE samples per
-    frame) read at frames ``s + u + HR_OVERSAMPLE * k`` by linear interpolation, over every
-    high-rate start ``s`` and fraction ``u`` in [0, 1] (any sub-frame lag). Between two neighbouring
-    starts the interpolated window is ``a + u (b - a)``, so the sum of squares is a quadratic in
-    ``u`` and its minimum is exact."""
-    y = np.asarray(y, dtype=float)
-    g = np.asarray(gaw_hr, dtype=float)
-    span = HR_OVERSAMPLE * (y.size - 1) + 1
-    if g.size - span < 1 or not np.all(np.isfinite(g)):
-        return math.inf
-    win = np.lib.stride_tricks.sliding_window_view(g, span)[:, ::HR_OVERSAMPLE]
-    r = win[:-1] - y
-    d = win[1:] - win[:-1]
-    rr, rd, dd = np.sum(r * r, axis=1), np.sum(r * d, axis=1), np.sum(d * d, axis=1)
-    u = np.clip(np.divide(-rd, dd, out=np.zeros_like(rd), where=dd > 0), 0.0, 1.0)
-    return float(max(np.min(rr + 2.0 * u * rd + u * u * dd), 0.0))
-
-
-class MaterialSpace:
-    """The material box of the absorption searches: ``E_body, E_cover, p_sub`` in ``TRUTH_BOUNDS``
-    mapped to the unit cube, the other parameters at TABLE3."""
-
-    def __init__(self):
-        self.names = list(TRUTH_BOUNDS)
-        self.lo = np.array([TRUTH_BOUNDS[n][0] for n in self.names])
-        self.hi = np.array([TRUTH_BOUNDS[n][1] for n in self.names])
-        self._base = TABLE3.as_dict()
-
-    def params_of(self, u) -> Params:
-        """Params at unit-cube point ``u`` (clipped to the box)."""
-        d = dict(self._base)
-        d.update({n: float(v) for n, v in zip(self.names, self.lo + np.clip(u, 0.0, 1.0) * (self.hi - self.lo))})
-        return Params(**d)
-
-    def unit(self, dicts, clip: bool = True) -> np.ndarray:
-        """Unit-cube rows of material dicts, shape (len(dicts), 3)."""
-        u = (np.array([[float(d[n]) for n in self.names] for d in dicts]) - self.lo) / (self.hi - self.lo)
-        return np.clip(u, 0.0, 1.0) if clip else u
-
-    def sobol(self, n: int, seed: int) -> np.ndarray:
-        """``n`` scrambled-Sobol points of the unit cube (scipy warns when n is not a power of 2)."""
-        import warnings
-
-        from scipy.stats import qmc
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            return qmc.Sobol(len(self.names), scramble=True, seed=seed).random(n)
-
-
-def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimConfig = BASE_CONFIG,
-                   n_sobol: int = 64, n_starts: int = 1, maxfev: int = 80, seed: int = 0,
-                   starts: list[dict] | None = None) -> tuple[float, dict]:
-    """RMS (mm^2) of what the BASE model cannot absorb of a clean waveform: the minimum over the
-    material parameters (E_body, E_cover, p_sub in ``TRUTH_BOUNDS``, the rest at TABLE3) and over
-    the sub-frame lag of ``RMS(clean - base)``. A scrambled-Sobol design of ``n_sobol`` points
-    (plus ``truth`` and the material dicts in ``starts`` when given) is simulated in lock-step,
-    then a bounded Nelder-Mead polishes the ``n_starts`` best design points, the truth and every
-    ``starts`` point (``maxfev`` simulations each). It is an upper bound on the true minimum (a
-    better optimiser could only absorb more). Returns ``(rms, best material values)``."""
-    from scipy.optimize import minimize
-
-    from vfcore.batch import simulate_many
-    space = MaterialSpace()
-    names, params_of = space.names, space.params_of
-    y = np.asarray(clean, dtype=float)
-
-    def sse_of(res):
-        return _aligned_sse(y, res.gaw_hr) if res.ok else math.inf
-
-    U = space.sobol(n_sobol, seed)
-    if truth is not None:
-        U = np.vstack([U, space.unit([{n: getattr(truth, n) for n in names}], clip=False)])
-    n_ranked = len(U)
-    if starts:
-        U = np.vstack([U, space.unit(starts)])
-    res = simulate_many([params_of(u) for u in U], config, block=32)
-    sse = np.array([sse_of(r) for r in res])
-    best_u, best = U[int(np.argmin(sse))], float(np.min(sse))
-    polish = [int(j) for j in np.argsort(sse[:n_ranked], kind="stable")[:n_starts]]
-    if truth is not None and n_ranked - 1 not in polish:
-        polish.insert(0, n_ranked - 1)     # the truth: usually next to the absorbing optimum
-    polish += list(range(n_ranked, len(U)))    # and every given start
-    for j in polish:
-        if not math.isfinite(sse[j]):
-            continue
-        r = minimize(lambda u: sse_of(simulate(params_of(u), config)), U[j], method="Nelder-Mead",
-                     bounds=[(0.0, 1.0)] * len(names),
-                     options={"maxfev": maxfev, "xatol": 1e-3, "fatol": 1e-6 * max(sse[j], 1e-12),
-                              "initial_simplex": np.vstack([U[j]] + [np.clip(U[j] + 0.05 * e, 0, 1)
-                                                                     for e in np.eye(len(names))])})
-        if r.fun < best:
-            best, best_u = float(r.fun), np.clip(r.x, 0.0, 1.0)
-    bp = params_of(best_u)
-    return math.sqrt(best / y.size), {n: float(getattr(bp, n)) for n in names}
 
 
 def _ok(res) -> bool:
@@ -681,74 +405,6 @@ def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = No
         arrays[f"base_{c.id}"] = c.base
         arrays[f"noisy_{c.id}"] = c.gaw
     np.savez(out / "truth.npz", **arrays)
-
-
-#: Absorption search of :func:`audit_presence`: a denser design and more polished starts than the
-#: generator's (64 points, the truth polished). Stop 12: in the seed-0 suite the diagnosis's own
-#: base fit of case 07 (frame rate 1.039) reached a residual of 0.650 mm^2 against sigma 0.555,
-#: i.e. an unabsorbed part of ~0.34 mm^2 = 0.61 sigma, where the generator had measured 2.08 mm^2
-#: (3.7 sigma) from the truth: the base model absorbs a time stretch in another material mode,
-#: along the f0 ridge, which a local search from the truth does not reach.
-AUDIT_SEARCH = {"n_sobol": 512, "n_starts": 6, "maxfev": 150}
-
-
-def _audit_one(args):
-    cid, t, config, search, method = args
-    if t.get("label") == "control":
-        return cid, {"present": False}
-    starts = [t["truth"]] + ([t["absorbing_fit"]] if t.get("absorbing_fit") else [])
-    clean = np.asarray(t["clean"], dtype=float)
-    u, fit, n_sim, by = math.inf, {}, 0, None
-    if method in ("continuation", "both"):
-        from .absorb import continued_unabsorbed_rms
-        u, fit, n_sim = continued_unabsorbed_rms(clean, config, config.fps, starts=starts,
-                                                 **search.get("continuation", search))
-        by = "continuation"
-    # "both": the design search too, unless the continuation already decided the case
-    if method == "design" or (method == "both" and u >= PRESENCE_SIGMA * float(t["sigma_mm2"])):
-        ud, fitd = unabsorbed_rms(clean, None, config, starts=starts, **search.get("design", search))
-        if ud < u:
-            u, fit, by = ud, fitd, "design"
-    before = float(t.get("unabsorbed_rms_mm2", math.nan))
-    if math.isfinite(before) and before < u:       # never report a worse search than the generator's
-        u, fit, by = before, t.get("absorbing_fit", {}), "generator"
-    return cid, {"unabsorbed_rms_mm2": u, "generated_unabsorbed_rms_mm2": before, "sigma_mm2": t["sigma_mm2"],
-                 "present": bool(u >= PRESENCE_SIGMA * float(t["sigma_mm2"])), "absorbing_fit": fit,
-                 "n_simulations_continuation": n_sim, "smallest_from": by}
-
-
-def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig = BASE_CONFIG,
-                   search: dict | None = None, method: str = "both") -> dict:
-    """Re-test the presence rule of an existing suite with a stronger absorption search and
-    write ``audit.json`` beside ``truth.json``. ``method``: ``"continuation"``
-    (:func:`.absorb.continued_unabsorbed_rms` with :data:`.absorb.CONTINUATION_SEARCH`),
-    ``"design"`` (stop 12; :func:`unabsorbed_rms` with :data:`AUDIT_SEARCH`) or ``"both"``
-    (default since stop 21: the continuation, then the design search wherever the continuation
-    left the effect present; the smaller RMS; ``search`` then has one dict per method). The truth and
-    the generator's absorbing fit are starts too, and a result above the generator's own is
-    replaced by it, so the unabsorbed RMS can only go down. The recordings are not touched; only
-    which effects count as present changes. Like the rest of the generator, it reads the clean
-    waveform and knows nothing of the fitting code."""
-    from .absorb import CONTINUATION_SEARCH
-    if method not in ("continuation", "design", "both"):
-        raise ValueError(f"method must be 'continuation', 'design' or 'both', got {method!r}")
-    suite = Path(suite)
-    hidden = json.loads((suite / "truth.json").read_text())
-    default = {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH,
-               "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH}}[method]
-    search = dict(default if search is None else search)
-    jobs = [(cid, t, config, search, method) for cid, t in sorted(hidden["cases"].items())]
-    if workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(workers) as ex:
-            out = dict(ex.map(_audit_one, jobs))
-    else:
-        out = dict(map(_audit_one, jobs))
-    doc = {"method": method, "search": search, "presence_sigma": PRESENCE_SIGMA, "cases": out}
-    tmp = suite / "audit.json.tmp"
-    tmp.write_text(json.dumps(doc, indent=1, default=float))
-    tmp.replace(suite / "audit.json")
-    return doc
 
 
 def main(argv=None) -> int:
