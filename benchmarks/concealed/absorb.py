@@ -268,6 +268,23 @@ def _audit_one(args):
                  "n_simulations_continuation": n_sim, "smallest_from": by}
 
 
+def _check_search(search: dict, method: str) -> None:
+    """Refuse a search whose keys the method's function does not take (before any simulation)."""
+    import inspect
+    fns = {"continuation": continued_unabsorbed_rms, "design": unabsorbed_rms}
+    own = {"clean", "truth", "config", "fps", "starts"}
+    parts = ({m: search.get(m) for m in fns} if method == "both"
+             else {method: search.get(method, search)})
+    for m, d in parts.items():
+        if not isinstance(d, dict):
+            raise ValueError(f"method 'both' needs search={{'continuation': {{...}}, 'design': {{...}}}}; "
+                             f"the {m!r} entry is {d!r}")
+        allowed = set(inspect.signature(fns[m]).parameters) - own
+        bad = sorted(set(d) - allowed)
+        if bad:
+            raise ValueError(f"search of the {m} method: unknown keys {bad}; allowed {sorted(allowed)}")
+
+
 def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig = BASE_CONFIG,
                    search: dict | None = None, method: str = "both") -> dict:
     """Re-test the presence rule of an existing suite with a stronger absorption search and
@@ -275,7 +292,8 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
     (:func:`.absorb.continued_unabsorbed_rms` with :data:`.absorb.CONTINUATION_SEARCH`),
     ``"design"`` (stop 12; :func:`unabsorbed_rms` with :data:`AUDIT_SEARCH`) or ``"both"``
     (default since stop 21: the continuation, then the design search wherever the continuation
-    left the effect present; the smaller RMS; ``search`` then has one dict per method). The truth and
+    left the effect present; the smaller RMS; ``search`` then has one dict per method, and a
+    key the method does not take is refused before anything is simulated). The truth and
     the generator's absorbing fit are starts too, and a result above the generator's own is
     replaced by it, so the unabsorbed RMS can only go down. The recordings are not touched; only
     which effects count as present changes. Like the rest of the generator, it reads the clean
@@ -287,6 +305,7 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
     default = {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH,
                "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH}}[method]
     search = dict(default if search is None else search)
+    _check_search(search, method)
     jobs = [(cid, t, config, search, method) for cid, t in sorted(hidden["cases"].items())]
     if workers > 1:
         from concurrent.futures import ProcessPoolExecutor

@@ -66,6 +66,11 @@ def test_audit_both_stops_at_the_continuation_when_it_decides_and_refuses_unknow
     with pytest.raises(ValueError, match="method must be"):
         G.audit_presence(tmp_path, config=CFG, method="grid")
     assert not (tmp_path / "audit.json").exists()
+    with pytest.raises(ValueError, match="method 'both' needs search"):     # a flat dict for two methods
+        G.audit_presence(tmp_path, config=CFG, search={"n_sobol": 2, "maxfev": 4}, method="both")
+    with pytest.raises(ValueError, match=r"unknown keys \['n_keep'\]"):     # a continuation key for the design
+        G.audit_presence(tmp_path, config=CFG, search={"n_sobol": 2, "n_keep": 1}, method="design")
+    assert not (tmp_path / "audit.json").exists()
     search = {"continuation": {"n_sobol": 1, "n_keep": 0, "maxfev": 2},
               "design": {"n_sobol": 2, "n_starts": 1, "maxfev": 4}}
     doc = G.audit_presence(tmp_path, config=CFG, search=search, method="both")
