@@ -119,12 +119,13 @@ def run(a) -> None:
 
 def score(a) -> None:
     """Per-case table and summary (benchmarks/scoring.py) of one suite, or of several pooled:
-    ``--cases`` and ``--out`` then take comma-separated lists of equal length."""
-    from benchmarks.scoring import PRESENCE_SD, format_summary, load_suite, summarise
+    ``--cases`` and ``--out`` then take comma-separated lists of equal length. An ``--out`` that
+    is a file is a kept ``--score`` table of a suite whose reports were not kept (scoring.load_table)."""
+    from benchmarks.scoring import PRESENCE_SD, format_summary, load_suite, load_table, summarise
     cdirs, odirs = [c for c in a.cases.split(",") if c], [o for o in a.out.split(",") if o]
     if len(cdirs) != len(odirs):
         raise SystemExit(f"--score: {len(cdirs)} --cases directories but {len(odirs)} --out directories")
-    suites = [(Path(c), load_suite(c, o)) for c, o in zip(cdirs, odirs)]
+    suites = [(Path(c), (load_table if Path(o).is_file() else load_suite)(c, o)) for c, o in zip(cdirs, odirs)]
     recs = [r for _, rs in suites for r in rs]
     multi = len(suites) > 1
     print(f"{'case':<{14 if multi else 5}}{'truth':<12}{'named':<13}{'ok':<4}{'dlogZ':>9}{'RMS impr':>9}{'sims':>7}"
@@ -151,7 +152,8 @@ def score(a) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", required=True)
-    ap.add_argument("--out", required=True)
+    ap.add_argument("--out", required=True,
+                    help="reports directory; with --score, a kept --score table file is read instead of reports")
     ap.add_argument("--score", action="store_true", help="score existing reports against truth.json")
     from vfcore.diagnose.defaults import BASE_PARTICLES, REFIT_PARTICLES
     ap.add_argument("--particles", type=int, default=BASE_PARTICLES)

@@ -27,6 +27,12 @@ Two presence checks beside the generator's own (stop 21):
   whatever the generator's search found; misses are split by it. It reads the diagnosis'
   reports, so it explains misses and is never used to decide which cases count.
 
+Suites whose reports were not kept (held-out seeds 1-3) are scored from the per-case table that
+``--score`` printed at the time (kept under ``benchmarks/results/heldout_seedS/score_table.txt``)
+and the regenerated suite: :func:`load_table`, used when ``--out`` names a file. Each row's truth
+label and effect log-likelihood must match the regenerated suite, so a generator that no longer
+reproduces the suite is refused rather than scored.
+
 The reports are read only; the truth is opened here, after the diagnosis, never by the fitting
 code.
 """
@@ -40,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CaseRecord", "load_suite", "reference_rms", "summarise", "wilson", "format_summary", "WEAK_SD"]
+__all__ = ["CaseRecord", "load_suite", "load_table", "reference_rms", "summarise", "wilson", "format_summary",
+           "WEAK_SD"]
 
 #: unabsorbed effect RMS (in noise sds) below which an effect counts as weak
 WEAK_SD = 2.0
@@ -157,6 +164,46 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
             int(d.get("n_simulations", 0)), float(d.get("wall_s", 0.0)), el,
             None if reg is None else bool(reg["irregular"]),
             _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", [])), aud, floor))
+    return recs
+
+
+_ROW = re.compile(r"^(\d\d)\s+(\w+)\s+(\w+?)\s*([YN])\s+(\S+)\s+(\S+)%\s+(\d+)\s+(\d+)\s+(\S+)\s+(\S+)\s+(.*)$")
+
+
+def load_table(cases_dir, table, *, suite: str | None = None) -> list[CaseRecord]:
+    """Records of a suite scored from a kept ``--score`` table (``table``, a text file) instead of
+    reports: named winner, ok, dlogZ, RMS improvement, simulations and wall time per case, the
+    rivals and the reference; the base fit's regularity and the reference floor are unknown.
+    Raises ``ValueError`` naming the first row whose truth label or effect log-likelihood (to the
+    table's 0.1 nats) differs from the regenerated suite's ``truth.json``."""
+    from vfcore.diagnose.extensions import physics_of
+    cases_dir = Path(cases_dir)
+    if not (cases_dir / "truth.json").exists():
+        raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
+    suite = suite or cases_dir.name
+    truth = _truth_table(cases_dir)
+    audit = (json.loads((cases_dir / "audit.json").read_text())["cases"]
+             if (cases_dir / "audit.json").exists() else {})
+    recs = []
+    for line in Path(table).read_text().splitlines():
+        m = _ROW.match(line)
+        if not m:
+            continue
+        cid, label, named, ok, dz, imp, sims, wall, ell, _, rest = m.groups()
+        t = truth.get(cid)
+        if t is None or t["label"] != label or abs(float(t["effect_loglik"]) - float(ell)) > 0.051:
+            raise ValueError(f"{table}: case {cid} ({label}, effect ll {ell}) does not match {cases_dir}/truth.json "
+                             f"({None if t is None else (t['label'], round(float(t['effect_loglik']), 1))}): "
+                             f"the suite did not regenerate")
+        control = label == "control"
+        win = None if named == "None" else named
+        rivals = rest.split("; rivals: ")[1].split(", ") if "; rivals: " in rest else []
+        recs.append(CaseRecord(
+            suite, cid, label, False if control else bool(t.get("present", True)),
+            math.nan if control else float(t["unabsorbed_rms_mm2"]) / float(t["sigma_mm2"]),
+            win, physics_of(win) if win else None, ok == "Y", float(dz), float(imp) / 100.0, int(sims),
+            float(wall), float(ell), None, [r.strip() for r in rivals], rest.split(";")[0].strip(), [],
+            None if control or cid not in audit else bool(audit[cid]["present"])))
     return recs
 
 

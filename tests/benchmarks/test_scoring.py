@@ -169,3 +169,45 @@ def test_reference_floor_and_presence_audit(tmp_path):
     assert s["audited_cases"] == 3 and s["misses_floor_below_30pct"] == [1, 2]
     out = format_summary(s)
     assert "under the presence audit (3 effect cases audited" in out and "1/2 (50 %" in out
+
+
+TABLE = """case truth       named       ok      dlogZ RMS impr   sims  wall s  effect ll unabs/sd  reference
+00   control     None        Y         nan     nan%   7623     100        0.0      nan  base
+04   asymmetry   lr_stiffnessY       313.6      37%  31441     421    10031.7     1.86  base; rivals: zipper
+10   frame_rate  asymmetry   N      1175.4      50%  42052     589   431015.9     9.66  base; rivals: zipper, asymmetry
+14   scale       None        N         nan     nan%   7903      98     4438.7     1.40  base near scale
+"""
+
+
+def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
+    """A suite whose reports were not kept is scored from its printed table: the glued named/ok
+    columns, rivals and reference parse, the audit applies, and a row whose truth does not match
+    the regenerated suite is refused by name."""
+    from benchmarks.scoring import load_table
+    cases = {"00": {"label": "control", "effect_loglik": 0.0, "sigma_mm2": 0.5},
+             "04": {"label": "asymmetry", "effect_loglik": 10031.66, "unabsorbed_rms_mm2": 1.86, "sigma_mm2": 1.0,
+                    "present": True},
+             "10": {"label": "frame_rate", "effect_loglik": 431015.94, "unabsorbed_rms_mm2": 9.66, "sigma_mm2": 1.0,
+                    "present": True},
+             "14": {"label": "scale", "effect_loglik": 4438.7, "unabsorbed_rms_mm2": 1.4, "sigma_mm2": 1.0,
+                    "present": True}}
+    cdir = tmp_path / "s"
+    cdir.mkdir()
+    (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
+    (cdir / "audit.json").write_text(json.dumps({"cases": {"04": {"present": True}, "10": {"present": True},
+                                                           "14": {"present": False}}}))
+    table = tmp_path / "score_table.txt"
+    table.write_text(TABLE)
+    recs = {r.case: r for r in load_table(cdir, table)}
+    assert recs["04"].winner == "lr_stiffness" and recs["04"].physics == "asymmetry" and recs["04"].ok
+    assert recs["04"].rivals == ["zipper"] and recs["04"].gain == 313.6 and recs["04"].rms_improvement == 0.37
+    assert recs["10"].physics == "asymmetry" and not recs["10"].ok and recs["10"].rivals == ["zipper", "asymmetry"]
+    assert recs["14"].winner is None and recs["14"].reference == "base near scale"
+    assert recs["00"].ok and recs["00"].label == "control" and math.isnan(recs["00"].gain)
+    s = summarise(list(recs.values()))
+    assert (s["present"]["named"], s["present"]["of"]) == (1, 3)
+    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 2)   # 14 absorbed
+    cases["10"]["effect_loglik"] = 431016.2              # the generator no longer reproduces case 10
+    (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
+    with pytest.raises(ValueError, match="case 10 .*did not regenerate"):
+        load_table(cdir, table)
