@@ -181,8 +181,9 @@ TABLE = """case truth       named       ok      dlogZ RMS impr   sims  wall s  e
 
 def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
     """A suite whose reports were not kept is scored from its printed table: the glued named/ok
-    columns, rivals and reference parse, the audit applies, and a row whose truth does not match
-    the regenerated suite is refused by name."""
+    columns, rivals and reference parse, the audit applies to the rows that regenerate (to 1e-4 of
+    their effect log-likelihood), a row that does not is scored as tabled without it, and a table
+    of another suite is refused by name."""
     from benchmarks.scoring import load_table
     cases = {"00": {"label": "control", "effect_loglik": 0.0, "sigma_mm2": 0.5},
              "04": {"label": "asymmetry", "effect_loglik": 10031.66, "unabsorbed_rms_mm2": 1.86, "sigma_mm2": 1.0,
@@ -207,7 +208,30 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
     s = summarise(list(recs.values()))
     assert (s["present"]["named"], s["present"]["of"]) == (1, 3)
     assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 2)   # 14 absorbed
-    cases["10"]["effect_loglik"] = 431016.2              # the generator no longer reproduces case 10
+    assert s["not_regenerated"] == [] and s["misses_floor_below_30pct"] == [0, 0]     # no floor in a table
+    # a last-digit change of the forward model is the same recording (1e-4 relative)...
+    cases["10"]["effect_loglik"] = 431016.2
+    cases["14"]["effect_loglik"] = 4438.7 + 0.4
     (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
-    with pytest.raises(ValueError, match="case 10 .*did not regenerate"):
+    assert all(r.regenerated for r in load_table(cdir, table))
+    # ...a changed mechanism is not: the row is scored as tabled, without the audit
+    cases["14"]["effect_loglik"] = 4438.7 + 2.0
+    cases["14"]["unabsorbed_rms_mm2"] = 0.5             # the regenerated truth's strength is not used
+    (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
+    recs = {r.case: r for r in load_table(cdir, table)}
+    assert not recs["14"].regenerated and recs["14"].audit_present is None and recs["14"].present
+    assert recs["14"].strength_sd == 1.40 and recs["10"].regenerated and recs["10"].audit_present is True
+    s = summarise(list(recs.values()))
+    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 3)   # 14 as tabled
+    assert s["not_regenerated"] == ["s/14"] and "not regenerated" in format_summary(s)
+    # another suite (a label differs) or no effect row reproduced: refused by name
+    cases["04"]["label"] = "leak"
+    (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
+    with pytest.raises(ValueError, match="case 04 .*not the suite"):
+        load_table(cdir, table)
+    cases["04"]["label"] = "asymmetry"
+    for c in ("04", "10"):
+        cases[c]["effect_loglik"] += 5000.0
+    (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
+    with pytest.raises(ValueError, match="did not regenerate"):
         load_table(cdir, table)
