@@ -46,6 +46,7 @@ from .config import BASE_CONFIG, PRESENCE_SIGMA, TRUTH_BOUNDS
 __all__ = ["MaterialSpace", "unabsorbed_rms", "CONTINUATION_SEARCH", "continued_unabsorbed_rms", "windows",
            "AUDIT_SEARCH", "audit_presence"]
 
+
 def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
     """Smallest sum of squares between ``y`` (frames) and ``gaw_hr`` (HR_OVERSAMPLE samples per
     frame) read at frames ``s + u + HR_OVERSAMPLE * k`` by linear interpolation, over every
