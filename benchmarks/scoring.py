@@ -30,8 +30,8 @@ Two presence checks beside the generator's own (stop 21):
 Suites whose reports were not kept (held-out seeds 1-3) are scored from the per-case table that
 ``--score`` printed at the time (kept under ``benchmarks/results/heldout_seedS/score_table.txt``)
 and the regenerated suite: :func:`load_table`, used when ``--out`` names a file. Each row's truth
-label and effect log-likelihood must match the regenerated suite, so a generator that no longer
-reproduces the suite is refused rather than scored.
+label must match the regenerated suite (another suite is refused); a row whose effect
+log-likelihood no longer matches is scored as tabled, without the audit, and listed.
 
 The reports are read only; the truth is opened here, after the diagnosis, never by the fitting
 code.
@@ -91,6 +91,16 @@ def _truth_table(cases_dir: Path) -> dict:
     return truth
 
 
+def _suite_truth(cases_dir: Path) -> tuple[dict, dict]:
+    """A suite's truth table and its audit's cases ({} without ``audit.json``); raises
+    ``FileNotFoundError`` naming a missing ``truth.json``."""
+    if not (cases_dir / "truth.json").exists():
+        raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
+    audit = (json.loads((cases_dir / "audit.json").read_text())["cases"]
+             if (cases_dir / "audit.json").exists() else {})
+    return _truth_table(cases_dir), audit
+
+
 def _rescues(notes) -> list:
     out = []
     for n in notes:
@@ -131,13 +141,10 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
     yet diagnosed are skipped). Raises ``FileNotFoundError`` naming a missing ``truth.json``."""
     from vfcore.diagnose.extensions import physics_of
     cases_dir, out_dir = Path(cases_dir), Path(out_dir)
-    if not (cases_dir / "truth.json").exists():
-        raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
+    truth, audit = _suite_truth(cases_dir)
     suite = suite or cases_dir.name
-    audit = (json.loads((cases_dir / "audit.json").read_text())["cases"]
-             if (cases_dir / "audit.json").exists() else {})
     recs = []
-    for cid, t in sorted(_truth_table(cases_dir).items()):
+    for cid, t in sorted(truth.items()):
         p = out_dir / f"case_{cid}.json"
         if not p.exists():
             continue
@@ -186,12 +193,8 @@ def load_table(cases_dir, table, *, suite: str | None = None, rtol: float = 1e-4
     no row matches."""
     from vfcore.diagnose.extensions import physics_of
     cases_dir = Path(cases_dir)
-    if not (cases_dir / "truth.json").exists():
-        raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
+    truth, audit = _suite_truth(cases_dir)
     suite = suite or cases_dir.name
-    truth = _truth_table(cases_dir)
-    audit = (json.loads((cases_dir / "audit.json").read_text())["cases"]
-             if (cases_dir / "audit.json").exists() else {})
     recs = []
     for line in Path(table).read_text().splitlines():
         m = _ROW.match(line)
