@@ -1,20 +1,20 @@
 """Stop 23: the "best of all base fits" lead, evaluated on kept development reports (no simulation).
 
 The lead (docs/diagnose_history.md, stop 22): when the base fit is irregular and no entry is
-named, name the entry whose log-evidence beats *every* base-model fit (all base runs, the mode
-checks' bounds, null-consistent refits) by > 3 nats and > 3 delta-method errors, with >= 30 %
-lower residual RMS and parameters off their null value, instead of adding the base runs' scatter
-in quadrature. This prints, for every report of held-out seeds 4 and 5 (now development data), what
+named, rank the entries with the shipped rule against *every* base-model fit (all base runs, the
+mode checks' bounds, null-consistent refits) by their delta-method errors, instead of adding the
+base runs' scatter in quadrature. This prints, for every report of held-out seeds 4 and 5 (now development data), what
 that rule would name where the shipped rule named nothing. Usage:
-    python benchmarks/results/leads/best_of_base.py
+    .venv/bin/python benchmarks/results/leads/best_of_base.py
 """
 import glob
 import json
-import math
 import re
+import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(HERE.parents[1]))
 
 
 def truth(seed: int) -> dict[str, str]:
@@ -42,15 +42,23 @@ def base_fits(rep: dict) -> list[tuple[float, float, str]]:
     return fits
 
 
-def lead(rep: dict, min_gain=3.0, k_se=3.0, min_rms_gain=0.30):
-    zb, sb, lab = max(base_fits(rep))
-    best = None
-    for k, v in rep["refits"].items():
-        d, se = v["log_evidence"] - zb, math.hypot(v["log_evidence_se"], sb)
-        if (not v.get("null_consistent") and v["rms_improvement"] >= min_rms_gain and d > min_gain
-                and d > k_se * se and (best is None or d > best[1])):
-            best = (k, d, se, v["rms_improvement"], lab)
-    return best
+def lead(rep: dict):
+    """The shipped naming rule (:func:`vfcore.diagnose.rank.rank_extensions`: evidence, effect
+    size against the reference fit, null value) with every base-model fit as a reference and
+    delta-method errors only (no between-run error). Returns the ranking."""
+    from vfcore.diagnose.rank import rank_extensions
+    b = rep["base"]
+    refs = {}
+    for i, (z, s, lab) in enumerate(base_fits(rep)):
+        if lab.startswith("base near "):
+            refs[f"{lab} ({i})"] = (z, s, b["mode_checks"][lab[len("base near "):]]["residual_rms"])
+        elif lab == "base run":        # never above the kept run, so its RMS is never used
+            refs[f"{lab} ({i})"] = (z, s, b["residual_rms"])
+    fits = rep["refits"]
+    return rank_extensions((b["log_evidence"], b["log_evidence_se"]),
+                           {k: (v["log_evidence"], v["log_evidence_se"]) for k, v in fits.items()},
+                           rms={k: v["residual_rms"] for k, v in fits.items()}, base_rms=b["residual_rms"],
+                           null={k: v["null_consistent"] for k, v in fits.items()}, references=refs)
 
 
 def main():
@@ -67,16 +75,17 @@ def main():
             if reg.get("irregular") is False:
                 print(f"seed {seed} case {cid} ({tr[cid]}, regular): the lead does not apply")
                 continue
-            got = lead(rep)        # irregular, or not recorded (seed 4: applied anyway; it changes none)
-            if got is None:
-                print(f"seed {seed} case {cid} ({tr[cid]}, {irr}): still none")
+            r = lead(rep)          # irregular, or not recorded (seed 4)
+            top = r.rows[0] if r.rows else None
+            if r.winner is None:
+                why = f"; top {top.name} dlogZ {top.delta:.0f}, {top.reason}" if top else ""
+                print(f"seed {seed} case {cid} ({tr[cid]}, {irr}): still none (reference {r.reference}{why})")
                 continue
             changed += 1
-            k, d, se, g, lab = got
-            print(f"seed {seed} case {cid} ({tr[cid]}, {irr}): would name {k}, dlogZ {d:.0f} +- {se:.1f} over the "
-                  f"best base-model fit ({lab}), RMS {100 * g:.0f} % lower, roughness "
-                  f"{reg.get('max_change', math.nan):.0f}")
-    print(f"cases the lead changes: {changed} (a control named is a false alarm)")
+            w = next(x for x in r.rows if x.name == r.winner)
+            print(f"seed {seed} case {cid} ({tr[cid]}, {irr}): would name {w.name}, dlogZ {w.delta:.0f} +- "
+                  f"{w.delta_se:.1f} over {r.reference}, RMS {100 * w.rms_gain:.0f} % lower")
+    print(f"cases the lead changes: {changed} (a control named would be a false alarm)")
 
 
 if __name__ == "__main__":
