@@ -469,3 +469,47 @@ def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred(
     assert p.winner == "scale" and p.physics == "scale" and p.notes[-1].startswith("scale: named instead")
     assert "not distinguishable from asymmetry" in p.verdict
     assert r.winner == "asymmetry"                      # the original report is unchanged
+
+
+def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter_swamped():
+    """Held-out seed-7 case 11 (a concealed scale error, irregular base): base runs at -2,506,
+    -2,378, -2,482 and -1,904 nats (between-run error 409), the scale refit at -644 with its RMS
+    59 % lower. With the between-run error in quadrature the 1,260-nat gain is 2.2 se and not
+    named; against the best of all base fits by their own errors it is."""
+    from vfcore.diagnose.rank import rank_best_of_base
+    runs = [(-2506.1, 0.5), (-2378.2, 0.7), (-2481.7, 0.5), (-1903.7, 0.4)]
+    tau = 408.75
+    fits = {"scale": (-644.0, 0.44), "asymmetry": (-870.8, 0.5), "leak": (-1880.5, 0.5)}
+    rms = {"scale": 1.117, "asymmetry": 1.518, "leak": 2.71}
+    shipped = rank_extensions((-1903.7, math.hypot(0.4, tau)), {k: (z, math.hypot(s, tau)) for k, (z, s) in fits.items()},
+                              rms=rms, base_rms=2.746)
+    assert shipped.winner is None and "evidence" in shipped.rows[0].reason
+    r = rank_best_of_base((-1903.7, 0.4), fits, base_runs=runs, rms=rms, base_rms=2.746)
+    assert r.winner == "scale" and r.reference == "base"
+    w = r.rows[0]
+    assert abs(w.delta - 1259.7) < 0.1 and w.delta_se < 1.0 and abs(w.rms_gain - (1 - 1.117 / 2.746)) < 1e-12
+    # the base refitted around scale's material mode, as good as the scale fit: nothing is named
+    r = rank_best_of_base((-1903.7, 0.4), fits, base_runs=runs, rms=rms, base_rms=2.746,
+                          mode_checks={"scale": (-646.0, 0.5, 1.13)})
+    assert r.winner is None and r.reference == "base near scale"
+    # a base run above the kept one (never from base_fit, which keeps the largest) becomes the reference
+    r = rank_best_of_base((-1903.7, 0.4), fits, base_runs=runs + [(-600.0, 0.5)], rms=rms, base_rms=2.746)
+    assert r.winner is None and r.reference == "base run (4)"
+
+
+def test_best_of_base_keeps_the_effect_size_against_a_null_consistent_reference():
+    """Held-out seed-5 case 08, a control with an irregular base: the asymmetry refit is 394 nats
+    above every base-model fit and 40 % lower in RMS than the base, but only 26 % lower than the
+    reference (the exposure refit at its null value, a better base-model fit). Not named."""
+    from vfcore.diagnose.rank import rank_best_of_base
+    fits = {"asymmetry": (-1000.0, 0.7), "exposure": (-1394.0, 0.5)}
+    rms = {"asymmetry": 0.60, "exposure": 0.81}
+    r = rank_best_of_base((-1500.0, 0.5), fits, base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)], rms=rms, base_rms=1.0,
+                          null={"asymmetry": False, "exposure": True})
+    assert r.reference == "exposure" and r.winner is None
+    row = next(x for x in r.rows if x.name == "asymmetry")
+    assert abs(row.delta - 394.0) < 1e-9 and "effect size" in row.reason
+    # the same fits with the exposure refit off its null: it is no reference, and asymmetry is named
+    r = rank_best_of_base((-1500.0, 0.5), fits, base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)], rms=rms, base_rms=1.0,
+                          null={"asymmetry": False, "exposure": False})
+    assert r.winner == "asymmetry"

@@ -294,3 +294,41 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     off = pipeline.diagnose(pb, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
     assert calls == ["scale"] and "rescued" not in off.after["scale"]
     assert off.winner is None
+
+
+def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(base_run,
+                                                                                                 monkeypatch):
+    """Stop 25, blind runs through the whole pipeline. The base fit is made to look as it does on
+    an irregular vibration (held-out seed-7 case 11): its runs scattered (further runs 3,000 and
+    9,000 nats below the kept one, between-run error 5,000 nats) and a roughness of 10,000 nats.
+    A hidden 12 % scale error is then not named by the stop-19 rule (the gain is swamped, and the
+    local check counts the roughness), and is named by the best-of-base rule, with its material mode
+    re-fitted with the base model first. The same fakery on a clean recording names nothing."""
+    from vfcore.diagnose import pipeline, regularity
+    from vfcore.diagnose.regularity import Sensitivity
+    real_base_fit = pipeline.base_fit
+
+    def scattered(problem, *, runs_out=None, **kw):
+        base, tau, factor, n, notes = real_base_fit(problem, runs_out=runs_out, **kw)
+        z, s = float(base.log_evidence), float(base.log_evidence_se)
+        runs_out.extend([(z - 3000.0, s), (z - 9000.0, s)])
+        return base, 5000.0, factor, n, notes
+
+    monkeypatch.setattr(pipeline, "base_fit", scattered)
+    monkeypatch.setattr(regularity, "sensitivity", lambda problem, theta, seed=0, **kw: Sensitivity(
+        step=1e-6, tol=1.0, loglik=0.0, changes=[10000.0, 50.0], irregular=True, n_simulations=0))
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(21)
+    clean = np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200])
+    kw = dict(n_particles=16, seed=6, candidates=["scale", "leak"], base_runs=1, refit_forward=False)
+    pb = Problem(1.12 * clean + 0.4 * rng.standard_normal(200), FPS, prior, config=CFG)
+    old = pipeline.diagnose(pb, best_of_base=False, **kw)
+    assert old.winner is None and old.before["regularity"]["irregular"]
+    new = pipeline.diagnose(pb, **kw)
+    assert new.winner == "scale", new.to_dict()["ranking"]
+    assert "scale" in new.before["mode_checks"]
+    assert len(new.before["base_runs"]) == 3
+    assert any(n.startswith("irregular base fit, nothing named") for n in new.notes)
+    assert abs(new.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
+    ctl = pipeline.diagnose(Problem(clean + 0.4 * rng.standard_normal(200), FPS, prior, config=CFG), **kw)
+    assert ctl.winner is None, ctl.to_dict()["ranking"]

@@ -268,6 +268,40 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
         f"base runs that landed in different modes)"))
 
 
+def rank_best_of_base(base, candidates: dict, *, base_runs, mode_checks: dict | None = None,
+                      base_rms: float | None = None, **kw) -> RankReport:
+    """The naming rule of :func:`rank_extensions` against *every* base-model fit, with delta-method
+    errors only: the rule for an irregular base fit on which nothing was named (stop 25;
+    docs/diagnose.md section 3, "Best of all base fits").
+
+    When the base runs land far apart (between-run error ``tau`` of hundreds of nats) the shipped
+    rule adds ``tau`` in quadrature to every fit's error, and on an irregular likelihood that error
+    swamps gains of a thousand nats and more. Here instead each extension is compared with the best
+    of all base-model fits the diagnosis made -- every base run (``base_runs``: ``(log Z, se)``
+    pairs), every mode check's evidence bound (``mode_checks``: label -> ``(log Z, se, rms)``) and
+    every null-consistent refit (as in :func:`rank_extensions`) -- each carrying only its own
+    reported error. The scatter of the base runs is then not an error of the comparison but a
+    search over base-model modes, of which the best is kept. An SMC evidence estimate is unbiased
+    for Z and non-negative, so by Markov's inequality an estimate lands ``d`` nats above the
+    truth with probability at most ``exp(-d)``: an extension far above every base fit is not a
+    lucky draw of its own sampler; what remains is the chance that all base fits missed a better
+    base mode, which the mode check (the base refitted around the extension's own material mode)
+    covers. The effect-size test (RMS gain against the reference fit) is unchanged.
+
+    ``base``, ``candidates``, ``kw`` (``residual``, ``n_extra``, ``rms``, ``null``, ``min_gain``,
+    ``k_se``, ``min_rms_gain``): as :func:`rank_extensions`, errors *without* ``tau``."""
+    refs = {}
+    for i, (z, s) in enumerate(base_runs or ()):
+        refs[f"base run ({i})"] = (float(z), float(s), float(base_rms) if base_rms is not None else math.nan)
+    for label, (z, s, r) in (mode_checks or {}).items():
+        refs[f"base near {label}"] = (float(z), float(s), float(r))
+    rep = rank_extensions(base, candidates, base_rms=base_rms, references=refs, **kw)
+    rep.notes.append(f"irregular base fit, nothing named with the between-run error: every extension compared "
+                     f"with the best of {len(refs) + 1} base-model fits by their own errors (reference: "
+                     f"{rep.reference})")
+    return rep
+
+
 def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: float = 0.0, *,
                  min_gain: float = 3.0, k_se: float = 3.0) -> tuple[bool, float]:
     """The evidence test of the local check: ``(passes, se)`` with ``se`` the delta-method errors of
