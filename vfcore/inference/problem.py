@@ -23,7 +23,7 @@ import numpy as np
 
 from ..config import SimConfig
 from ..measures import estimate_f0
-from ..observe import ALIGNMENTS, align, alignment_window
+from ..observe import ALIGNMENTS, LAG_SEARCHES, align, alignment_window
 from .prior import Prior
 
 
@@ -94,6 +94,7 @@ class Problem:
     alignment: str = "profile"
     noise: str = "fixed"
     sigma_bounds: tuple = (0.01, 100.0)
+    lag_search: str = "window"
 
     def __post_init__(self) -> None:
         y = validate_observation(self.obs_gaw, self.fps)
@@ -122,10 +123,13 @@ class Problem:
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
             raise ValueError(f"sigma_bounds must satisfy 0 < lo < hi (finite, mm^2), got {self.sigma_bounds!r}")
         object.__setattr__(self, "sigma_bounds", (lo, hi))
+        if self.lag_search not in LAG_SEARCHES:
+            raise ValueError(f"lag_search must be one of {LAG_SEARCHES}, got {self.lag_search!r}")
         if self.model != "fe":
             raise ValueError(f"unknown model {self.model!r}; only 'fe' is available")
         # fails (ValueError) here, before any simulation, if the simulation is too short
-        object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config)))
+        object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config),
+                                                             self.lag_search))
 
     @property
     def window(self) -> tuple[int, int]:
@@ -144,7 +148,8 @@ class Problem:
     def to_dict(self) -> dict:
         return {"obs_gaw": self.obs_gaw.tolist(), "fps": self.fps, "sigma_e": self.sigma_e,
                 "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model,
-                "alignment": self.alignment, "noise": self.noise, "sigma_bounds": list(self.sigma_bounds)}
+                "alignment": self.alignment, "noise": self.noise, "sigma_bounds": list(self.sigma_bounds),
+                "lag_search": self.lag_search}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Problem":
@@ -156,7 +161,8 @@ class Problem:
                    prior=Prior.from_dict(d["prior"]), sigma_e=d.get("sigma_e", 1.0),
                    config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"),
                    alignment=d.get("alignment", "profile"), noise=d.get("noise", "fixed"),
-                   sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))))
+                   sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))),
+                   lag_search=d.get("lag_search", "window"))
 
     def loglik(self, seg) -> float:
         """Log-likelihood of an aligned simulated segment ``seg`` (n_compare,) under this problem's
