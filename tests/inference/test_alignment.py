@@ -100,3 +100,41 @@ def test_profile_scores_equal_the_direct_sum_at_every_fine_lag():
     fast = _profile_scores(hr, tmpl, q, j_max)
     assert np.max(np.abs(fast - direct)) < 1e-8 * np.max(np.abs(direct))
     assert int(np.argmax(fast)) == int(np.argmax(direct)) == 237
+
+
+def test_window_search_finds_a_recording_deep_in_a_drifting_simulation():
+    """Stop 25. A vibration still drifting across the kept window (its amplitude doubles
+    over 600 frames), recorded from frame 137.4 on: the 1.5-period search (lags <= 48 frames)
+    can only compare an earlier, smaller part and is left with a misfit of more than 1 mm^2 RMS;
+    the whole-window search (every start the 600 simulated frames offer, 200 for 400 recorded)
+    finds the recording exactly. For a settled cycle the two agree (same misfit, to rounding)."""
+    from vfcore.inference import Prior
+    from vfcore.inference.problem import Problem
+    q, n, f0 = HR_OVERSAMPLE, 600, 63.7
+    t = np.arange(q * (n - 1) + 1) / (q * FPS)
+    settled = 20.0 * np.maximum(np.sin(2 * np.pi * f0 * t), 0.0) ** 1.5
+    for hr, drifting in ((settled * (1.0 + t / t[-1]), True), (settled, False)):
+        obs = np.interp(137.4 + np.arange(400), np.arange(hr.size) / q, hr)
+        rms = {}
+        for search in ("periods", "window"):
+            win = alignment_window(obs, FPS, n, search)
+            seg, o, lag = align(hr[::q], obs, FPS, win, sim_hr=hr, oversample=q, method="profile")
+            assert o.size == 400
+            rms[search] = float(np.sqrt(np.mean((seg - o) ** 2)))
+            if search == "window":
+                assert win == (200, 400)
+                if drifting:
+                    assert abs(lag - 137.4) < 1e-3
+            else:
+                assert win[0] == int(np.ceil(1.5 * FPS / f0))
+        if drifting:
+            assert rms["periods"] > 1.0 and rms["window"] < 1e-3
+        else:
+            assert rms["window"] <= rms["periods"] + 1e-9 and rms["periods"] < 0.05
+    with pytest.raises(ValueError, match="lag search"):
+        alignment_window(obs, FPS, n, "everywhere")
+    with pytest.raises(ValueError, match="lag_search"):
+        Problem(obs, FPS, Prior.default(), lag_search="everywhere")
+    pb = Problem(obs, FPS, Prior.default(), config=SimConfig(duration=0.55, discard=0.25), lag_search="periods")
+    assert Problem.from_dict(pb.to_dict()).lag_search == "periods" and pb.window[0] < 200
+    assert Problem(obs, FPS, Prior.default(), config=SimConfig(duration=0.55, discard=0.25)).window == (200, 400)
