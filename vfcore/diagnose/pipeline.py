@@ -41,7 +41,8 @@ from .locate import LocateReport, locate, measure_pvalues
 from .rank import (NO_FINDING, RankReport, local_passes, null_consistent, prefer_nested, prefer_parsimonious,
                    promote_local, rank_best_of_base, rank_extensions, residual_removed)
 
-__all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near", "base_fit", "reference_refit"]
+__all__ = ["DiagnoseReport", "diagnose", "screen", "fit_summary", "base_near", "base_fit", "reference_refit",
+           "best_of_base_from_summaries"]
 
 
 def _pred(post: Posterior) -> np.ndarray:
@@ -269,6 +270,24 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
     if runs_out is not None:
         runs_out.extend((float(p.log_evidence), float(p.log_evidence_se)) for p in runs)
     return best(runs), tau, factor, n_sims, notes
+
+
+def best_of_base_from_summaries(before: dict, after: dict, **rule) -> RankReport:
+    """:func:`.rank.rank_best_of_base` on a diagnosis' summaries: ``before`` (a report's ``"base"``:
+    the base fit's log-evidence and residual RMS, its ``"base_runs"`` and ``"mode_checks"``) and
+    ``after`` (its ``"refits"``, each with log-evidence, residual RMS, localised residual removed and
+    the null check). The pipeline names with it, and ``benchmarks/results/leads/redecide.py``
+    re-reads kept reports with it. ``rule``: ``min_gain``, ``k_se``, ``min_rms_gain``."""
+    return rank_best_of_base(
+        (before["log_evidence"], before["log_evidence_se"]),
+        {n: (v["log_evidence"], v["log_evidence_se"]) for n, v in after.items()},
+        base_runs=before.get("base_runs") or [(before["log_evidence"], before["log_evidence_se"])],
+        mode_checks={k: (v["log_evidence_bound"], v["log_evidence_bound_se"], v["residual_rms"])
+                     for k, v in before.get("mode_checks", {}).items()},
+        residual={n: v["residual_removed"] for n, v in after.items()},
+        n_extra={n: len(get(n).params) for n in after},
+        rms={n: v["residual_rms"] for n, v in after.items()}, base_rms=before["residual_rms"],
+        null={n: v["null_consistent"] for n, v in after.items()}, **rule)
 
 
 @dataclass
@@ -563,17 +582,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         return sn
 
     def name_best_of_base():
-        return rank_best_of_base(
-            (float(base.log_evidence), float(base.log_evidence_se)),
-            {n: (float(p.log_evidence), float(p.log_evidence_se)) for n, p in refits.items()},
-            base_runs=all_base,
-            mode_checks={k: (v["log_evidence_bound"], v["log_evidence_bound_se"], v["residual_rms"])
-                         for k, v in before.get("mode_checks", {}).items()},
-            residual={n: after[n]["residual_removed"] for n in after},
-            n_extra={n: len(get(n).params) for n in refits},
-            rms={n: after[n]["residual_rms"] for n in after}, base_rms=before["residual_rms"],
-            null={n: after[n]["null_consistent"] for n in after},
-            min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
+        return best_of_base_from_summaries(before, after, min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
 
     def nested(ranking: RankReport, local, rerank=None) -> RankReport:
         nonlocal n_sims

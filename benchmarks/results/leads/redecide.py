@@ -1,8 +1,8 @@
 """Stop 25: re-decide kept reports with the shipped best-of-base rule (no simulation).
 
 For every kept report of the given held-out seeds whose base fit is irregular and on which
-nothing was named, apply :func:`vfcore.diagnose.rank.rank_best_of_base` -- the function the
-pipeline now calls -- to the numbers the report kept, and print what it names. It must agree
+nothing was named, apply :func:`vfcore.diagnose.pipeline.best_of_base_from_summaries` -- the
+function the pipeline now names with -- to the numbers the report kept, and print what it names. It must agree
 with ``best_of_base.py`` (the pre-registered reading of the lead), case by case. The pipeline
 also re-fits the base model around a winner's material mode when the report has no such mode
 check; offline that cannot be done, and such a case is printed as needing one.
@@ -31,19 +31,8 @@ def base_runs(rep: dict) -> list[tuple[float, float]]:
 
 
 def redecide(rep: dict):
-    from vfcore.diagnose.extensions import get
-    from vfcore.diagnose.rank import rank_best_of_base
-    b, fits = rep["base"], rep["refits"]
-    return rank_best_of_base(
-        (b["log_evidence"], b["log_evidence_se"]),
-        {k: (v["log_evidence"], v["log_evidence_se"]) for k, v in fits.items()},
-        base_runs=base_runs(rep),
-        mode_checks={k: (v["log_evidence_bound"], v["log_evidence_bound_se"], v["residual_rms"])
-                     for k, v in b.get("mode_checks", {}).items()},
-        residual={k: v["residual_removed"] for k, v in fits.items()},
-        n_extra={k: len(get(k).params) for k in fits},
-        rms={k: v["residual_rms"] for k, v in fits.items()}, base_rms=b["residual_rms"],
-        null={k: v["null_consistent"] for k, v in fits.items()})
+    from vfcore.diagnose.pipeline import best_of_base_from_summaries
+    return best_of_base_from_summaries({**rep["base"], "base_runs": base_runs(rep)}, rep["refits"])
 
 
 def main(seeds):
