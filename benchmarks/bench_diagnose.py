@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 
 
 def _problem(meta: dict, case: dict, cases_dir: Path, duration: float | None, sigma_e: float,
-             discard: float | None = None, noise: str = "fixed"):
+             discard: float | None = None, noise: str = "fixed", lag_search: str = "window"):
     """The fitting problem of one case: its GAW and fps, the default prior with the suite's fixed
     parameters, and the suite's public forward-model settings (``cases.json`` "model"); ``duration``
     and ``discard`` override the simulated window when given."""
@@ -54,7 +54,8 @@ def _problem(meta: dict, case: dict, cases_dir: Path, duration: float | None, si
                     discard=m["discard"] if discard is None else discard, fps=case["fps"])
     prior = Prior.default(fixed=meta["fixed"])
     y = np.loadtxt(cases_dir / case["file"], delimiter=",", skiprows=1, ndmin=1)
-    return Problem(y, case["fps"], prior, sigma_e=sigma_e, config=cfg, noise=noise)
+    return Problem(y, case["fps"], prior, sigma_e=sigma_e, config=cfg, noise=noise,
+                   lag_search=lag_search)
 
 
 class BalancedMap:
@@ -91,7 +92,8 @@ def run(a) -> None:
             if path.exists():
                 continue
             try:
-                pb = _problem(meta, case, cases_dir, a.duration, a.sigma_e, a.discard, a.noise)
+                pb = _problem(meta, case, cases_dir, a.duration, a.sigma_e, a.discard, a.noise,
+                              a.lag_search)
             except ValueError as exc:          # the recording is rejected before any simulation
                 path.write_text(json.dumps({"error": str(exc), "winner": None, "verdict": "rejected input"}))
                 print(f"case {case['id']}: rejected input: {exc}", flush=True)
@@ -173,6 +175,8 @@ def main(argv=None) -> int:
                          "results so far were measured with 'fixed'")
     ap.add_argument("--escalate-tau", type=float, default=10.0,
                     help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
+    ap.add_argument("--lag-search", choices=("window", "periods"), default="window",
+                    help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)
