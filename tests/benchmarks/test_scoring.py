@@ -235,3 +235,18 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
     (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
     with pytest.raises(ValueError, match="did not regenerate"):
         load_table(cdir, table)
+
+
+@pytest.mark.parametrize("search", ["window", "periods"])
+def test_problem_carries_lag_search(tmp_path, search):
+    """--lag-search reaches the fitting problem (the controlled comparison of seed 8 depends on it)."""
+    meta = {"model": {"mesh": "coarse", "dt": 1e-4, "duration": 0.55, "discard": 0.25},
+            "fixed": {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}}
+    import numpy as np
+    t = np.arange(400) / 2000.0
+    np.savetxt(tmp_path / "c.csv", 5.0 * np.clip(np.sin(2 * np.pi * 120 * t), 0, None)[:, None],
+               delimiter=",", header="area", comments="")
+    pb = bench_diagnose._problem(meta, {"file": "c.csv", "fps": 2000.0}, tmp_path, None, 1.0,
+                                 None, "fixed", search)
+    assert pb.lag_search == search
+    assert type(pb).from_dict(pb.to_dict()).lag_search == search
