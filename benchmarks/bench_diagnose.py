@@ -175,7 +175,8 @@ def main(argv=None) -> int:
                          "results so far were measured with 'fixed'")
     ap.add_argument("--escalate-tau", type=float, default=10.0,
                     help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
-    ap.add_argument("--lag-search", choices=("window", "periods"), default="window",
+    from vfcore.observe import LAG_SEARCHES
+    ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)
