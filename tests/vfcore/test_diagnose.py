@@ -97,12 +97,44 @@ def test_pvalues_uniform_under_the_generator():
 # ------------------------------------------------------------------ extensions
 def test_leak_raises_minimum_exactly():
     g = gaw_like()
-    out = get("leak").apply(g, {"leak_mm2": 1.7}, fps=FPS)
+    out = get("leak").apply(g, {"leak_mm2": 1.7, "chink_fraction": 0.0}, fps=FPS)
     assert out.min() == pytest.approx(g.min() + 1.7, abs=1e-12)
-    np.testing.assert_allclose(out - g, 1.7)
+    np.testing.assert_allclose(out - g, 1.7)            # a cartilaginous gap: constant
     assert M.glottal_gap_index(out, FPS) > 0.1 > M.glottal_gap_index(g, FPS)
     with pytest.raises(ValueError):
-        get("leak").apply(g, {"leak_mm2": 5.0}, fps=FPS)   # outside its 0-3 mm^2 prior
+        get("leak").apply(g, {"leak_mm2": 5.0, "chink_fraction": 0.0}, fps=FPS)   # outside its 0-3 mm^2 prior
+    with pytest.raises(ValueError, match="chink_fraction"):
+        get("leak").apply(g, {"leak_mm2": 1.0, "chink_fraction": 1.5}, fps=FPS)
+    with pytest.raises(ValueError, match="missing parameters"):
+        get("leak").apply(g, {"leak_mm2": 1.0}, fps=FPS)
+
+
+@pytest.mark.parametrize("gap_mm, chink_mm", [(0.2, 6.0), (0.05, 17.0), (0.6, 1.0)])
+def test_membranous_chink_matches_a_strip_sum(gap_mm, chink_mm):
+    """The chink model against the glottis summed strip by strip: a fold of length L = 17 mm whose
+    membranous opening has width W(t) = A(t) / L everywhere, and a gap of width ``gap_mm`` over the
+    last ``chink_mm`` of the length, is ``sum_y max(W, g(y)) dy``. That is the leak entry with
+    area ``g l`` and chink fraction ``l / L``, hidden where the opening is wider than the gap."""
+    L, n_y = 17.0, 3400
+    y = (np.arange(n_y) + 0.5) * L / n_y
+    g_y = np.where(y > L - chink_mm, gap_mm, 0.0)
+    A = gaw_like()
+    strips = np.maximum((A / L)[:, None], g_y[None, :]).sum(axis=1) * (L / n_y)
+    out = get("leak").apply(A, {"leak_mm2": gap_mm * chink_mm, "chink_fraction": chink_mm / L}, fps=FPS)
+    np.testing.assert_allclose(out, strips, atol=2e-3)
+    # closed: the whole gap shows; open wider than the gap: none of it
+    assert out[A == 0].size == 0 or np.allclose(out[A == 0], gap_mm * chink_mm, atol=2e-3)
+    wide = A / L > gap_mm
+    np.testing.assert_allclose(out[wide], A[wide], atol=1e-12)
+
+
+def test_leak_flow_follows_the_open_part_of_the_chink():
+    g = gaw_like()
+    a, f, p = 1.5, 0.5, 800.0
+    extra = X.leak_extra(g, a, f)
+    q = X.leak_flow(extra, p)
+    np.testing.assert_allclose(q, extra * 1e-6 * math.sqrt(2 * p / X.RHO_AIR))
+    assert q.max() == pytest.approx(X.leak_flow(a - f * g.min(), p))
 
 
 def test_leak_flow_bernoulli():
@@ -320,7 +352,7 @@ def test_residual_removed_by_leak_extension():
     base = gaw_like()
     obs = base + 1.2
     before = locate(obs, base, FPS)
-    after = locate(obs, get("leak").apply(base, {"leak_mm2": 1.2}, fps=FPS), FPS)
+    after = locate(obs, get("leak").apply(base, {"leak_mm2": 1.2, "chink_fraction": 0.0}, fps=FPS), FPS)
     assert residual_removed(before, after) == pytest.approx(1.0)
     worse = locate(obs, base - 1.0, FPS)
     assert residual_removed(before, worse) < 0
@@ -340,13 +372,15 @@ def test_compare_fits_from_posteriors():
     base = gaw_like()
     obs = np.maximum(base, 1.0)
     p0 = _posterior(np.tile(base, (20, 1)), obs, -200.0, 0.3)
-    p1 = _posterior(np.tile(np.maximum(base, 1.0), (20, 1)), obs, -150.0, 0.3, names=("E_body", "leak_mm2"))
+    p1 = _posterior(np.tile(np.maximum(base, 1.0), (20, 1)), obs, -150.0, 0.3,
+                    names=("E_body", "leak_mm2", "chink_fraction"))
     p1.samples[:, 1] = 1.0 + 0.01 * np.arange(20)      # a leak of ~1 mm^2, far from its null (0)
+    p1.samples[:, 2] = 0.05 * np.arange(20)            # chink fraction unidentified (it has no null)
     rep, pv = from_posterior(p0)
     assert rep.dominant_phase == "closed"
     assert pv["min_area_mm2"].p_upper == 0.0 and pv["glottal_gap_index"].p_two_sided == 0.0
     r = compare_fits(p0, {"leak": p1})
-    assert r.winner == "leak" and r.rows[0].n_extra == 1
+    assert r.winner == "leak" and r.rows[0].n_extra == 2
     assert r.rows[0].residual_removed == pytest.approx(1.0, abs=1e-6)
     assert r.rows[0].rms_gain == pytest.approx(1.0, abs=1e-6) and not r.rows[0].null_consistent
     # the same fit with its leak at the null value (0) is a better base fit, not a finding

@@ -22,7 +22,7 @@ def base_run():
 
 
 @pytest.mark.parametrize("name,phi", [
-    ("leak", {"leak_mm2": 0.0}), ("scale", {"scale": 1.0}), ("exposure", {"exposure_fraction": 0.0}),
+    ("leak", {"leak_mm2": 0.0, "chink_fraction": 0.7}), ("scale", {"scale": 1.0}), ("exposure", {"exposure_fraction": 0.0}),
     ("frame_rate", {"rate_ratio": 1.0}), ("zipper", {"ap_phase_lag": 0.0, "end_fraction": 0.0}),
     ("asymmetry", {"lr_phase": 0.0, "lr_amp": 1.0})])
 def test_observation_extensions_reduce_to_the_base_model(base_run, name, phi):
@@ -32,7 +32,10 @@ def test_observation_extensions_reduce_to_the_base_model(base_run, name, phi):
 
 def test_observation_operators_against_analytic_answers(base_run):
     hr = np.asarray(base_run.gaw_hr)
-    assert np.allclose(observe_extended("leak", hr, FPS, {"leak_mm2": 1.25}), hr + 1.25)
+    assert np.allclose(observe_extended("leak", hr, FPS, {"leak_mm2": 1.25, "chink_fraction": 0.0}), hr + 1.25)
+    # a chink along the whole length: the area cannot fall below it, and is unchanged above it
+    np.testing.assert_allclose(observe_extended("leak", hr, FPS, {"leak_mm2": 1.25, "chink_fraction": 1.0}),
+                               np.maximum(hr, 1.25))
     assert np.allclose(observe_extended("scale", hr, FPS, {"scale": 0.9}), 0.9 * hr)
     # a boxcar leaves a straight line unchanged away from the ends, and scales a sine by sinc(f tau)
     rate = HR_OVERSAMPLE * FPS
@@ -78,7 +81,7 @@ def test_extended_likelihood_equals_base_at_the_null_extension(base_run):
     pb = Problem(y, FPS, prior, config=CFG)
     th = np.array([[TABLE3.E_cover], [TABLE3.E_cover + 40.0]])
     base = evaluate(th, pb).loglik
-    leak = ExtendedEvaluator(pb, "leak")(np.hstack([th, np.zeros((2, 1))])).loglik
+    leak = ExtendedEvaluator(pb, "leak")(np.hstack([th, np.zeros((2, 1)), np.full((2, 1), 0.4)])).loglik
     sep = ExtendedEvaluator(pb, "sep_ratio")(np.hstack([th, np.full((2, 1), 1.3)])).loglik
     np.testing.assert_allclose(leak, base, rtol=1e-9)
     np.testing.assert_allclose(sep, base, rtol=1e-6)
@@ -102,7 +105,9 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     assert rep.after["leak"]["rms_improvement"] >= 0.3
     from vfcore.diagnose.fit import param_table
     names, mean, sd = param_table(rep.refits["leak"])          # leak integrated per simulation
-    assert names[-1] == "leak_mm2" and abs(mean[-1] - 1.5) < 0.3 and sd[-1] < 0.3
+    i = names.index("leak_mm2")
+    assert abs(mean[i] - 1.5) < 0.3 and sd[i] < 0.3
+    assert mean[names.index("chink_fraction")] < 0.25      # a constant leak: no chink hidden by the opening
     # the report carries the leak's null drop: no leak at all is far below the best (200 frames
     # 1.5 mm^2 off, sigma_e 1: ~200 * 1.5^2 / 2 = 225 nats), so the fit is not null-consistent
     drop = rep.after["leak"]["params"]["leak_mm2"]["null_drop"]

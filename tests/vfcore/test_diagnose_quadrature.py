@@ -135,3 +135,32 @@ def test_null_drop_rejects_a_null_between_two_modes(base_run, lag):
         assert 0.0 <= drop < 2.0
         assert null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness",
                                drops={"lr_lag": drop})
+
+
+def test_integrated_membranous_chink_recovers_its_area_and_fraction(base_run):
+    """The leak entry's two parameters integrated out of one simulation: the conditional means
+    recover a hidden chink (1.2 mm^2, hidden where the GAW exceeds 1.2 / 0.3 = 4 mm^2), and the
+    integrated log-likelihood equals the average over a dense grid of the prior box."""
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(8)
+    hr0 = np.asarray(base_run.gaw_hr)
+    phi = {"leak_mm2": 1.2, "chink_fraction": 0.3}
+    y = observe_extended("leak", hr0, FPS, phi)[55::HR_OVERSAMPLE][:240] + 0.5 * rng.standard_normal(240)
+    pb = Problem(y, FPS, prior, config=CFG)
+    ev = ExtendedEvaluator(pb, "leak", integrate=True)
+    assert ev.prior.names == ("E_cover",) and ev.integrated == ("leak_mm2", "chink_fraction")
+    out = ev(np.array([[TABLE3.E_cover]]))
+    for j, name in enumerate(ev.integrated):
+        mean, sd = out.extra[0, 2 * j], out.extra[0, 2 * j + 1]
+        assert abs(mean - phi[name]) < 3 * sd + 0.02 and sd < 0.2, (name, mean, sd)
+    max_lag, n_cmp = pb.window
+
+    def ll(a, f):
+        hr = observe_extended("leak", hr0, FPS, {"leak_mm2": a, "chink_fraction": f})
+        seg, _, _ = align(hr[::HR_OVERSAMPLE], pb.obs_gaw, FPS, (max_lag, n_cmp), sim_hr=hr,
+                          oversample=HR_OVERSAMPLE, method=pb.alignment)
+        return gaussian_loglik(seg, pb.obs_compared, pb.sigma_e)
+    n_a, n_f = 240, 80                                   # the whole prior box [0, 3] x [0, 1]
+    grid = [ll((i + 0.5) * 3.0 / n_a, (k + 0.5) / n_f) for i in range(n_a) for k in range(n_f)]
+    want = float(logsumexp(grid) - math.log(n_a * n_f))
+    assert abs(out.loglik[0] - want) < 0.1, (out.loglik[0], want)

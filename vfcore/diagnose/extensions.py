@@ -27,7 +27,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
-           "apply_exposure", "apply_frame_rate", "leak_flow", "RHO_AIR", "matching", "physics_of"]
+           "apply_exposure", "apply_frame_rate", "leak_flow", "leak_extra", "RHO_AIR", "matching", "physics_of"]
 
 #: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
 RHO_AIR = 1.14
@@ -122,15 +122,34 @@ def _gaw_fps(base, fps):
 
 
 # ---------------------------------------------------------------- observation-level operators
-def apply_leak(gaw, leak_mm2: float) -> np.ndarray:
-    """Posterior-gap / incomplete-closure leak: a constant parallel area added to the GAW."""
-    return np.asarray(gaw, dtype=float) + float(leak_mm2)
+def leak_extra(gaw, leak_mm2: float, chink_fraction: float = 0.0) -> np.ndarray:
+    """Area the incomplete closure adds to the GAW, mm^2: ``max(0, leak_mm2 - chink_fraction * A)``.
+
+    A gap of area ``a = leak_mm2`` (its area when the membranous folds are closed) that lies a
+    fraction ``f = chink_fraction`` inside the membranous glottis: a chink of width ``g`` over the
+    length ``l``, with ``f = l / L`` of the fold length ``L`` and ``a = g l``. Where the membranous
+    opening ``W(t) = A(t) / L`` is wider than ``g`` the chink is inside it and adds nothing, so the
+    glottis' area is ``W (L - l) + l max(W, g) = A + a max(0, 1 - W / g) = A + max(0, a - f A)``.
+    ``f = 0`` is a gap outside the membranous glottis (cartilaginous, constant: ``A + a``);
+    ``f = 1`` a uniform gap along the whole length (the area cannot fall below ``a``)."""
+    g = np.asarray(gaw, dtype=float)
+    return np.maximum(0.0, float(leak_mm2) - float(chink_fraction) * g)
 
 
-def leak_flow(leak_mm2: float, p_sub_pa, rho: float = RHO_AIR):
-    """Bernoulli flow through a rigid leak of area A at transglottal pressure p, m^3/s:
-    ``Q = A sqrt(2 p / rho)`` (Zañartu et al. 2014: the posterior gap carries DC flow)."""
-    return float(leak_mm2) * 1e-6 * np.sqrt(2.0 * np.maximum(np.asarray(p_sub_pa, dtype=float), 0.0) / rho)
+def apply_leak(gaw, leak_mm2: float, chink_fraction: float = 0.0) -> np.ndarray:
+    """Posterior-gap / incomplete-closure leak: ``A + max(0, leak_mm2 - chink_fraction * A)``
+    (:func:`leak_extra`); ``chink_fraction = 0`` is a constant parallel area."""
+    g = np.asarray(gaw, dtype=float)
+    return g + leak_extra(g, leak_mm2, chink_fraction)
+
+
+def leak_flow(leak_mm2, p_sub_pa, rho: float = RHO_AIR):
+    """Bernoulli flow through a rigid leak of area A (mm^2, a number or one per sample) at
+    transglottal pressure p, m^3/s: ``Q = A sqrt(2 p / rho)`` (Zañartu et al. 2014: the posterior
+    gap carries DC flow)."""
+    a = np.asarray(leak_mm2, dtype=float)
+    q = a * 1e-6 * np.sqrt(2.0 * np.maximum(np.asarray(p_sub_pa, dtype=float), 0.0) / rho)
+    return float(q) if np.ndim(q) == 0 else q
 
 
 def apply_scale(gaw, scale: float) -> np.ndarray:
@@ -180,11 +199,16 @@ def _obs_apply(fn):
 
 
 def _leak(base, th, fps, **kw):
-    """GAW + leak; for a SimResult also returns flow + Bernoulli leak flow (p_sub of its params)."""
+    """GAW + the gap's area (:func:`leak_extra`); for a SimResult also returns flow + the Bernoulli
+    flow through the open part of the gap (p_sub of its params)."""
     g, f = _gaw_fps(base, fps)
-    out = apply_leak(g, th["leak_mm2"])
+    extra = leak_extra(g, th["leak_mm2"], th["chink_fraction"])
+    out = g + extra
     if hasattr(base, "flow") and hasattr(base, "params") and getattr(base, "flow").size:
-        q = np.asarray(base.flow, dtype=float) + leak_flow(th["leak_mm2"], base.params.p_sub - base.config.p_sup)
+        q = np.asarray(base.flow, dtype=float)
+        if q.shape != extra.shape:        # flow on another time base: the open area read off it
+            extra = np.interp(np.linspace(0.0, 1.0, q.size), np.linspace(0.0, 1.0, extra.size), extra)
+        q = q + leak_flow(extra, base.params.p_sub - base.config.p_sup)
         return {"gaw": out, "flow": q}
     return out
 
@@ -207,9 +231,14 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
     Extension(
         "leak", "observation",
         (ExtParam("leak_mm2", 0.0, 3.0, "mm^2",
-                  "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)", null=0.0),),
+                  "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)", null=0.0),
+         ExtParam("chink_fraction", 0.0, 1.0, "-",
+                  "fraction of the fold length the gap spans inside the membranous glottis: 0 = a "
+                  "cartilaginous gap (constant area), 1 = a uniform gap along the length; a chink is "
+                  "hidden where the membranous opening is wider (chosen bounds, docs/diagnose.md)")),
         ("closed",), ("min_area_mm2", "glottal_gap_index", "open_quotient", "closing_quotient"),
-        "area floor above zero during the closed phase; GGI > 0; DC flow", True, _leak),
+        "area floor above zero during the closed phase; GGI > 0; DC flow; a membranous chink is "
+        "hidden as the folds open (the added area falls as the GAW rises)", True, _leak),
     Extension(
         "scale", "observation",
         (ExtParam("scale", 0.8, 1.2, "-",

@@ -98,7 +98,8 @@ def observe_extended(name: str, hr: np.ndarray, fps: float, phi: dict, length_mm
     ``HR_OVERSAMPLE * fps``) under observation-level extension ``name`` with parameters ``phi``
     (:func:`observer` for many ``phi`` on one simulation).
 
-    - leak: ``A + leak_mm2`` (a parallel, rigid posterior gap).
+    - leak: ``A + max(0, leak_mm2 - chink_fraction * A)`` (a rigid posterior gap, hidden by the
+      membranous opening where that is wider: :func:`.extensions.leak_extra`).
     - scale: ``scale * A`` (pixel-size / viewing-angle calibration error).
     - exposure: centred boxcar average over ``exposure_fraction / fps`` s (exact integral of the
       piecewise-linear waveform, continuous in the fraction).
@@ -119,7 +120,7 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
     y = np.asarray(hr, dtype=float)
     t = np.arange(y.size) / rate
     if name == "leak":
-        return lambda phi: y + phi["leak_mm2"]
+        return lambda phi: y + np.maximum(0.0, phi["leak_mm2"] - phi["chink_fraction"] * y)
     if name == "scale":
         return lambda phi: y * phi["scale"]
     if name == "exposure":
@@ -249,13 +250,16 @@ def extended_config(config, name: str, phi: dict):
 
 # -------------------------------------------------------------------------------- evaluator
 #: coarse quadrature cells per integrated dimension (:func:`.quadrature.integrate_loglik`); the
-#: frame-rate ratio is pinned by the drift of ~20 compared cycles, a peak ~1e-3 wide in a 0.2 prior
-QUAD_CELLS = {"frame_rate": 64}
+#: frame-rate ratio is pinned by the drift of ~20 compared cycles, a peak ~1e-3 wide in a 0.2 prior;
+#: the leak area (a peak ~0.05 mm^2 wide in 3 mm^2) as finely as a 1-D entry, its chink fraction coarser
+QUAD_CELLS = {"frame_rate": 64, "leak": (24, 6)}
 QUAD_CELLS_1D = 24
 QUAD_CELLS_2D = 6
 
 
-def quad_cells(name: str, d: int) -> int:
+def quad_cells(name: str, d: int):
+    """Coarse cells per integrated dimension of entry ``name`` with ``d`` integrated parameters:
+    an int (every dimension) or one per dimension."""
     return QUAD_CELLS.get(name, QUAD_CELLS_1D if d == 1 else QUAD_CELLS_2D)
 
 
