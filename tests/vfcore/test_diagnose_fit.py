@@ -23,7 +23,7 @@ def base_run():
 
 @pytest.mark.parametrize("name,phi", [
     ("leak", {"leak_mm2": 0.0, "chink_fraction": 0.7}), ("scale", {"scale": 1.0}), ("exposure", {"exposure_fraction": 0.0}),
-    ("frame_rate", {"rate_ratio": 1.0}), ("zipper", {"ap_phase_lag": 0.0, "end_fraction": 0.0}),
+    ("frame_rate", {"rate_ratio": 1.0}), ("zipper", {"ap_phase_lag": 0.0, "end_fraction": 0.0, "ap_power": 2.2}),
     ("asymmetry", {"lr_phase": 0.0, "lr_amp": 1.0})])
 def test_observation_extensions_reduce_to_the_base_model(base_run, name, phi):
     hr = np.asarray(base_run.gaw_hr)
@@ -47,6 +47,20 @@ def test_observation_operators_against_analytic_answers(base_run):
     sine = np.sin(2 * np.pi * f * t)
     out = observe_extended("exposure", sine, FPS, {"exposure_fraction": 1.0})
     assert abs(np.max(np.abs(out[200:-200])) - np.sinc(f / FPS)) < 2e-3
+    # the zipper of a pure tone: 24 strips, strip k delayed by d_k = lag T0 ((y_k)^p - 1/2), sums to
+    # mean_k sin(w (t - d_k)) = Re(c) sin(w t) + Im(c) cos(w t), c = mean_k exp(-i w d_k)
+    f0, lag = 50.0, 0.4
+    tt = np.arange(16000) / rate
+    tone = 5.0 + np.sin(2 * np.pi * f0 * tt)
+    y_k = (np.arange(24) + 0.5) / 24
+    basis = np.stack([np.sin(2 * np.pi * f0 * tt), np.cos(2 * np.pi * f0 * tt)], axis=1)[4000:12000]
+    coef = {}
+    for p in (1.0, 2.5):
+        zip_ = observe_extended("zipper", tone, FPS, {"ap_phase_lag": lag, "end_fraction": 0.0, "ap_power": p})
+        c = np.mean(np.exp(-2j * np.pi * lag * (y_k ** p - 0.5)))
+        coef[p] = np.linalg.lstsq(basis, zip_[4000:12000] - 5.0, rcond=None)[0]
+        np.testing.assert_allclose(coef[p], [c.real, c.imag], atol=2e-3)
+    assert np.abs(coef[2.5] - coef[1.0]).max() > 0.05      # the delay shape changes the waveform
     # half the fold delayed by half a period: the sum of two copies of a pure tone cancels
     tone = 5.0 + np.sin(2 * np.pi * 50.0 * t[:4000])
     asym = observe_extended("asymmetry", np.tile(tone, 4), FPS, {"lr_phase": 0.5, "lr_amp": 1.0})
@@ -56,10 +70,10 @@ def test_observation_operators_against_analytic_answers(base_run):
 def test_extended_prior_orders_and_splits():
     base = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_cover", "p_sub")})
     ep = ExtendedPrior(bounds={}, base=base, extension="zipper")
-    assert ep.names == ("E_cover", "p_sub", "ap_phase_lag", "end_fraction")
-    b, phi = ep.split(np.array([600.0, 900.0, 0.1, 0.2]))
-    assert b.tolist() == [600.0, 900.0] and phi == {"ap_phase_lag": 0.1, "end_fraction": 0.2}
-    assert ep.to_params(np.array([600.0, 900.0, 0.1, 0.2])).E_cover == 600.0
+    assert ep.names == ("E_cover", "p_sub", "ap_phase_lag", "end_fraction", "ap_power")
+    b, phi = ep.split(np.array([600.0, 900.0, 0.1, 0.2, 1.5]))
+    assert b.tolist() == [600.0, 900.0] and phi == {"ap_phase_lag": 0.1, "end_fraction": 0.2, "ap_power": 1.5}
+    assert ep.to_params(np.array([600.0, 900.0, 0.1, 0.2, 1.5])).E_cover == 600.0
     with pytest.raises(KeyError, match="unknown extension"):
         ExtendedPrior(bounds={}, base=base, extension="vocal_tract")
 

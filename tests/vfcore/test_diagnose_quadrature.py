@@ -93,7 +93,9 @@ def test_integrated_prior_keeps_only_what_needs_a_simulation():
     base = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_cover", "p_sub")})
     assert ExtendedPrior(bounds={}, base=base, extension="lr_stiffness", integrate=True).names == \
         ("E_cover", "p_sub", "log2_lr_Q")
-    assert ExtendedPrior(bounds={}, base=base, extension="zipper", integrate=True).names == ("E_cover", "p_sub")
+    # the zipper's delay shape is sampled with the material parameters, its lag and taper integrated
+    assert ExtendedPrior(bounds={}, base=base, extension="zipper", integrate=True).names == \
+        ("E_cover", "p_sub", "ap_power")
     assert ExtendedPrior(bounds={}, base=base, extension="sep_ratio", integrate=True).names == \
         ("E_cover", "p_sub", "sep_ratio")
 

@@ -68,12 +68,18 @@ class Extension:
     #: their null values this entry *is* ``simpler`` (the phase/amplitude asymmetry at zero phase
     #: difference is ``A (1 + lr_amp) / 2``, a scale error). Used by the nested check (section 3)
     nests: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    #: parameters of an observation-level entry that the sampler explores with the material
+    #: parameters instead of the quadrature (a third integrated dimension would cost ~10x)
+    sampled_params: tuple[str, ...] = ()
 
     @property
     def integrable(self) -> tuple[str, ...]:
         """Parameters that can be integrated out per simulation by quadrature
-        (:mod:`.quadrature`): all of an observation-level entry's, ``waveform_params`` otherwise."""
-        return self.param_names if self.kind == "observation" else tuple(self.waveform_params)
+        (:mod:`.quadrature`): an observation-level entry's (less ``sampled_params``),
+        ``waveform_params`` otherwise."""
+        if self.kind == "observation":
+            return tuple(n for n in self.param_names if n not in self.sampled_params)
+        return tuple(self.waveform_params)
 
     @property
     def physics(self) -> str:
@@ -283,10 +289,14 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
                   "anterior-posterior phase difference of high-speed recordings (zipper-like closure; chosen bounds)",
                   null=0.0),
          ExtParam("end_fraction", 0.0, 0.5, "-", "fraction of the length over which the ends are held (taper)",
-                  null=0.0)),
+                  null=0.0),
+         ExtParam("ap_power", 0.5, 3.0, "-",
+                  "shape of the delay along the length, delay ~ (y/L)^p: 1 = a wave at constant speed, "
+                  "> 1 = most of the length in phase and the lag gathered at the posterior end, < 1 at "
+                  "the anterior end (chosen bounds, docs/diagnose.md)")),
         ("opening", "closing", "peak"), ("speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
         "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
-        True, None, confusable=("asymmetry",)),
+        True, None, confusable=("asymmetry",), sampled_params=("ap_power",)),
     Extension(
         "subglottal", "forward",
         (ExtParam("f_sub_hz", 200.0, 900.0, "Hz",

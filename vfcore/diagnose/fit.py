@@ -105,8 +105,9 @@ def observe_extended(name: str, hr: np.ndarray, fps: float, phi: dict, length_mm
       piecewise-linear waveform, continuous in the fraction).
     - frame_rate: ``A(t / rate_ratio)`` (the camera's true rate is ``rate_ratio * fps``).
     - zipper: the fold length split into 24 strips; strip ``y`` moves like the section delayed by
-      ``ap_phase_lag * T0 * (y / L - 1/2)`` and scaled by the end-constraint taper
-      ``min(1, y / (e L), (L - y) / (e L))`` with ``e = end_fraction``; area = sum of strips.
+      ``ap_phase_lag * T0 * ((y / L)^p - 1/2)`` (``p = ap_power``; 1 = a wave along the length at
+      constant speed) and scaled by the end-constraint taper ``min(1, y / (e L), (L - y) / (e L))``
+      with ``e = end_fraction``; area = sum of strips.
     - asymmetry: two folds with the section's motion, the second delayed by
       ``lr_phase * T0`` and scaled by ``lr_amp``: ``A/2 + lr_amp * A(t - lr_phase T0)/2``.
     """
@@ -149,9 +150,10 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
         def zipper(phi):
             e = phi["end_fraction"]
             taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
+            shape = ys ** phi["ap_power"] - 0.5              # in [-1/2, 1/2]: within the padding
             out = np.zeros_like(y)
-            for yk, wk in zip(ys, taper):
-                out += wk * _delayed(yp, pad, y.size, phi["ap_phase_lag"] * T0 * rate * (yk - 0.5))
+            for sk, wk in zip(shape, taper):
+                out += wk * _delayed(yp, pad, y.size, phi["ap_phase_lag"] * T0 * rate * sk)
             return out / n
         return zipper
     raise ValueError(f"{name!r} is not an observation-level extension")
@@ -405,7 +407,7 @@ class ExtendedEvaluator:
                     if not r.ok:
                         raise RuntimeError(r.message or "simulation failed")
                     obs_fn = observer(self.name, np.asarray(r.gaw_hr, dtype=float), pb.fps, pb.config.length_mm)
-                    fwd = {}
+                    fwd = dict(phis[i])          # an observation entry's sampled parameters, if any
 
                 def score(point, obs_fn=obs_fn, fwd=fwd):
                     hr = obs_fn({**fwd, **dict(zip(names, map(float, point)))})
