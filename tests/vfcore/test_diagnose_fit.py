@@ -315,6 +315,54 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     assert off.winner is None
 
 
+def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base_run, monkeypatch):
+    """Stop 27, blind runs. A hidden 12 % scale error; the asymmetry entry can reproduce it (in
+    phase, amplitude ratio 1.24), but its first refit is made to end as a sampler stuck near the
+    base does (evidence set to 1 nat above the base: no rescue fires). The scale refit leads, so
+    the asymmetry is refitted from the scale fit's material mode: the new fit sits in that mode
+    (E_cover within 5 % of the leader's), its evidence is far above the stuck one and replaces it,
+    and the report records both. With ``shared_mode=False`` the stuck fit stays."""
+    from vfcore.diagnose import pipeline
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(21)
+    y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
+    real, calls = pipeline.fit_extended, []
+    base_z = {}
+
+    def stuck_asymmetry(problem, extension, **kw):
+        post = real(problem, extension, **kw)
+        calls.append(extension)
+        if extension == "asymmetry" and calls.count("asymmetry") == 1:
+            post.log_evidence = base_z["z"] + 1.0
+        return post
+
+    real_base_fit = pipeline.base_fit
+
+    def base_fit(problem, **kw):
+        out = real_base_fit(problem, **kw)
+        base_z["z"] = float(out[0].log_evidence)
+        return out
+
+    monkeypatch.setattr(pipeline, "fit_extended", stuck_asymmetry)
+    monkeypatch.setattr(pipeline, "base_fit", base_fit)
+    pb = Problem(y, FPS, prior, config=CFG)
+    kw = dict(n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
+    rep = pipeline.diagnose(pb, **kw)
+    assert rep.before["shared_mode_leader"] == "scale"
+    assert sorted(calls) == ["asymmetry", "asymmetry", "scale"], calls
+    sm = rep.after["asymmetry"]["shared_mode"]
+    assert sm["from"] == "scale" and sm["first"]["log_evidence"] == pytest.approx(base_z["z"] + 1.0)
+    z_new = float(rep.refits["asymmetry"].log_evidence)
+    assert z_new > base_z["z"] + 50.0
+    lead_cover = rep.after["scale"]["params"]["E_cover"]["mean"]
+    assert abs(rep.after["asymmetry"]["params"]["E_cover"]["mean"] - lead_cover) < 0.05 * lead_cover
+    assert any(n.startswith("shared mode: asymmetry refitted from scale") and "(kept)" in n for n in rep.notes)
+    calls.clear()
+    off = pipeline.diagnose(pb, shared_mode=False, **kw)
+    assert sorted(calls) == ["asymmetry", "scale"] and "shared_mode_leader" not in off.before
+    assert float(off.refits["asymmetry"].log_evidence) == pytest.approx(base_z["z"] + 1.0)
+
+
 def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(base_run,
                                                                                                  monkeypatch):
     """Stop 25, blind runs through the whole pipeline. The base fit is made to look as it does on
