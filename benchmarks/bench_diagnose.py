@@ -105,7 +105,7 @@ def run(a) -> None:
                                max_refits=a.max_refits or None, refit_particles=a.refit_particles,
                                base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
-                               shared_mode=not a.no_shared_mode)
+                               shared_mode=a.shared_mode)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
             path.write_text(json.dumps(d, indent=1, default=float))
@@ -179,8 +179,8 @@ def main(argv=None) -> int:
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
-    ap.add_argument("--no-shared-mode", action="store_true",
-                    help="skip the shared-mode refits (diagnose(shared_mode=False)): the stop-26 pipeline")
+    ap.add_argument("--shared-mode", action="store_true",
+                    help="refit every entry from the leading refit's material mode too (diagnose(shared_mode=True))")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)

@@ -321,7 +321,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     base does (evidence set to 1 nat above the base: no rescue fires). The scale refit leads, so
     the asymmetry is refitted from the scale fit's material mode: the new fit sits in that mode
     (E_cover within 5 % of the leader's), its evidence is far above the stuck one and replaces it,
-    and the report records both. With ``shared_mode=False`` the stuck fit stays."""
+    and the report records both. With ``shared_mode=False`` (the default) the stuck fit stays."""
     from vfcore.diagnose import pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
@@ -347,7 +347,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     monkeypatch.setattr(pipeline, "base_fit", base_fit)
     pb = Problem(y, FPS, prior, config=CFG)
     kw = dict(n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
-    rep = pipeline.diagnose(pb, **kw)
+    rep = pipeline.diagnose(pb, shared_mode=True, **kw)
     assert rep.before["shared_mode_leader"] == "scale"
     assert sorted(calls) == ["asymmetry", "asymmetry", "scale"], calls
     sm = rep.after["asymmetry"]["shared_mode"]
