@@ -399,3 +399,21 @@ def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clea
     assert abs(new.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     ctl = pipeline.diagnose(Problem(clean + 0.4 * rng.standard_normal(200), FPS, prior, config=CFG), **kw)
     assert ctl.winner is None, ctl.to_dict()["ranking"]
+
+
+def test_leak_on_a_simulation_adds_the_bernoulli_flow_of_the_open_part_of_the_chink(base_run):
+    """On a SimResult the leak entry returns the observed area and the flow: the simulated flow
+    plus ``extra * sqrt(2 (p_sub - p_sup) / rho)`` frame by frame, where ``extra`` is the part of
+    the chink the opening does not hide; where the opening hides it all the flow is unchanged."""
+    from vfcore.diagnose.extensions import RHO_AIR, get
+    a, f = 1.5, 0.4
+    out = get("leak").apply(base_run, {"leak_mm2": a, "chink_fraction": f})
+    A = np.asarray(base_run.gaw)
+    extra = np.maximum(0.0, a - f * A)
+    np.testing.assert_allclose(out["gaw"], A + extra)
+    dp = TABLE3.p_sub - base_run.config.p_sup
+    np.testing.assert_allclose(out["flow"] - np.asarray(base_run.flow), extra * 1e-6 * np.sqrt(2 * dp / RHO_AIR),
+                               rtol=1e-12, atol=1e-15)
+    hidden = A > a / f
+    assert hidden.any() and (~hidden).any()
+    np.testing.assert_array_equal(out["flow"][hidden], np.asarray(base_run.flow)[hidden])

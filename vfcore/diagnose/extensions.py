@@ -211,10 +211,8 @@ def _leak(base, th, fps, **kw):
     extra = leak_extra(g, th["leak_mm2"], th["chink_fraction"])
     out = g + extra
     if hasattr(base, "flow") and hasattr(base, "params") and getattr(base, "flow").size:
-        q = np.asarray(base.flow, dtype=float)
-        if q.shape != extra.shape:        # flow on another time base: the open area read off it
-            extra = np.interp(np.linspace(0.0, 1.0, q.size), np.linspace(0.0, 1.0, extra.size), extra)
-        q = q + leak_flow(extra, base.params.p_sub - base.config.p_sup)
+        # SimResult.flow is sampled with SimResult.gaw (one value per frame)
+        q = np.asarray(base.flow, dtype=float) + leak_flow(extra, base.params.p_sub - base.config.p_sup)
         return {"gaw": out, "flow": q}
     return out
 

@@ -476,8 +476,9 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     docs/diagnose_history.md, stop 25). Off: the stop-19 rule.
     ``shared_mode`` (stop 27): the refits are ranked as if each had found its model's best
     material mode, and a refit started from the prior often has not (held-out seed 8 case 14: the
-    separation-ratio refit found the true ratio, 1.473 against 1.481, in a material mode 4,950 mm^2
-    RMS away, while the asymmetry refit's material mode was near the truth). So once the refits
+    separation-ratio refit found the true ratio, 1.473 against 1.481, in a material mode that left
+    a 4.95 mm^2 residual at a noise of 0.86, while the asymmetry refit's E_cover and p_sub were
+    near the truth's). So once the refits
     (and rescues) are done, the *leader* — the non-null refit of largest evidence, if it beats the
     base's and removes at least ``min_rms_gain`` of its residual RMS — lends its material mode to
     every other refitted entry: each is refitted by an SMC started from the leader's material
