@@ -31,7 +31,7 @@ from ..measures import estimate_f0
 from ..result import HR_OVERSAMPLE
 from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
-from .extensions import Extension, get
+from .extensions import Extension, apply_leak, get
 
 __all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "observer", "extended_config", "fit_extended",
            "entrain_pair", "pair_observer", "right_fold_params", "integrated_summary", "param_table"]
@@ -121,7 +121,7 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
     y = np.asarray(hr, dtype=float)
     t = np.arange(y.size) / rate
     if name == "leak":
-        return lambda phi: y + np.maximum(0.0, phi["leak_mm2"] - phi["chink_fraction"] * y)
+        return lambda phi: apply_leak(y, phi["leak_mm2"], phi["chink_fraction"])
     if name == "scale":
         return lambda phi: y * phi["scale"]
     if name == "exposure":
