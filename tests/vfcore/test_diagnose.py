@@ -307,6 +307,25 @@ def test_null_consistent_posteriors():
     assert not null_consistent(names, [10.0, 0.06, 0.2], [1.0, 0.05, 0.01], "lr_stiffness", drops={"lr_lag": 1.0})
 
 
+def test_nested_gate_reads_the_likelihood_drop_at_the_null():
+    """The nested check's gate (``by_drop=True``): a phase difference pinned 2.7 sd from zero
+    whose null costs only 2.2 nats passes (seed 8 case 11's asymmetry fit, whose in-phase form is
+    a scale error), one that costs 20 nats does not, and without a measured drop the mean +- 2 sd
+    test still applies."""
+    from vfcore.diagnose.rank import null_consistent
+    names = ("E_body", "E_cover", "p_sub", "lr_phase", "lr_amp")
+    mean, sd = [12.64, 545.0, 1656.0, 0.0121, 0.744], [1e-8, 1e-6, 1e-5, 0.0045, 0.006]
+    drops = {"lr_phase": 2.18, "lr_amp": 1266.0}
+    only = ("lr_phase",)
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops=drops)       # 2.7 sd: the sd rule
+    assert null_consistent(names, mean, sd, "asymmetry", only=only, drops=drops, by_drop=True)
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={**drops, "lr_phase": 20.0},
+                               by_drop=True)
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={"lr_amp": 1266.0}, by_drop=True)
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={"lr_phase": float("nan")},
+                               by_drop=True)
+
+
 def test_rank_null_fit_is_not_named_and_raises_the_reference():
     """A refit at its null value that beats the base found a better material mode: it is not
     named, and the other gains are measured against it (evidence and RMS)."""

@@ -671,7 +671,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         for simpler, restrict in get(w).nests:
             if simpler not in cand:
                 continue
-            if not null_consistent(names, mean, sd, w, null_sd, only=restrict, drops=null_drops(refits[w])):
+            if not null_consistent(names, mean, sd, w, null_sd, only=restrict, drops=null_drops(refits[w]),
+                                   by_drop=True):
                 continue
             t1 = time.perf_counter()
             zb, sb, near = base_near(problem, refits[w], n_particles=refit_n, seed=seed + 131071, map=map,
