@@ -554,6 +554,22 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         s["wall_s"] = time.perf_counter() - t1
         s["n_generations"] = int(post.info.get("n_generations", 0))
         return s
+
+    def keep_if_higher(name: str, near: Posterior, zb: float, t1: float, **tag) -> dict | None:
+        """A second fit ``near`` of entry ``name`` (log-evidence or its lower bound ``zb``) replaces
+        the first when ``zb`` is higher (or the first has none): its evidence is set to ``zb``, ``tag``
+        goes into its ``info``, and its summary into ``after``. Returns the first fit's summary
+        when replaced (``{}`` if there was none), ``None`` when the first is kept."""
+        first = refits.get(name)
+        z1 = float(first.log_evidence) if first is not None else math.nan
+        if not math.isfinite(zb) or (math.isfinite(z1) and zb <= z1):
+            return None
+        near.log_evidence = zb
+        near.info.update(tag)
+        prev = after.get(name, {})
+        refits[name] = near
+        after[name] = summarise(name, near, t1)
+        return prev
     for i, name in enumerate(chosen):
         t1 = time.perf_counter()
         post = fit_extended(problem, name, n_particles=refit_n, seed=seed + 101 * (i + 1),
@@ -592,15 +608,13 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                                                integrate=integrate, **opts)
                 how, rel = "from the base posterior (reference-started SMC)", "="
             n_sims += int(near.n_simulations)
-            kept = math.isfinite(zb) and (not math.isfinite(z1) or zb > z1)
+            # box: zb is a lower bound on the extended model's evidence
+            kept = keep_if_higher(name, near, zb, t1, **{
+                "box_refit_of" if rescue_method == "box" else "reference_refit_of": "base"}) is not None
             notes.append(f"rescue: the {name} refit ended at log Z {z1:.1f}, below the base's {z0:.1f}; refitted "
                          f"{how}: log Z {rel} {zb:.1f} +- {sb:.1f}"
                          + ("" if kept else " (not higher; the first refit is kept)"))
             if kept:
-                near.log_evidence = zb       # box: a lower bound on the extended model's evidence
-                near.info["box_refit_of" if rescue_method == "box" else "reference_refit_of"] = "base"
-                refits[name] = near
-                after[name] = summarise(name, near, t1)
                 after[name]["rescued"] = {"method": rescue_method, "first_log_evidence": z1,
                                           "first_log_evidence_se": s1, "first_n_simulations": first_sims,
                                           **({"box": near.info["box"],
@@ -620,16 +634,13 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                                                  seed=seed + 524287 + 31 * j, map=map, chunk_size=chunk_size,
                                                  inflate=rescue_inflate, integrate=integrate, **opts)
                 n_sims += int(near.n_simulations)
-                kept = math.isfinite(zb) and (not math.isfinite(z1) or zb > z1)
+                first = {"log_evidence": z1, "log_evidence_se": float(refits[name].log_evidence_se),
+                         "n_simulations": int(refits[name].n_simulations)}
+                prev = keep_if_higher(name, near, zb, t1, shared_mode_of=leader)
                 notes.append(f"shared mode: {name} refitted from {leader}'s material mode: log Z {zb:.1f} +- {sb:.1f} "
-                             f"against its first {z1:.1f}" + (" (kept)" if kept else " (not higher; the first is kept)"))
-                if kept:
-                    first = {"log_evidence": z1, "log_evidence_se": float(refits[name].log_evidence_se),
-                             "n_simulations": int(refits[name].n_simulations)}
-                    near.info["shared_mode_of"] = leader
-                    refits[name] = near
-                    prev = after.get(name, {})
-                    after[name] = summarise(name, near, t1)
+                             f"against its first {z1:.1f}"
+                             + (" (kept)" if prev is not None else " (not higher; the first is kept)"))
+                if prev is not None:
                     after[name]["shared_mode"] = {"from": leader, "first": first,
                                                   **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
             before["shared_mode_leader"] = leader
@@ -678,12 +689,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             zb, sb, near = base_near(problem, refits[w], n_particles=refit_n, seed=seed + 131071, map=map,
                                      chunk_size=chunk_size, extension=simpler, integrate=integrate, **opts)
             n_sims += int(near.n_simulations)
-            first = refits.get(simpler)
-            near.log_evidence = zb                     # a lower bound on the simpler model's evidence
-            near.info["box_refit_of"] = w
-            if first is None or not math.isfinite(float(first.log_evidence)) or zb > float(first.log_evidence):
-                refits[simpler] = near
-                after[simpler] = summarise(simpler, near, t1)
+            # zb: a lower bound on the simpler model's evidence
+            if keep_if_higher(simpler, near, zb, t1, box_refit_of=w) is not None:
                 after[simpler]["box_refit_of"] = w
             ranking = rerank() if rerank is not None else name_it(references)
             if local is not None and ranking.winner is None:    # the winner was named on the local comparison
