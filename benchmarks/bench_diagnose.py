@@ -105,7 +105,7 @@ def run(a) -> None:
                                max_refits=a.max_refits or None, refit_particles=a.refit_particles,
                                base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
-                               shared_mode=a.shared_mode)
+                               shared_mode=a.shared_mode, continuation=a.continuation)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
             path.write_text(json.dumps(d, indent=1, default=float))
@@ -179,6 +179,9 @@ def main(argv=None) -> int:
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
+    ap.add_argument("--continuation", action="store_true",
+                    help="search the base and every entry by window continuation and fit from the optimum too "
+                         "(diagnose(continuation=True))")
     ap.add_argument("--shared-mode", action="store_true",
                     help="refit every entry from the leading refit's material mode too (diagnose(shared_mode=True))")
     ap.add_argument("--workers", type=int, default=2)

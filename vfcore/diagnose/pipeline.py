@@ -374,7 +374,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              parsimony_se: float = 0.0, rescue_forward: bool = True, rescue_observation: bool = True,
              rescue_half_width: float = 0.15, rescue_method: str = "reference",
              rescue_inflate: float = 2.0, regularity_check: bool = True,
-             best_of_base: bool = True, shared_mode: bool = False) -> DiagnoseReport:
+             best_of_base: bool = True, shared_mode: bool = False, continuation: bool = False,
+             continuation_options: dict | None = None) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -474,6 +475,15 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     none, and the nested check. Pre-registered on held-out seed 7 (adopted because the one case it
     changed there, 11, became a right name and no control or wrong name resulted;
     docs/diagnose_history.md, stop 25). Off: the stop-19 rule.
+    ``continuation`` (stop 28): after the refits (and rescues), the base model and every refitted
+    entry are searched by window continuation (:func:`.search.continuation_search`: fit the first
+    three cycles, double the window, polish, until the whole recording; starts: the best points of a
+    Sobol design, the fit's best particle, and for an entry the base's optimum with the entry at its
+    null) and fitted by an SMC started about the optimum (:func:`.search.continued_fit`). The base
+    model's joins the references as ``"base near continuation"`` (``before["mode_checks"]``), so
+    every gain is measured against the best base fit found the same way; an entry's replaces its
+    refit when its evidence is higher. ``continuation_options`` override
+    :data:`.search.CONTINUATION`. ~2,000 simulations per model.
     ``shared_mode`` (stop 27): the refits are ranked as if each had found its model's best
     material mode, and a refit started from the prior often has not (held-out seed 8 case 14: the
     separation-ratio refit found the true ratio, 1.473 against 1.481, in a material mode that left
@@ -671,6 +681,54 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         references[f"base near {name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
         return sn
 
+    def continue_all(copts: dict) -> None:
+        nonlocal n_sims
+        from .fit import ExtendedPrior
+        from .search import continuation_search, continued_fit
+        sd = seed + 1048573
+        t1 = time.perf_counter()
+        fb = continuation_search(problem, None, starts=_best_particles(base, 1), seed=sd, map=map,
+                                 chunk_size=chunk_size, **copts)
+        n_sims += fb.n_simulations
+        if math.isfinite(fb.loglik):
+            zc, sc, pc = continued_fit(problem, fb, None, n_particles=refit_n, seed=sd, map=map,
+                                       chunk_size=chunk_size, **opts)
+            n_sims += int(pc.n_simulations)
+            sn = fit_summary(pc, problem.obs_compared, problem.fps, problem.sigma_e)
+            sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc,
+                      continuation=fb.to_dict())
+            before.setdefault("mode_checks", {})["continuation"] = sn
+            references["base near continuation"] = (zc, math.hypot(sc, tau), sn["residual_rms"])
+            notes.append(f"continuation: the base model searched by window continuation (best log-likelihood "
+                         f"{fb.loglik:.1f}, {fb.n_simulations} simulations) and fitted from there: log Z = {zc:.1f} "
+                         f"+- {sc:.1f}, residual {sn['residual_rms']:.3f} mm^2")
+        for j, name in enumerate(n for n in chosen if n in refits):
+            t1 = time.perf_counter()
+            prior_e = ExtendedPrior(bounds={}, base=problem.prior, extension=name, integrate=bool(integrate))
+            starts = [th for th in _best_particles(refits[name], 1) if th.size == prior_e.ndim]
+            if math.isfinite(fb.loglik):
+                own = {p.name: (p.null if p.null is not None else 0.5 * (p.lo + p.hi)) for p in get(name).params}
+                starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base:]]]))
+            fe = continuation_search(problem, name, starts=starts, seed=sd + 97 * (j + 1), map=map,
+                                     chunk_size=chunk_size, integrate=integrate, **copts)
+            n_sims += fe.n_simulations
+            if not math.isfinite(fe.loglik):
+                notes.append(f"continuation: the {name} search found no finite log-likelihood")
+                continue
+            zc, sc, pc = continued_fit(problem, fe, name, n_particles=refit_n, seed=sd + 97 * (j + 1), map=map,
+                                       chunk_size=chunk_size, integrate=integrate, **opts)
+            n_sims += int(pc.n_simulations)
+            first = {"log_evidence": float(refits[name].log_evidence),
+                     "log_evidence_se": float(refits[name].log_evidence_se),
+                     "n_simulations": int(refits[name].n_simulations)}
+            prev = keep_if_higher(name, pc, zc, t1, continued=True)
+            notes.append(f"continuation: {name} searched (best log-likelihood {fe.loglik:.1f}) and fitted from "
+                         f"there: log Z = {zc:.1f} +- {sc:.1f} against its first {first['log_evidence']:.1f}"
+                         + (" (kept)" if prev is not None else " (not higher; the first is kept)"))
+            if prev is not None:
+                after[name]["continuation"] = {"first": first, **fe.to_dict(),
+                                               **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
+
     def name_best_of_base():
         return best_of_base_from_summaries(before, after, min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
 
@@ -713,7 +771,12 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
 
     # Mode check: before naming a winner, re-fit the base model around the winner's material mode.
     # If that base fit explains the data as well, the gain was the mode, not the physics.
-    ranking, checked = name_it({}), set()
+    # Continuation search: the base model and every refitted entry searched by window continuation
+    # (:mod:`.search`), then fitted by an SMC started about the optimum; the base's joins the
+    # references, an entry's replaces its refit when its evidence is higher.
+    if continuation:
+        continue_all(dict(continuation_options or {}))
+    ranking, checked = name_it(references), set()
     while ranking.winner is not None and ranking.winner not in checked and len(checked) < max(0, int(mode_checks)):
         checked.add(ranking.winner)
         mode_check(ranking.winner)
