@@ -158,7 +158,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True,
                     help="reports directory; with --score, a kept --score table file is read instead of reports")
     ap.add_argument("--score", action="store_true", help="score existing reports against truth.json")
-    from vfcore.diagnose.defaults import BASE_PARTICLES, REFIT_PARTICLES
+    from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, REFIT_PARTICLES
     ap.add_argument("--particles", type=int, default=BASE_PARTICLES)
     ap.add_argument("--base-runs", type=int, default=2, help="independent base SMC runs, largest evidence kept")
     ap.add_argument("--max-refits", type=int, default=0,
@@ -179,9 +179,9 @@ def main(argv=None) -> int:
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
-    ap.add_argument("--continuation", action="store_true",
+    ap.add_argument("--continuation", action=argparse.BooleanOptionalAction, default=CONTINUATION,
                     help="search the base and every entry by window continuation and fit from the optimum too "
-                         "(diagnose(continuation=True))")
+                         "(diagnose(continuation=...); default: vfcore.diagnose.defaults.CONTINUATION)")
     ap.add_argument("--shared-mode", action="store_true",
                     help="refit every entry from the leading refit's material mode too (diagnose(shared_mode=True))")
     ap.add_argument("--workers", type=int, default=2)

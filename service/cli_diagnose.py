@@ -11,7 +11,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from vfcore.diagnose.defaults import BASE_PARTICLES, DISCARD_S, DURATION_S, MAX_REFITS, REFIT_PARTICLES
+from vfcore.diagnose.defaults import (BASE_PARTICLES, CONTINUATION, DISCARD_S, DURATION_S, MAX_REFITS,
+                                     REFIT_PARTICLES)
 
 console = Console()
 
@@ -145,6 +146,9 @@ def diagnose_cmd(
             help="most observation-level extensions refitted, best screened first (default: all)")] = MAX_REFITS,
         candidates: Annotated[Optional[str], typer.Option(
             help="comma-separated extensions to screen (default: every implemented one)")] = None,
+        continuation: Annotated[bool, typer.Option(
+            help="also search the base model and every extension by window continuation and fit from the "
+                 "optimum (~2,000 simulations each; docs/diagnose.md section 4)")] = CONTINUATION,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
         seed: int = 0) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
@@ -172,7 +176,7 @@ def diagnose_cmd(
     t0 = time.perf_counter()
     try:
         kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
-                  seed=seed)
+                  seed=seed, continuation=continuation)
         if workers == 1:
             report = diagnose(problem, **kw)
         else:

@@ -22,7 +22,7 @@ import numpy as np
 from fastapi import APIRouter, Body, HTTPException, Request, Response, status
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from vfcore.diagnose.defaults import BASE_PARTICLES, MAX_REFITS, REFIT_PARTICLES
+from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, MAX_REFITS, REFIT_PARTICLES
 from worker.jobspec import JobSpec
 
 from ..deps import JobIdDep, ManagerDep, UserDep
@@ -150,6 +150,9 @@ class DiagnoseRequest(BaseModel):
     max_refits: int | None = Field(default=MAX_REFITS, ge=0, le=6,
                                    description="most observation-level extensions refitted, best screened "
                                                "first (default: all six)")
+    continuation: bool = Field(default=CONTINUATION,
+                               description="also search the base model and every extension by window "
+                                           "continuation and fit from the optimum (docs/diagnose.md section 4)")
     seed: int = Field(default=0, ge=0, lt=2**63)
 
     @field_validator("candidates")
@@ -180,7 +183,7 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
                           map=dask_map(client), chunk_size=chunk, max_refits=req.max_refits,
-                          refit_particles=req.refit_particles)
+                          refit_particles=req.refit_particles, continuation=req.continuation)
         d = jsonable(report.to_dict())
         d["request"] = req.model_dump()
         plot_atomic(report, problem, png)

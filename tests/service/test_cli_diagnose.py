@@ -89,6 +89,7 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     assert (sig["particles"].default, sig["refit_particles"].default, sig["max_refits"].default) == \
         (D.BASE_PARTICLES, D.REFIT_PARTICLES, D.MAX_REFITS)
     assert (sig["duration"].default, sig["discard"].default) == (D.DURATION_S, D.DISCARD_S)
+    assert sig["continuation"].default == req.continuation == D.CONTINUATION
     assert (req.n_particles, req.refit_particles, req.max_refits) == (D.BASE_PARTICLES, D.REFIT_PARTICLES,
                                                                        D.MAX_REFITS)
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2]))     # undone after the test
@@ -97,4 +98,5 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     monkeypatch.setattr(bench_diagnose, "run", lambda a: seen.update(vars(a)))
     bench_diagnose.main(["--cases", "c", "--out", "o"])
     assert (seen["particles"], seen["refit_particles"]) == (D.BASE_PARTICLES, D.REFIT_PARTICLES)
+    assert seen["continuation"] == D.CONTINUATION
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)

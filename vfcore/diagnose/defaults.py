@@ -16,3 +16,5 @@ MAX_REFITS = None
 #: simulated time and discarded transient, s (the paper's 0.55 s; the suites' window)
 DURATION_S = 0.55
 DISCARD_S = 0.25
+#: window-continuation search of the base and every entry (``diagnose(continuation=...)``; stop 28)
+CONTINUATION = False
