@@ -565,11 +565,14 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         s["n_generations"] = int(post.info.get("n_generations", 0))
         return s
 
-    def keep_if_higher(name: str, near: Posterior, zb: float, t1: float, **tag) -> dict | None:
+    def keep_if_higher(name: str, near: Posterior, zb: float, t1: float, record: tuple | None = None,
+                       **tag) -> dict | None:
         """A second fit ``near`` of entry ``name`` (log-evidence or its lower bound ``zb``) replaces
         the first when ``zb`` is higher (or the first has none): its evidence is set to ``zb``, ``tag``
-        goes into its ``info``, and its summary into ``after``. Returns the first fit's summary
-        when replaced (``{}`` if there was none), ``None`` when the first is kept."""
+        goes into its ``info``, and its summary into ``after``. ``record = (key, dict)``: written to
+        the new summary under ``key``, with the first fit's evidence (``"first"``) and its rescue
+        record carried over. Returns the first fit's summary when replaced (``{}`` if there was
+        none), ``None`` when the first is kept."""
         first = refits.get(name)
         z1 = float(first.log_evidence) if first is not None else math.nan
         if not math.isfinite(zb) or (math.isfinite(z1) and zb <= z1):
@@ -579,6 +582,12 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         prev = after.get(name, {})
         refits[name] = near
         after[name] = summarise(name, near, t1)
+        if record is not None:
+            key, extra = record
+            after[name][key] = {**extra, "first": None if first is None else {
+                "log_evidence": z1, "log_evidence_se": float(first.log_evidence_se),
+                "n_simulations": int(first.n_simulations)},
+                **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
         return prev
     for i, name in enumerate(chosen):
         t1 = time.perf_counter()
@@ -644,15 +653,10 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                                                  seed=seed + 524287 + 31 * j, map=map, chunk_size=chunk_size,
                                                  inflate=rescue_inflate, integrate=integrate, **opts)
                 n_sims += int(near.n_simulations)
-                first = {"log_evidence": z1, "log_evidence_se": float(refits[name].log_evidence_se),
-                         "n_simulations": int(refits[name].n_simulations)}
-                prev = keep_if_higher(name, near, zb, t1, shared_mode_of=leader)
+                kept = keep_if_higher(name, near, zb, t1, record=("shared_mode", {"from": leader}),
+                                      shared_mode_of=leader) is not None
                 notes.append(f"shared mode: {name} refitted from {leader}'s material mode: log Z {zb:.1f} +- {sb:.1f} "
-                             f"against its first {z1:.1f}"
-                             + (" (kept)" if prev is not None else " (not higher; the first is kept)"))
-                if prev is not None:
-                    after[name]["shared_mode"] = {"from": leader, "first": first,
-                                                  **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
+                             f"against its first {z1:.1f}" + (" (kept)" if kept else " (not higher; the first is kept)"))
             before["shared_mode_leader"] = leader
 
     def name_it(references):
@@ -718,16 +722,11 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             zc, sc, pc = continued_fit(problem, fe, name, n_particles=refit_n, seed=sd + 97 * (j + 1), map=map,
                                        chunk_size=chunk_size, integrate=integrate, **opts)
             n_sims += int(pc.n_simulations)
-            first = {"log_evidence": float(refits[name].log_evidence),
-                     "log_evidence_se": float(refits[name].log_evidence_se),
-                     "n_simulations": int(refits[name].n_simulations)}
-            prev = keep_if_higher(name, pc, zc, t1, continued=True)
+            z1 = float(refits[name].log_evidence)
+            kept = keep_if_higher(name, pc, zc, t1, record=("continuation", fe.to_dict()), continued=True) is not None
             notes.append(f"continuation: {name} searched (best log-likelihood {fe.loglik:.1f}) and fitted from "
-                         f"there: log Z = {zc:.1f} +- {sc:.1f} against its first {first['log_evidence']:.1f}"
-                         + (" (kept)" if prev is not None else " (not higher; the first is kept)"))
-            if prev is not None:
-                after[name]["continuation"] = {"first": first, **fe.to_dict(),
-                                               **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
+                         f"there: log Z = {zc:.1f} +- {sc:.1f} against its first {z1:.1f}"
+                         + (" (kept)" if kept else " (not higher; the first is kept)"))
 
     def name_best_of_base():
         return best_of_base_from_summaries(before, after, min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
