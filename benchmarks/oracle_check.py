@@ -59,25 +59,18 @@ def entry_at(problem, name: str | None, theta_base: np.ndarray, *, polish_materi
     parameters (grid then Nelder-Mead); with ``polish_materials`` the base parameters move too."""
     from scipy.optimize import minimize
 
-    from vfcore.diagnose.fit import ExtendedEvaluator
-    from vfcore.inference.problem import evaluate
-    if name is None:
-        fn = lambda th: evaluate(np.atleast_2d(th), problem)  # noqa: E731
-        lo = hi = np.empty(0)
-        names: tuple = ()
-    else:
-        ev = ExtendedEvaluator(problem, name, integrate=True)
-        fn = ev
-        names = ev.prior.names[ev.prior.n_base:]
-        lo = np.array([ev.prior.bounds[n][0] for n in names])
-        hi = np.array([ev.prior.bounds[n][1] for n in names])
+    from vfcore.diagnose.search import model_evaluator, model_prior
+    fn = model_evaluator(problem, name)
+    prior = model_prior(problem, name)
     nb = theta_base.size
+    names = tuple(prior.names[nb:])
+    lo, hi = prior.lo[nb:], prior.hi[nb:]
     n_evals = 0
 
     def ll(x):
         nonlocal n_evals
         n_evals += 1
-        e = fn(np.concatenate([x[:nb], x[nb:]])[None, :])
+        e = fn(np.asarray(x, dtype=float)[None, :])
         return float(e.loglik[0]), e
 
     best_x, best_ll = np.asarray(theta_base, float), -math.inf
@@ -93,8 +86,7 @@ def entry_at(problem, name: str | None, theta_base: np.ndarray, *, polish_materi
         best_ll, _ = ll(best_x)
     free = slice(0 if polish_materials else nb, best_x.size)
     if best_x[free].size and math.isfinite(best_ll):
-        blo = np.concatenate([np.array([problem.prior.bounds[n][0] for n in problem.prior.names]), lo])
-        bhi = np.concatenate([np.array([problem.prior.bounds[n][1] for n in problem.prior.names]), hi])
+        blo, bhi = prior.lo, prior.hi
 
         def neg(z):
             x = best_x.copy()

@@ -32,7 +32,8 @@ from ..inference.importance import map_evaluate
 from ..inference.problem import Evaluation, Problem, ProblemEvaluator
 from ..measures import estimate_f0
 
-__all__ = ["CONTINUATION", "SearchResult", "windows", "window_problems", "continuation_search", "continued_fit"]
+__all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "windows", "window_problems",
+           "continuation_search", "continued_fit"]
 
 #: default search: Sobol design points, starts kept from it, first window in cycles, Nelder-Mead
 #: evaluations on window k (``maxfev0 + maxfev_step * k``) and its initial simplex step in unit
@@ -71,14 +72,17 @@ def window_problems(problem: Problem, cycles0: float = 3.0) -> list[Problem]:
     return [dataclasses.replace(problem, obs_gaw=y[:w]) if w < y.size else problem for w in ws]
 
 
-def _evaluator(problem: Problem, extension: str | None, integrate: bool):
+def model_evaluator(problem: Problem, extension: str | None, integrate: bool = True):
+    """Batch function ``thetas -> Evaluation`` of the base model (``extension=None``) or of the
+    base model plus ``extension`` (:class:`.fit.ExtendedEvaluator`)."""
     if extension is None:
         return ProblemEvaluator(problem)
     from .fit import ExtendedEvaluator
     return ExtendedEvaluator(problem, extension, integrate=integrate)
 
 
-def _prior(problem: Problem, extension: str | None, integrate: bool):
+def model_prior(problem: Problem, extension: str | None, integrate: bool = True):
+    """The prior :func:`model_evaluator` samples: the problem's, or the extended one."""
     if extension is None:
         return problem.prior
     from .fit import ExtendedPrior
@@ -162,9 +166,9 @@ def continuation_search(problem: Problem, extension: str | None = None, *, start
     unknown = set(settings) - set(CONTINUATION)
     if unknown:
         raise ValueError(f"unknown continuation settings {sorted(unknown)}; known: {sorted(CONTINUATION)}")
-    prior = _prior(problem, extension, integrate)
+    prior = model_prior(problem, extension, integrate)
     probs = window_problems(problem, float(s["cycles0"]))
-    evs = [_evaluator(p, extension, integrate) for p in probs]
+    evs = [model_evaluator(p, extension, integrate) for p in probs]
     d = prior.ndim
     U = qmc.Sobol(d, scramble=True, seed=int(seed)).random(int(s["n_design"])) if s["n_design"] > 0 else \
         np.empty((0, d))
@@ -204,7 +208,7 @@ def continued_fit(problem: Problem, found: SearchResult, extension: str | None =
     from ..inference.reference import GaussianReference
     from ..inference.smc import smc
     from .fit import fit_extended
-    prior = _prior(problem, extension, integrate)
+    prior = model_prior(problem, extension, integrate)
     if tuple(found.names) != tuple(prior.names):
         raise ValueError(f"the search was over {found.names}, this model's parameters are {prior.names}")
     if not np.all(np.isfinite(found.theta)):
