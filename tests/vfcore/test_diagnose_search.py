@@ -65,6 +65,36 @@ def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically
     assert again.theta.tobytes() == found.theta.tobytes() and again.loglik == found.loglik
 
 
+class _Quadratic:
+    """A stand-in window log-likelihood: -((x - centre) / w)^2 summed over the coordinates; a
+    ``spike`` is flat (-1000) beyond distance ``w``, so no polish can find it from afar."""
+
+    def __init__(self, centre, w, spike=False):
+        self.centre, self.w, self.spike = centre, w, spike
+
+    def __call__(self, thetas):
+        from vfcore.inference.problem import Evaluation
+        d2 = np.sum(((np.asarray(thetas) - self.centre) / self.w) ** 2, axis=1)
+        ll = np.where(d2 < 1.0, -d2, -1000.0) if self.spike else -d2
+        return Evaluation(loglik=ll, ok=np.ones(len(ll), bool))
+
+
+def test_search_never_returns_less_than_its_start():
+    """The first window's optimum (0.2) lies far from the whole window's narrow one (0.8). A start
+    on the whole window's optimum is pulled to 0.2 by the first window, and the last window's small
+    polish cannot find the spike again; the search must still return the start's own value (stop 29:
+    on seed 8 case 00 the base search from the base fit's best particle ended 115 nats below that
+    fit's log-evidence)."""
+    from types import SimpleNamespace
+    from vfcore.diagnose.search import CONTINUATION, _Continuer
+    prior = SimpleNamespace(lo=np.zeros(2), width=np.ones(2))
+    evs = [_Quadratic(0.2, 0.3), _Quadratic(0.2, 0.3), _Quadratic(0.8, 0.01, spike=True)]
+    res = _Continuer(evs, {**CONTINUATION, "prior": prior})(np.array([[0.8, 0.8], [0.5, 0.5]]))
+    assert res.loglik[0] >= 0.0 and np.allclose(res.extra[0, :2], 0.8)
+    assert res.loglik[1] == -1000.0                    # a start off the spike does not reach it
+    assert res.extra[0, 2] >= 1 and np.all(np.isfinite(res.loglik))
+
+
 def test_continued_fit_estimates_the_evidence_from_the_found_mode(scaled_problem):
     found = continuation_search(scaled_problem, "scale", seed=4, **SMALL)
     z, se, post = continued_fit(scaled_problem, found, "scale", n_particles=12, seed=2)
@@ -89,3 +119,9 @@ def test_blind_diagnosis_with_continuation_names_the_scale(scaled_problem):
     assert math.isfinite(mc["log_evidence_bound"]) and mc["continuation"]["n_simulations"] > 0
     assert any(n.startswith("continuation: scale searched") for n in rep.notes)
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.1) < 0.02
+    # the winner's mode check: the base searched from the scale fit's optimum (scale dropped)
+    # gets the search the entry got, and stays below it (the scale is physics, not a mode)
+    assert rep.after["scale"]["continuation"]["n_simulations"] > 0      # the continued refit was kept
+    mcc = rep.before["mode_checks"]["scale continued"]
+    assert mcc["continuation"]["start_logliks"] and mcc["continuation"]["n_simulations"] > 0
+    assert mcc["log_evidence_bound"] < rep.after["scale"]["log_evidence"] - 3.0

@@ -683,7 +683,36 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                   box=near.info["box"], log_box_probability=near.info["log_box_probability"])
         before.setdefault("mode_checks", {})[name] = sn
         references[f"base near {name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
+        found = refits[name].info.get("continuation") if continuation else None
+        if found is not None:
+            continued_mode_check(name, found)
         return sn
+
+    def continued_mode_check(name: str, found: dict) -> None:
+        """The base model searched by window continuation from ``name``'s continued optimum (its own
+        parameters dropped), with the settings ``name``'s search had, and fitted from there: the
+        base gets the search the entry got, so a mode the entry's search found is not named as
+        physics (stop 29)."""
+        nonlocal n_sims
+        from .search import continuation_search, continued_fit
+        t1 = time.perf_counter()
+        start = np.array([found["params"][n] for n in problem.prior.names], dtype=float)
+        sd = seed + 1048573 + 7919 * (len(before.get("mode_checks", {})) + 1)
+        fb = continuation_search(problem, None, starts=start[None, :], seed=sd, map=map, chunk_size=chunk_size,
+                                 **{**continuation_settings, "n_design": 0})
+        n_sims += fb.n_simulations
+        if not math.isfinite(fb.loglik):
+            return
+        zc, sc, pc = continued_fit(problem, fb, None, n_particles=refit_n, seed=sd, map=map,
+                                   chunk_size=chunk_size, **opts)
+        n_sims += int(pc.n_simulations)
+        sn = fit_summary(pc, problem.obs_compared, problem.fps, problem.sigma_e)
+        sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc,
+                  continuation=fb.to_dict())
+        before["mode_checks"][f"{name} continued"] = sn
+        references[f"base near {name} continued"] = (zc, math.hypot(sc, tau), sn["residual_rms"])
+        notes.append(f"mode check: the base model searched from {name}'s continued optimum (best log-likelihood "
+                     f"{fb.loglik:.1f}) and fitted from there: log Z = {zc:.1f} +- {sc:.1f}")
 
     def continue_all(copts: dict) -> None:
         nonlocal n_sims
@@ -773,8 +802,9 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     # Continuation search: the base model and every refitted entry searched by window continuation
     # (:mod:`.search`), then fitted by an SMC started about the optimum; the base's joins the
     # references, an entry's replaces its refit when its evidence is higher.
+    continuation_settings = dict(continuation_options or {})
     if continuation:
-        continue_all(dict(continuation_options or {}))
+        continue_all(continuation_settings)
     ranking, checked = name_it(references), set()
     while ranking.winner is not None and ranking.winner not in checked and len(checked) < max(0, int(mode_checks)):
         checked.add(ranking.winner)

@@ -108,9 +108,12 @@ class _Continuer:
         out_ll = np.full(len(starts), -np.inf)
         extra = np.full((len(starts), d + 1), np.nan)
         for i, u0 in enumerate(starts):
-            n = 0
-            best = (-math.inf, np.clip(u0, 0.0, 1.0))
-            u = best[1].copy()
+            u = np.clip(u0, 0.0, 1.0)
+            # the start's own whole-window value: the search never returns less than its start
+            # (a start already fitted to the whole window can drift on the short first window)
+            v0 = float(self.evaluators[-1]((lo + u * width)[None, :]).loglik[0])
+            n = 1
+            best = (v0 if math.isfinite(v0) else -math.inf, u.copy())
             for k, ev in enumerate(self.evaluators):
                 def f(z, ev=ev, last=(k == k_all - 1)):
                     nonlocal n, best
