@@ -693,45 +693,45 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         parameters dropped), with the settings ``name``'s search had, and fitted from there: the
         base gets the search the entry got, so a mode the entry's search found is not named as
         physics (stop 29)."""
+        start = np.array([found["params"][n] for n in problem.prior.names], dtype=float)
+        sd = seed + 1048573 + 7919 * (len(before.get("mode_checks", {})) + 1)
+        got = search_base(start[None, :], sd, f"{name} continued", {**continuation_settings, "n_design": 0})
+        if got is not None:
+            fb, zc, sc, _ = got
+            notes.append(f"mode check: the base model searched from {name}'s continued optimum (best "
+                         f"log-likelihood {fb.loglik:.1f}) and fitted from there: log Z = {zc:.1f} +- {sc:.1f}")
+
+    def search_base(starts, sd: int, label: str, copts: dict):
+        """The base model searched by window continuation from ``starts`` (and the design ``copts``
+        asks for), then fitted from the optimum; the fit's bound joins the references as
+        ``"base near <label>"`` and ``before["mode_checks"][label]``. Returns ``(search, log Z, se,
+        summary)``, or ``None`` when the search found no finite log-likelihood."""
         nonlocal n_sims
         from .search import continuation_search, continued_fit
         t1 = time.perf_counter()
-        start = np.array([found["params"][n] for n in problem.prior.names], dtype=float)
-        sd = seed + 1048573 + 7919 * (len(before.get("mode_checks", {})) + 1)
-        fb = continuation_search(problem, None, starts=start[None, :], seed=sd, map=map, chunk_size=chunk_size,
-                                 **{**continuation_settings, "n_design": 0})
+        fb = continuation_search(problem, None, starts=starts, seed=sd, map=map, chunk_size=chunk_size, **copts)
         n_sims += fb.n_simulations
         if not math.isfinite(fb.loglik):
-            return
+            return None
         zc, sc, pc = continued_fit(problem, fb, None, n_particles=refit_n, seed=sd, map=map,
                                    chunk_size=chunk_size, **opts)
         n_sims += int(pc.n_simulations)
         sn = fit_summary(pc, problem.obs_compared, problem.fps, problem.sigma_e)
         sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc,
                   continuation=fb.to_dict())
-        before["mode_checks"][f"{name} continued"] = sn
-        references[f"base near {name} continued"] = (zc, math.hypot(sc, tau), sn["residual_rms"])
-        notes.append(f"mode check: the base model searched from {name}'s continued optimum (best log-likelihood "
-                     f"{fb.loglik:.1f}) and fitted from there: log Z = {zc:.1f} +- {sc:.1f}")
+        before.setdefault("mode_checks", {})[label] = sn
+        references[f"base near {label}"] = (zc, math.hypot(sc, tau), sn["residual_rms"])
+        return fb, zc, sc, sn
 
     def continue_all(copts: dict) -> None:
         nonlocal n_sims
         from .fit import ExtendedPrior
         from .search import continuation_search, continued_fit
         sd = seed + 1048573
-        t1 = time.perf_counter()
-        fb = continuation_search(problem, None, starts=_best_particles(base, 1), seed=sd, map=map,
-                                 chunk_size=chunk_size, **copts)
-        n_sims += fb.n_simulations
-        if math.isfinite(fb.loglik):
-            zc, sc, pc = continued_fit(problem, fb, None, n_particles=refit_n, seed=sd, map=map,
-                                       chunk_size=chunk_size, **opts)
-            n_sims += int(pc.n_simulations)
-            sn = fit_summary(pc, problem.obs_compared, problem.fps, problem.sigma_e)
-            sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc,
-                      continuation=fb.to_dict())
-            before.setdefault("mode_checks", {})["continuation"] = sn
-            references["base near continuation"] = (zc, math.hypot(sc, tau), sn["residual_rms"])
+        got = search_base(_best_particles(base, 1), sd, "continuation", copts)
+        fb = None
+        if got is not None:
+            fb, zc, sc, sn = got
             notes.append(f"continuation: the base model searched by window continuation (best log-likelihood "
                          f"{fb.loglik:.1f}, {fb.n_simulations} simulations) and fitted from there: log Z = {zc:.1f} "
                          f"+- {sc:.1f}, residual {sn['residual_rms']:.3f} mm^2")
@@ -739,7 +739,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             t1 = time.perf_counter()
             prior_e = ExtendedPrior(bounds={}, base=problem.prior, extension=name, integrate=bool(integrate))
             starts = [th for th in _best_particles(refits[name], 1) if th.size == prior_e.ndim]
-            if math.isfinite(fb.loglik):
+            if fb is not None:
                 own = {p.name: (p.null if p.null is not None else 0.5 * (p.lo + p.hi)) for p in get(name).params}
                 starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base:]]]))
             fe = continuation_search(problem, name, starts=starts, seed=sd + 97 * (j + 1), map=map,
