@@ -683,7 +683,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                   box=near.info["box"], log_box_probability=near.info["log_box_probability"])
         before.setdefault("mode_checks", {})[name] = sn
         references[f"base near {name}"] = (zb, math.hypot(sb, tau), sn["residual_rms"])
-        found = refits[name].info.get("continuation") if continuation else None
+        found = refits[name].info.get("continuation")     # set only by a kept continued fit
         if found is not None:
             continued_mode_check(name, found)
         return sn
