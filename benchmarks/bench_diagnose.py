@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import time
 import warnings
@@ -63,15 +64,24 @@ class BalancedMap:
     ``workers`` contiguous, equal parts (row order kept; map_evaluate only concatenates). With a
     fixed chunk size a 24-particle SMC batch goes out as 20 + 4 rows and one worker idles."""
 
-    def __init__(self, pool, workers: int):
-        self.pool, self.workers = pool, workers
+    def __init__(self, imap, workers: int):
+        self.imap, self.workers = imap, workers
 
     def __call__(self, fn, parts):
         parts = list(parts)
         rows = np.concatenate([np.atleast_2d(p) for p in parts]) if parts else np.empty((0, 0))
         if rows.shape[0] == 0:
             return []
-        return self.pool.imap(fn, np.array_split(rows, min(self.workers, rows.shape[0])))
+        return self.imap(fn, np.array_split(rows, min(self.workers, rows.shape[0])))
+
+
+def _mapper(pool, workers: int, store: Path | None):
+    """The case's map: the pool's (balanced) or the builtin, through a CachedMap when ``store``."""
+    from vfcore.inference.memo import CachedMap
+    inner = pool.imap if pool is not None else map
+    if store is not None:
+        inner = CachedMap(inner, store)
+    return (BalancedMap(inner, workers) if pool is not None else inner), inner
 
 
 def run(a) -> None:
@@ -85,7 +95,6 @@ def run(a) -> None:
         cases = [by_id[i.strip()] for i in a.ids.split(",") if i.strip()]
     import multiprocessing as mp
     pool = mp.get_context("spawn").Pool(a.workers) if a.workers > 1 else None
-    mapper = BalancedMap(pool, a.workers) if pool is not None else map
     try:
         for case in cases:
             path = out / f"case_{case['id']}.json"
@@ -98,6 +107,8 @@ def run(a) -> None:
                 path.write_text(json.dumps({"error": str(exc), "winner": None, "verdict": "rejected input"}))
                 print(f"case {case['id']}: rejected input: {exc}", flush=True)
                 continue
+            store = Path(a.resume_store) / f"case_{case['id']}" if a.resume_store else None
+            mapper, inner = _mapper(pool, a.workers, store)
             t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -108,8 +119,15 @@ def run(a) -> None:
                                shared_mode=a.shared_mode, continuation=a.continuation)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
-            path.write_text(json.dumps(d, indent=1, default=float))
+            if store is not None:          # wall_s is this attempt's; a resumed case read its earlier parts back
+                d["resume_store"] = {"parts_read": inner.hits, "parts_simulated": inner.misses,
+                                     "parts_uncached": inner.uncached}
             plot_diagnosis(rep, pb, out / f"case_{case['id']}.png")
+            tmp = path.with_suffix(".json.tmp")
+            tmp.write_text(json.dumps(d, indent=1, default=float))
+            os.replace(tmp, path)          # the report appears whole, after its figure
+            if store is not None:
+                shutil.rmtree(store, ignore_errors=True)
             print(f"case {case['id']}: {rep.verdict}  sims={rep.n_simulations}  {d['wall_s']:.0f} s  refits "
                   + ", ".join(f"{r['name']} d={r['delta']:.0f} rms={100 * r['rms_gain']:.0f}%"
                               + ("" if r["found"] else f" [{r['reason'].split(':')[0]}]") for r in d["ranking"]),
@@ -184,6 +202,10 @@ def main(argv=None) -> int:
                          "(diagnose(continuation=...); default: vfcore.diagnose.defaults.CONTINUATION)")
     ap.add_argument("--shared-mode", action="store_true",
                     help="refit every entry from the leading refit's material mode too (diagnose(shared_mode=True))")
+    ap.add_argument("--resume-store", default="",
+                    help="directory of per-case stores of batch evaluations (vfcore.inference.memo.CachedMap): "
+                         "a case interrupted and run again reads its finished simulations back; a case's store "
+                         "is deleted once its report is written")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)

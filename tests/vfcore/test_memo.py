@@ -1,0 +1,151 @@
+"""The store of batch evaluations (vfcore.inference.memo.CachedMap): a rerun reads back what was
+simulated, an interrupted run resumes, and a diagnosis resumed from the store is bit-identical."""
+import pickle
+import threading
+
+import numpy as np
+import pytest
+
+from vfcore.inference.memo import CachedMap
+from vfcore.inference.problem import Evaluation
+
+CALLS = []
+
+
+class _Square:
+    """A batch function: log-likelihood -offset * sum(x^2); records each part it is given."""
+
+    def __init__(self, offset=1.0):
+        self.offset = offset
+
+    def __call__(self, rows):
+        CALLS.append(len(rows))
+        return Evaluation.from_loglik(-self.offset * np.sum(np.asarray(rows) ** 2, axis=1))
+
+
+def _parts(n=5, seed=0):
+    return np.array_split(np.random.default_rng(seed).standard_normal((23, 3)), n)
+
+
+def _same(a: list, b: list) -> bool:
+    return len(a) == len(b) and all(x.loglik.tobytes() == y.loglik.tobytes() for x, y in zip(a, b))
+
+
+def test_a_second_run_reads_every_part_back_and_a_changed_function_or_part_is_simulated(tmp_path):
+    CALLS.clear()
+    first = CachedMap(map, tmp_path)(_Square(), _parts())
+    assert CALLS == [5, 5, 5, 4, 4]
+    again = CachedMap(map, tmp_path)
+    CALLS.clear()
+    assert _same(again(_Square(), _parts()), first) and CALLS == [] and (again.hits, again.misses) == (5, 0)
+    # another function (different offset) or other parameters are other keys: simulated, not read back
+    other = again(_Square(2.0), _parts())
+    assert CALLS == [5, 5, 5, 4, 4] and again.misses == 5
+    assert np.allclose(other[0].loglik, 2.0 * first[0].loglik)
+    p = _parts()
+    p[2] = p[2] + 1e-12                                   # one parameter moved by 1e-12
+    CALLS.clear()
+    again(_Square(), p)
+    assert CALLS == [5]
+
+
+def test_an_interrupted_run_resumes_from_the_parts_it_finished(tmp_path):
+    class Killed(Exception):
+        pass
+
+    def dies_after(k):
+        def inner(fn, parts):
+            for i, part in enumerate(parts):
+                if i == k:
+                    raise Killed
+                yield fn(part)
+        return inner
+
+    with pytest.raises(Killed):
+        CachedMap(dies_after(3), tmp_path)(_Square(), _parts())
+    resumed = CachedMap(map, tmp_path)
+    CALLS.clear()
+    out = resumed(_Square(), _parts())
+    assert (resumed.hits, resumed.misses) == (3, 2) and CALLS == [4, 4]
+    assert _same(out, list(map(_Square(), _parts())))
+    assert not list(tmp_path.rglob("*.tmp"))             # nothing half-written is left
+
+
+def test_an_unreadable_entry_is_simulated_again_and_an_unpicklable_function_runs_uncached(tmp_path):
+    cm = CachedMap(map, tmp_path)
+    cm(_Square(), _parts())
+    victim = sorted(tmp_path.rglob("*.pkl"))[0]
+    victim.write_bytes(b"not a pickle")
+    cm2 = CachedMap(map, tmp_path)
+    assert _same(cm2(_Square(), _parts()), list(map(_Square(), _parts()))) and cm2.misses == 1
+    assert pickle.loads(victim.read_bytes()).loglik.shape[0] in (4, 5)   # rewritten whole
+
+    class Locked(_Square):
+        def __init__(self):
+            super().__init__()
+            self.lock = threading.Lock()                 # neither pickle nor cloudpickle takes a lock
+
+    cm3 = CachedMap(map, tmp_path)
+    assert _same(cm3(Locked(), _parts()), list(map(_Square(), _parts())))
+    assert cm3.uncached == 5 and cm3.hits == cm3.misses == 0
+
+
+def test_a_map_that_drops_results_is_an_error(tmp_path):
+    with pytest.raises(RuntimeError, match="returned 2 results for 5 parts"):
+        CachedMap(lambda fn, parts: [fn(p) for p in parts[:2]], tmp_path)(_Square(), _parts())
+
+
+def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
+    """A small blind diagnosis (a recording seen 10 % too large; continuation search on) run
+    through the store, interrupted part-way in a second run, resumed in a third: the third reads
+    back what the first two simulated, simulates nothing else, and its report is the first's."""
+    import json
+
+    from vfcore.config import SimConfig
+    from vfcore.diagnose.pipeline import diagnose
+    from vfcore.forward import simulate
+    from vfcore.inference import Prior
+    from vfcore.inference.problem import Problem
+    from vfcore.params import PARAM_NAMES, TABLE3
+    from vfcore.result import HR_OVERSAMPLE
+
+    cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
+    run = simulate(TABLE3, cfg)
+    y = 1.1 * np.asarray(run.gaw_hr[29::HR_OVERSAMPLE][:200]) + 0.3 * np.random.default_rng(3).standard_normal(200)
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    pb = Problem(y, 2000.0, prior, config=cfg, sigma_e=0.3)
+    small = {"n_design": 8, "n_keep": 1, "maxfev0": 12, "maxfev_step": 8}
+
+    def go(mapper):
+        rep = diagnose(pb, n_particles=12, seed=3, candidates=["scale"], base_runs=1, map=mapper,
+                       continuation=True, continuation_options=small)
+        def strip(x):                                    # wall times are the only clock readings
+            if isinstance(x, dict):
+                return {k: strip(v) for k, v in x.items() if k != "wall_s"}
+            return [strip(v) for v in x] if isinstance(x, (list, tuple)) else x
+        return json.dumps(strip(rep.to_dict()), sort_keys=True, default=float)
+
+    first = CachedMap(map, tmp_path / "a")
+    ref = go(first)
+    n = first.misses
+    assert n > 10 and first.hits == 0
+
+    class Killed(Exception):
+        pass
+
+    done = []
+
+    def dies(fn, parts):                                 # a worker killed after n // 2 parts
+        for part in parts:
+            if len(done) >= n // 2:
+                raise Killed
+            done.append(1)
+            yield fn(part)
+
+    with pytest.raises(Killed):
+        go(CachedMap(dies, tmp_path / "b"))
+    resumed = CachedMap(map, tmp_path / "b")
+    assert go(resumed) == ref
+    assert resumed.hits == n // 2 and resumed.misses == n - n // 2
+    replay = CachedMap(lambda fn, parts: pytest.fail("simulated on a replay"), tmp_path / "a")
+    assert go(replay) == ref and replay.hits == n

@@ -1,0 +1,117 @@
+"""A content-addressed store of batch evaluations, so that an interrupted ensemble resumes.
+
+:class:`CachedMap` wraps any ``map`` (the builtin, a pool's ``imap``, a Dask adapter) for
+:func:`vfcore.inference.importance.map_evaluate` and the diagnosis. Each call ``map(fn, parts)``
+is keyed per part by the SHA-256 of the pickled batch function and the part's array (dtype, shape
+and bytes). A part seen before is read back instead of simulated; the others go to the inner map
+and are written, each atomically (temporary file, then rename), before the call returns.
+
+Why this is safe. A forward simulation is a pure function of its batch function and its
+parameters (the samplers pass their seeds explicitly, and no batch function here carries a random
+state), and the key holds both in full, so a stored entry is exactly what the simulation would
+return and a rerun is bit-identical to the uncached run (tests/vfcore/test_memo.py). A batch
+function whose pickle misses something that changes its output would break this; such a function
+must not be cached. A function that cannot be pickled is run uncached. Different bytes for the
+same function (a lazily filled attribute, say) only cost a miss.
+
+The store is for resuming one piece of work; it is not an archive. Delete it when that work is done.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+
+def _fn_digest(fn) -> bytes | None:
+    for dumps in (pickle.dumps, _cloud_dumps):
+        try:
+            return hashlib.sha256(dumps(fn)).digest()
+        except Exception:  # noqa: BLE001 - an unpicklable function is simply not cached
+            continue
+    return None
+
+
+def _cloud_dumps(obj) -> bytes:
+    import cloudpickle
+    return cloudpickle.dumps(obj)
+
+
+def _part_key(fdigest: bytes, part) -> str:
+    a = np.ascontiguousarray(part)
+    h = hashlib.sha256(fdigest)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
+
+
+class CachedMap:
+    """``map(fn, parts)`` through ``inner``, each part's result stored under ``root``.
+
+    ``hits`` and ``misses`` count parts read back and parts simulated; ``uncached`` counts parts
+    whose batch function could not be pickled.
+    """
+
+    def __init__(self, inner: Callable = map, root: str | os.PathLike = ".vfcache"):
+        self.inner = inner
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.hits = self.misses = self.uncached = 0
+
+    def _path(self, key: str) -> Path:
+        return self.root / key[:2] / f"{key}.pkl"
+
+    def _store(self, key: str, value) -> None:
+        path = self._path(key)
+        path.parent.mkdir(exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    def _load(self, key: str):
+        path = self._path(key)
+        try:
+            with open(path, "rb") as f:
+                return True, pickle.load(f)
+        except FileNotFoundError:
+            return False, None
+        except (pickle.UnpicklingError, EOFError, ValueError):  # unreadable: simulate again
+            return False, None
+
+    def __call__(self, fn, parts) -> list:
+        parts = list(parts)
+        digest = _fn_digest(fn)
+        if digest is None:
+            self.uncached += len(parts)
+            return list(self.inner(fn, parts))
+        keys = [_part_key(digest, p) for p in parts]
+        out: list = [None] * len(parts)
+        todo = []
+        for i, key in enumerate(keys):
+            found, value = self._load(key)
+            if found:
+                out[i] = value
+            else:
+                todo.append(i)
+        self.hits += len(parts) - len(todo)
+        self.misses += len(todo)
+        if todo:
+            n = 0
+            for i, value in zip(todo, self.inner(fn, [parts[i] for i in todo])):  # stored as each arrives
+                self._store(keys[i], value)
+                out[i] = value
+                n += 1
+            if n != len(todo):
+                raise RuntimeError(f"the inner map returned {n} results for {len(todo)} parts; "
+                                   "CachedMap needs a map that gives one result per part")
+        return out
