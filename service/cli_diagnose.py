@@ -150,6 +150,10 @@ def diagnose_cmd(
             help="also search the base model and every extension by window continuation and fit from the "
                  "optimum (~2,000 simulations each; docs/diagnose.md section 4)")] = CONTINUATION,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
+        resume: Annotated[bool, typer.Option(
+            help="store finished simulations in OUT/.resume while running, so the same command run again "
+                 "after an interruption reads them back (same result, bit for bit); deleted once the "
+                 "diagnosis is written")] = True,
         seed: int = 0) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
     from .routers.diagnose import check_candidates, jsonable
@@ -174,16 +178,22 @@ def diagnose_cmd(
     console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {particles} particles, "
                   f"candidates {cand or 'all implemented'}, {workers} worker(s)")
     t0 = time.perf_counter()
+    store = out / ".resume"
+    if resume:
+        from vfcore.inference.memo import CachedMap
+        if store.exists():
+            console.print(f"resuming: reading finished simulations back from {store}")
     try:
         kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
                   seed=seed, continuation=continuation)
         if workers == 1:
-            report = diagnose(problem, **kw)
+            report = diagnose(problem, map=CachedMap(map, store) if resume else map, **kw)
         else:
             from concurrent.futures import ProcessPoolExecutor
             chunk = max(1, math.ceil(particles / (2 * workers)))
             with ProcessPoolExecutor(workers) as pool:
-                report = diagnose(problem, map=pool.map, chunk_size=chunk, **kw)
+                report = diagnose(problem, map=CachedMap(pool.map, store) if resume else pool.map,
+                                  chunk_size=chunk, **kw)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)
         raise typer.Exit(1) from None
@@ -191,6 +201,9 @@ def diagnose_cmd(
     out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis.json").write_text(json.dumps(d, indent=1))
     plot_diagnosis(report, problem, out / "diagnosis.png")
+    if resume:
+        import shutil
+        shutil.rmtree(store, ignore_errors=True)
     print_report(d)
     console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
                   f"({time.perf_counter() - t0:.1f} s)")

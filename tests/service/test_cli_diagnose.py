@@ -74,6 +74,7 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     assert d["n_simulations"] > 0
     assert (out / "diagnosis.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "missing physics: leak" in r.output and "Screening" in r.output
+    assert not (out / ".resume").exists()          # the resume store (on by default) is gone once written
 
 
 def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypatch):
@@ -101,3 +102,36 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     assert (seen["particles"], seen["refit_particles"]) == (D.BASE_PARTICLES, D.REFIT_PARTICLES)
     assert seen["continuation"] == D.CONTINUATION
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
+
+
+class _Half:
+    """A picklable batch function standing in for the forward model."""
+
+    def __call__(self, rows):
+        from vfcore.inference.problem import Evaluation
+        return Evaluation.from_loglik(-0.5 * np.sum(np.asarray(rows) ** 2, axis=1))
+
+
+def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it_back(tmp_path, leaky_gaw,
+                                                                                     monkeypatch):
+    """The diagnosis is replaced by one that evaluates 3 parts through the command's map and then
+    dies: the store keeps them in OUT/.resume, and the same command run again reads all 3 back."""
+    import vfcore.diagnose.pipeline as P
+    parts = [np.full((2, 1), float(k)) for k in range(3)]
+    seen = []
+
+    def dies(problem, *, map, **kw):
+        seen.append(map)
+        list(map(_Half(), parts))
+        raise RuntimeError("killed")
+
+    monkeypatch.setattr(P, "diagnose", dies)
+    out = tmp_path / "out"
+    args = [str(leaky_gaw), "--out", str(out), *TINY, "--estimate", "E_cover", "--workers", "1"]
+    r = _invoke(args)
+    assert r.exit_code == 1 and "killed" in r.output, r.output
+    assert len(list((out / ".resume").rglob("*.pkl"))) == 3
+    r = _invoke(args)
+    assert "resuming" in r.output and (seen[1].hits, seen[1].misses) == (3, 0)
+    r = _invoke([*args, "--no-resume"])
+    assert seen[2] is map                                 # --no-resume: the plain map, no store
