@@ -15,6 +15,7 @@ import logging
 import math
 import os
 import secrets
+import shutil
 import threading
 from pathlib import Path
 
@@ -174,20 +175,29 @@ class DiagnosisStatus(BaseModel):
 
 
 # ------------------------------------------------------------------------------------ worker
+def resume_store(manager, job_id: str) -> Path:
+    """Where a running diagnosis keeps its finished simulations (vfcore.inference.memo.CachedMap):
+    started again after an interruption, the same request reads them back."""
+    return manager.store_path(job_id).parent / f"{job_id}.diagnosis.resume"
+
+
 def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseRequest) -> None:
     from vfcore.diagnose.pipeline import diagnose
+    from vfcore.inference.memo import CachedMap
     js, png, err = _paths(manager, job_id)
+    store = resume_store(manager, job_id)
     try:
         problem = spec.to_problem()
         client = manager.client
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
-                          map=dask_map(client), chunk_size=chunk, max_refits=req.max_refits,
+                          map=CachedMap(dask_map(client), store), chunk_size=chunk, max_refits=req.max_refits,
                           refit_particles=req.refit_particles, continuation=req.continuation)
         d = jsonable(report.to_dict())
         d["request"] = req.model_dump()
         plot_atomic(report, problem, png)
         write_atomic(js, json.dumps(d).encode())       # the JSON's presence means "done"
+        shutil.rmtree(store, ignore_errors=True)
     except BaseException as exc:  # noqa: BLE001 - recorded as the diagnosis' failure
         log.exception("diagnosis of job %s failed", job_id)
         try:

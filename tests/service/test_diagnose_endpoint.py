@@ -107,3 +107,39 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     stores = service.settings.stores_dir
     assert not [p.name for p in stores.iterdir() if p.name.startswith(".")]
     assert (stores / f"{job}.diagnosis.json").exists() and (stores / f"{job}.diagnosis.png").exists()
+    assert not (stores / f"{job}.diagnosis.resume").exists()      # the resume store goes once done
+
+
+class _Half:
+    """A picklable batch function standing in for the forward model."""
+
+    def __call__(self, rows):
+        from vfcore.inference.problem import Evaluation
+        return Evaluation.from_loglik(-0.5 * np.sum(np.asarray(rows) ** 2, axis=1))
+
+
+def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatch):
+    """The diagnosis thread's body, with the diagnosis replaced by one that evaluates 3 parts and
+    then dies: the failure is recorded, the 3 parts stay in <id>.diagnosis.resume, and the same
+    request started again reads all 3 back and simulates nothing."""
+    from types import SimpleNamespace
+
+    import vfcore.diagnose.pipeline as P
+    from service.routers.diagnose import DiagnoseRequest, _Registry, _run, resume_store
+
+    parts = [np.full((2, 1), float(k)) for k in range(3)]
+    maps = []
+
+    def dies(problem, *, map, **kw):
+        maps.append(map)
+        list(map(_Half(), parts))
+        raise RuntimeError("worker lost")
+
+    monkeypatch.setattr(P, "diagnose", dies)
+    manager = SimpleNamespace(store_path=lambda jid: tmp_path / f"{jid}.zarr", client=None)
+    spec = SimpleNamespace(to_problem=lambda: None)
+    _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
+    assert "worker lost" in (tmp_path / "j1.diagnosis.error").read_text()
+    assert len(list(resume_store(manager, "j1").rglob("*.pkl"))) == 3
+    _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
+    assert (maps[1].hits, maps[1].misses) == (3, 0)
