@@ -11,7 +11,8 @@ parameters (the samplers pass their seeds explicitly, and no batch function here
 state), and the key holds both in full, so a stored entry is exactly what the simulation would
 return and a rerun is bit-identical to the uncached run (tests/vfcore/test_memo.py). A batch
 function whose pickle misses something that changes its output would break this; such a function
-must not be cached. A function that cannot be pickled is run uncached. Different bytes for the
+must not be cached. A function that cannot be pickled, or a call with a part that is not a
+numeric array, is run uncached. Different bytes for the
 same function (a lazily filled attribute, say) only cost a miss.
 
 The store is for resuming one piece of work; it is not an archive. Delete it when that work is done.
@@ -42,8 +43,15 @@ def _cloud_dumps(obj) -> bytes:
     return cloudpickle.dumps(obj)
 
 
-def _part_key(fdigest: bytes, part) -> str:
-    a = np.ascontiguousarray(part)
+def _part_key(fdigest: bytes, part) -> str | None:
+    """The part's key, or None for a part that is not a plain numeric array (an object array's
+    bytes are addresses, not values)."""
+    try:
+        a = np.ascontiguousarray(part)
+    except Exception:  # noqa: BLE001 - not array-like: not cached
+        return None
+    if a.dtype.kind not in "biufc":
+        return None
     h = hashlib.sha256(fdigest)
     h.update(f"{a.dtype.str}{a.shape}".encode())
     h.update(a.tobytes())
@@ -54,7 +62,8 @@ class CachedMap:
     """``map(fn, parts)`` through ``inner``, each part's result stored under ``root``.
 
     ``hits`` and ``misses`` count parts read back and parts simulated; ``uncached`` counts parts
-    whose batch function could not be pickled.
+    run without the store: their batch function could not be pickled, or a part of the call was
+    not a numeric array.
     """
 
     def __init__(self, inner: Callable = map, root: str | os.PathLike = ".vfcache"):
@@ -91,10 +100,10 @@ class CachedMap:
     def __call__(self, fn, parts) -> list:
         parts = list(parts)
         digest = _fn_digest(fn)
-        if digest is None:
+        keys = None if digest is None else [_part_key(digest, p) for p in parts]
+        if keys is None or None in keys:
             self.uncached += len(parts)
             return list(self.inner(fn, parts))
-        keys = [_part_key(digest, p) for p in parts]
         out: list = [None] * len(parts)
         todo = []
         for i, key in enumerate(keys):
