@@ -152,3 +152,43 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     assert resumed.hits == n // 2 and resumed.misses == n - n // 2
     replay = CachedMap(lambda fn, parts: pytest.fail("simulated on a replay"), tmp_path / "a")
     assert go(replay) == ref and replay.hits == n
+
+
+_DIGESTS = r"""
+import numpy as np
+from vfcore.config import SimConfig
+from vfcore.diagnose.extensions import CATALOGUE
+from vfcore.diagnose.fit import ExtendedEvaluator
+from vfcore.diagnose.search import CONTINUATION, _Continuer, model_evaluator, model_prior, window_problems
+from vfcore.inference import Prior
+from vfcore.inference.importance import batch_function
+from vfcore.inference.memo import _fn_digest
+from vfcore.inference.problem import Problem
+from vfcore.params import PARAM_NAMES, TABLE3
+cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
+prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_cover", "p_sub")})
+pb = Problem(np.sin(np.linspace(0, 40, 200)) + 2.0, 2000.0, prior, config=cfg, sigma_e=0.3)
+fns = [batch_function(pb)]
+fns += [ExtendedEvaluator(pb, n, integrate=i) for n in CATALOGUE for i in (False, True)]
+for ext in (None, *CATALOGUE):
+    evs = [model_evaluator(p, ext, True) for p in window_problems(pb, 3.0)]
+    fns.append(_Continuer(evs, {**CONTINUATION, "prior": model_prior(pb, ext, True)}))
+print(len(fns), *(_fn_digest(f).hex() for f in fns))
+"""
+
+
+def test_the_diagnosis_batch_functions_have_the_same_key_in_a_new_process():
+    """A resumed run is a new process, where str hashes are salted differently: the keys of the
+    base, every catalogue entry (sampled and integrated) and every continuation search must not
+    depend on that, or nothing would ever be read back."""
+    import os
+    import subprocess
+    import sys
+    outs = []
+    for salt in ("1", "2"):
+        env = {**os.environ, "PYTHONHASHSEED": salt}
+        r = subprocess.run([sys.executable, "-c", _DIGESTS], env=env, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr[-2000:]
+        outs.append(r.stdout.split())
+    assert int(outs[0][0]) >= 20 and "None" not in outs[0]
+    assert outs[0] == outs[1]
