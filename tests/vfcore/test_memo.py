@@ -49,6 +49,16 @@ def test_a_second_run_reads_every_part_back_and_a_changed_function_or_part_is_si
     assert CALLS == [5]
 
 
+def test_a_store_left_by_other_code_is_not_read(tmp_path, monkeypatch):
+    import vfcore.inference.memo as M
+    CachedMap(map, tmp_path)(_Square(), _parts())
+    assert [p.name for p in tmp_path.iterdir()] == [M.code_fingerprint()[:16]]
+    monkeypatch.setattr(M, "code_fingerprint", lambda: "f" * 64)     # as after an upgrade of vfcore
+    other = CachedMap(map, tmp_path)
+    other(_Square(), _parts())
+    assert (other.hits, other.misses) == (0, 5)
+
+
 def test_an_interrupted_run_resumes_from_the_parts_it_finished(tmp_path):
     class Killed(Exception):
         pass

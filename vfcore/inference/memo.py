@@ -15,10 +15,13 @@ must not be cached. A function that cannot be pickled, or a call with a part tha
 numeric array, is run uncached. Different bytes for the
 same function (a lazily filled attribute, say) only cost a miss.
 
-The store is for resuming one piece of work; it is not an archive. Delete it when that work is done.
+Entries live under ``root/<code fingerprint>/`` (:func:`code_fingerprint`: the ``vfcore`` sources
+and the numerical libraries' versions), so a store left by other code is never read. The store is
+for resuming one piece of work; it is not an archive. Delete it when that work is done.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import pickle
@@ -27,6 +30,28 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """SHA-256 of every ``vfcore`` source file (path and bytes) and of the Python, NumPy, SciPy and
+    Numba versions: what a simulation's result depends on besides its batch function's pickle
+    (classes and functions pickle by name, not by code). Stores are kept per fingerprint, so
+    after an upgrade nothing from the old code is read back."""
+    import platform
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    vers = [sys.version, platform.machine()]
+    for mod in ("numpy", "scipy", "numba"):
+        try:
+            vers.append(f"{mod} {__import__(mod).__version__}")
+        except ImportError:
+            vers.append(f"{mod} -")
+    h.update("\n".join(vers).encode())
+    return h.hexdigest()
 
 
 def _fn_digest(fn) -> bytes | None:
@@ -68,7 +93,7 @@ class CachedMap:
 
     def __init__(self, inner: Callable = map, root: str | os.PathLike = ".vfcache"):
         self.inner = inner
-        self.root = Path(root)
+        self.root = Path(root) / code_fingerprint()[:16]
         self.root.mkdir(parents=True, exist_ok=True)
         self.hits = self.misses = self.uncached = 0
 
