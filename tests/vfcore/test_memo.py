@@ -127,10 +127,10 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     y = 1.1 * np.asarray(run.gaw_hr[29::HR_OVERSAMPLE][:200]) + 0.3 * np.random.default_rng(3).standard_normal(200)
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     pb = Problem(y, 2000.0, prior, config=cfg, sigma_e=0.3)
-    small = {"n_design": 8, "n_keep": 1, "maxfev0": 12, "maxfev_step": 8}
+    small = {"n_design": 4, "n_keep": 1, "maxfev0": 6, "maxfev_step": 3}
 
     def go(mapper):
-        rep = diagnose(pb, n_particles=12, seed=3, candidates=["scale"], base_runs=1, map=mapper,
+        rep = diagnose(pb, n_particles=12, refit_particles=10, seed=3, candidates=["scale"], base_runs=1, map=mapper,
                        continuation=True, continuation_options=small)
         def strip(x):                                    # wall times are the only clock readings
             if isinstance(x, dict):
