@@ -67,3 +67,25 @@ def wait_done(http, job_id: str, user: str, timeout: float = 120.0, states=("don
         if time.time() - t0 > timeout:
             raise TimeoutError(f"job {job_id} still {st['state']}: {st}")
         time.sleep(0.1)
+
+
+class HalfSquare:
+    """A picklable batch function standing in for the forward model: -|x|^2 / 2 per row."""
+
+    def __call__(self, rows):
+        import numpy as np
+
+        from vfcore.inference.problem import Evaluation
+        return Evaluation.from_loglik(-0.5 * np.sum(np.asarray(rows) ** 2, axis=1))
+
+
+def dying_diagnosis(seen: list, message: str, n_parts: int = 3):
+    """A stand-in for vfcore.diagnose.pipeline.diagnose that records the ``map`` it is given,
+    evaluates ``n_parts`` parts through it and then dies with RuntimeError(message)."""
+    import numpy as np
+
+    def diagnose(problem, *, map, **kw):
+        seen.append(map)
+        list(map(HalfSquare(), [np.full((2, 1), float(k)) for k in range(n_parts)]))
+        raise RuntimeError(message)
+    return diagnose

@@ -104,28 +104,14 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
 
 
-class _Half:
-    """A picklable batch function standing in for the forward model."""
-
-    def __call__(self, rows):
-        from vfcore.inference.problem import Evaluation
-        return Evaluation.from_loglik(-0.5 * np.sum(np.asarray(rows) ** 2, axis=1))
-
-
 def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it_back(tmp_path, leaky_gaw,
                                                                                      monkeypatch):
     """The diagnosis is replaced by one that evaluates 3 parts through the command's map and then
     dies: the store keeps them in OUT/.resume, and the same command run again reads all 3 back."""
     import vfcore.diagnose.pipeline as P
-    parts = [np.full((2, 1), float(k)) for k in range(3)]
+    from svc_helpers import dying_diagnosis
     seen = []
-
-    def dies(problem, *, map, **kw):
-        seen.append(map)
-        list(map(_Half(), parts))
-        raise RuntimeError("killed")
-
-    monkeypatch.setattr(P, "diagnose", dies)
+    monkeypatch.setattr(P, "diagnose", dying_diagnosis(seen, "killed"))
     out = tmp_path / "out"
     args = [str(leaky_gaw), "--out", str(out), *TINY, "--estimate", "E_cover", "--workers", "1"]
     r = _invoke(args)

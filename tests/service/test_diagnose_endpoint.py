@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from svc_helpers import auth, toy_spec, wait_done
+from svc_helpers import auth, dying_diagnosis, toy_spec, wait_done
 
 FPS = 4000.0
 
@@ -110,14 +110,6 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert not (stores / f"{job}.diagnosis.resume").exists()      # the resume store goes once done
 
 
-class _Half:
-    """A picklable batch function standing in for the forward model."""
-
-    def __call__(self, rows):
-        from vfcore.inference.problem import Evaluation
-        return Evaluation.from_loglik(-0.5 * np.sum(np.asarray(rows) ** 2, axis=1))
-
-
 def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatch):
     """The diagnosis thread's body, with the diagnosis replaced by one that evaluates 3 parts and
     then dies: the failure is recorded, the 3 parts stay in <id>.diagnosis.resume, and the same
@@ -127,15 +119,8 @@ def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatc
     import vfcore.diagnose.pipeline as P
     from service.routers.diagnose import DiagnoseRequest, _Registry, _run, resume_store
 
-    parts = [np.full((2, 1), float(k)) for k in range(3)]
     maps = []
-
-    def dies(problem, *, map, **kw):
-        maps.append(map)
-        list(map(_Half(), parts))
-        raise RuntimeError("worker lost")
-
-    monkeypatch.setattr(P, "diagnose", dies)
+    monkeypatch.setattr(P, "diagnose", dying_diagnosis(maps, "worker lost"))
     manager = SimpleNamespace(store_path=lambda jid: tmp_path / f"{jid}.zarr", client=None)
     spec = SimpleNamespace(to_problem=lambda: None)
     _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
