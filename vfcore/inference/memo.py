@@ -17,7 +17,8 @@ same function (a lazily filled attribute, say) only cost a miss.
 
 Entries live under ``root/<code fingerprint>/`` (:func:`code_fingerprint`: the ``vfcore`` sources
 and the numerical libraries' versions), so a store left by other code is never read. The store is
-for resuming one piece of work; it is not an archive. Delete it when that work is done.
+for resuming one piece of work; it is not an archive. Delete it when that work is done. Entries
+are pickles: keep a store where only its owner can write (as the service's data directory).
 """
 from __future__ import annotations
 
