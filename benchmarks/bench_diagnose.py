@@ -86,6 +86,7 @@ def _mapper(pool, workers: int, store: Path | None):
 
 def run(a) -> None:
     from vfcore.diagnose.pipeline import diagnose, plot_diagnosis
+    from vfcore.inference.memo import account
     cases_dir, out = Path(a.cases), Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     meta = json.loads((cases_dir / "cases.json").read_text())
@@ -119,9 +120,8 @@ def run(a) -> None:
                                shared_mode=a.shared_mode, continuation=a.continuation)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
-            if store is not None:          # wall_s is this attempt's; a resumed case read its earlier parts back
-                d["resume_store"] = {"parts_read": inner.hits, "parts_simulated": inner.misses,
-                                     "parts_uncached": inner.uncached}
+            if store is not None:          # a resumed case: its earlier attempts' wall time counted in
+                account(d, inner)
             plot_diagnosis(rep, pb, out / f"case_{case['id']}.png")
             tmp = path.with_suffix(".json.tmp")
             tmp.write_text(json.dumps(d, indent=1, default=float))

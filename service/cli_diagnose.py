@@ -179,25 +179,26 @@ def diagnose_cmd(
                   f"candidates {cand or 'all implemented'}, {workers} worker(s)")
     t0 = time.perf_counter()
     store = out / ".resume"
+    from vfcore.inference.memo import CachedMap, account
     if resume:
-        from vfcore.inference.memo import CachedMap
         if store.exists():
             console.print(f"resuming: reading finished simulations back from {store}")
     try:
         kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
                   seed=seed, continuation=continuation)
         if workers == 1:
-            report = diagnose(problem, map=CachedMap(map, store) if resume else map, **kw)
+            cmap = CachedMap(map, store) if resume else None
+            report = diagnose(problem, map=cmap or map, **kw)
         else:
             from concurrent.futures import ProcessPoolExecutor
             chunk = max(1, math.ceil(particles / (2 * workers)))
             with ProcessPoolExecutor(workers) as pool:
-                report = diagnose(problem, map=CachedMap(pool.map, store) if resume else pool.map,
-                                  chunk_size=chunk, **kw)
+                cmap = CachedMap(pool.map, store) if resume else None
+                report = diagnose(problem, map=cmap or pool.map, chunk_size=chunk, **kw)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)
         raise typer.Exit(1) from None
-    d = jsonable(report.to_dict())
+    d = jsonable(account(report.to_dict(), cmap))      # a resumed run counts its earlier attempts' time
     out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis.json").write_text(json.dumps(d, indent=1))
     plot_diagnosis(report, problem, out / "diagnosis.png")

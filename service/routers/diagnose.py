@@ -183,17 +183,18 @@ def resume_store(manager, job_id: str) -> Path:
 
 def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseRequest) -> None:
     from vfcore.diagnose.pipeline import diagnose
-    from vfcore.inference.memo import CachedMap
+    from vfcore.inference.memo import CachedMap, account
     js, png, err = _paths(manager, job_id)
     store = resume_store(manager, job_id)
     try:
         problem = spec.to_problem()
         client = manager.client
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
+        cmap = CachedMap(dask_map(client), store)
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
-                          map=CachedMap(dask_map(client), store), chunk_size=chunk, max_refits=req.max_refits,
+                          map=cmap, chunk_size=chunk, max_refits=req.max_refits,
                           refit_particles=req.refit_particles, continuation=req.continuation)
-        d = jsonable(report.to_dict())
+        d = jsonable(account(report.to_dict(), cmap))   # a resumed run counts its earlier attempts' time
         d["request"] = req.model_dump()
         plot_atomic(report, problem, png)
         write_atomic(js, json.dumps(d).encode())       # the JSON's presence means "done"

@@ -75,6 +75,9 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     assert (out / "diagnosis.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "missing physics: leak" in r.output and "Screening" in r.output
     assert not (out / ".resume").exists()          # the resume store (on by default) is gone once written
+    rs = d["resume_store"]                          # a first attempt: everything simulated, nothing earlier
+    assert rs["parts_read"] == 0 and rs["parts_simulated"] > 0 and rs["earlier_attempts"] == 0
+    assert d["wall_s"] == rs["this_attempt_wall_s"]
 
 
 def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypatch):
@@ -119,5 +122,6 @@ def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it
     assert len(list((out / ".resume").rglob("*.pkl"))) == 3
     r = _invoke(args)
     assert "resuming" in r.output and (seen[1].hits, seen[1].misses) == (3, 0)
+    assert seen[1].earlier_attempts == 1                  # the dead attempt's time is on record
     r = _invoke([*args, "--no-resume"])
     assert seen[2] is map                                 # --no-resume: the plain map, no store

@@ -99,6 +99,7 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert rep["n_simulations"] > 0 and rep["base"]["residual_rms"] > 0
     assert set(rep["screening"]) >= {"leak"} and rep["request"]["n_particles"] == 12
     assert rep["wall_s"] <= wall + 1.0
+    assert rep["resume_store"]["earlier_attempts"] == 0 and rep["resume_store"]["parts_simulated"] > 0
     fig = http.get(f"/jobs/{job}/diagnosis/figure", headers=auth("alice"))
     assert fig.status_code == 200 and fig.headers["content-type"] == "image/png"
     assert fig.content[:8] == b"\x89PNG\r\n\x1a\n"
@@ -128,3 +129,4 @@ def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatc
     assert len(list(resume_store(manager, "j1").rglob("*.pkl"))) == 3
     _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
     assert (maps[1].hits, maps[1].misses) == (3, 0)
+    assert maps[1].earlier_attempts == 1                  # the dead attempt's time is on record

@@ -6,7 +6,7 @@ import threading
 import numpy as np
 import pytest
 
-from vfcore.inference.memo import CachedMap
+from vfcore.inference.memo import CachedMap, account
 from vfcore.inference.problem import Evaluation
 
 CALLS = []
@@ -79,6 +79,55 @@ def test_an_interrupted_run_resumes_from_the_parts_it_finished(tmp_path):
     assert (resumed.hits, resumed.misses) == (3, 2) and CALLS == [4, 4]
     assert _same(out, list(map(_Square(), _parts())))
     assert not list(tmp_path.rglob("*.tmp"))             # nothing half-written is left
+
+
+class _Slow(_Square):
+    """_Square that takes ``delay`` seconds a part."""
+
+    def __init__(self, delay):
+        super().__init__()
+        self.delay = delay
+
+    def __call__(self, rows):
+        import time
+        time.sleep(self.delay)
+        return super().__call__(rows)
+
+
+def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path):
+    import time
+
+    class Killed(Exception):
+        pass
+
+    def dies_after(k):
+        def inner(fn, parts):
+            for i, part in enumerate(parts):
+                if i == k:
+                    raise Killed
+                yield fn(part)
+        return inner
+
+    fn = _Slow(0.05)
+    t0 = time.perf_counter()
+    with pytest.raises(Killed):
+        CachedMap(dies_after(3), tmp_path)(fn, _parts())
+    first = time.perf_counter() - t0
+    # the first attempt is counted up to its third stored part: 3 parts of 0.05 s at least, and
+    # no more than the attempt lasted
+    second = CachedMap(map, tmp_path)
+    assert second.earlier_attempts == 1 and 0.15 <= second.earlier_wall_s <= first
+    t1 = time.perf_counter()
+    second(fn, _parts())
+    rep = account({"wall_s": time.perf_counter() - t1}, second)
+    assert rep["resume_store"]["parts_read"] == 3 and rep["resume_store"]["parts_simulated"] == 2
+    assert rep["wall_s"] == pytest.approx(rep["resume_store"]["this_attempt_wall_s"] + second.earlier_wall_s)
+    assert 0.25 <= rep["wall_s"] <= time.perf_counter() - t0
+    # a third attempt sees both; an unreadable record counts 0 s and breaks nothing
+    (second.root / "attempts" / "zz-broken.json").write_text("{not json")
+    third = CachedMap(map, tmp_path)
+    assert third.earlier_attempts == 3 and third.earlier_wall_s >= 0.25
+    assert account({"wall_s": 1.0}, None) == {"wall_s": 1.0}      # no store: unchanged
 
 
 def test_an_unreadable_entry_is_simulated_again_and_an_unpicklable_function_runs_uncached(tmp_path):

@@ -19,14 +19,23 @@ Entries live under ``root/<code fingerprint>/`` (:func:`code_fingerprint`: the `
 and the numerical libraries' versions), so a store left by other code is never read. The store is
 for resuming one piece of work; it is not an archive. Delete it when that work is done. Entries
 are pickles: keep a store where only its owner can write (as the service's data directory).
+
+Cost of a resumed run. Each ``CachedMap`` also keeps an attempt record under ``attempts/`` (its
+start and the seconds from its start to its latest stored part, rewritten as each part is
+stored), so the run that finishes can report the wall time of the attempts before it
+(:meth:`CachedMap.resume_summary`, :func:`account`). An attempt that was killed is counted up to
+its last stored part: the part it was computing when it died, whose result was lost, is not.
 """
 from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import os
 import pickle
 import tempfile
+import time
+import uuid
 from pathlib import Path
 from typing import Callable
 
@@ -89,7 +98,8 @@ class CachedMap:
 
     ``hits`` and ``misses`` count parts read back and parts simulated; ``uncached`` counts parts
     run without the store: their batch function could not be pickled, or a part of the call was
-    not a numeric array.
+    not a numeric array. ``earlier_attempts`` and ``earlier_wall_s``: the attempts on this store
+    before this one and their wall time, each up to its last stored part (module docstring).
     """
 
     def __init__(self, inner: Callable = map, root: str | os.PathLike = ".vfcache"):
@@ -97,6 +107,41 @@ class CachedMap:
         self.root = Path(root) / code_fingerprint()[:16]
         self.root.mkdir(parents=True, exist_ok=True)
         self.hits = self.misses = self.uncached = 0
+        self._stored = 0
+        runs = self.root / "attempts"
+        runs.mkdir(exist_ok=True)
+        earlier = [self._read_attempt(f) for f in sorted(runs.glob("*.json"))]
+        self.earlier_attempts = len(earlier)
+        self.earlier_wall_s = float(sum(earlier))
+        self._t0 = time.perf_counter()
+        self._started = time.time()
+        self._attempt = runs / f"{time.strftime('%Y%m%dT%H%M%S', time.gmtime(self._started))}-{uuid.uuid4().hex[:8]}.json"
+        self._note_attempt()
+
+    @staticmethod
+    def _read_attempt(path: Path) -> float:
+        try:
+            return max(0.0, float(json.loads(path.read_text())["elapsed_s"]))
+        except (OSError, ValueError, KeyError, TypeError):   # unreadable record: counted as 0 s
+            return 0.0
+
+    def _note_attempt(self) -> None:
+        rec = {"started_unix": self._started, "elapsed_s": time.perf_counter() - self._t0,
+               "parts_stored": self._stored}
+        fd, tmp = tempfile.mkstemp(dir=self._attempt.parent, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "w") as f:
+                json.dump(rec, f)
+            os.replace(tmp, self._attempt)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    def resume_summary(self) -> dict:
+        """What the store contributed to this run: parts read back, simulated and uncached, the
+        attempts before this one and their wall time (each up to its last stored part)."""
+        return {"parts_read": self.hits, "parts_simulated": self.misses, "parts_uncached": self.uncached,
+                "earlier_attempts": self.earlier_attempts, "earlier_wall_s": self.earlier_wall_s}
 
     def _path(self, key: str) -> Path:
         return self.root / key[:2] / f"{key}.pkl"
@@ -146,7 +191,22 @@ class CachedMap:
                 self._store(keys[i], value)
                 out[i] = value
                 n += 1
+                self._stored += 1
+                self._note_attempt()
             if n != len(todo):
                 raise RuntimeError(f"the inner map returned {n} results for {len(todo)} parts; "
                                    "CachedMap needs a map that gives one result per part")
         return out
+
+
+def account(report: dict, store: "CachedMap | None") -> dict:
+    """Add the resume store's summary to a diagnosis report dict (``report["resume_store"]``) and
+    count the earlier attempts' wall time into ``report["wall_s"]`` (this attempt's alone is kept
+    as ``resume_store["this_attempt_wall_s"]``). A run without a store is returned unchanged."""
+    if store is None:
+        return report
+    s = store.resume_summary()
+    s["this_attempt_wall_s"] = float(report.get("wall_s", 0.0))
+    report["resume_store"] = s
+    report["wall_s"] = s["this_attempt_wall_s"] + s["earlier_wall_s"]
+    return report
