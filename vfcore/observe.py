@@ -73,22 +73,43 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int, search: str = "win
 ALIGNMENTS = ("profile", "xcorr")
 
 
+#: conjugate spectra of zero-stuffed templates, by (oversample, FFT length, template bytes): one
+#: observation is aligned against thousands of waveforms of the same length
+_TEMPLATE_SPECTRA: dict = {}
+
+
 def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.ndarray:
     """``-sum_i (hr[j + q i] - tmpl[i])^2`` for every fine lag ``j = 0..j_max``, as
-    ``-(S2(j) - 2 C(j) + |tmpl|^2)``: per residue ``r = j mod q`` the cross term is one
-    ``np.correlate`` of the decimated record ``hr[r::q]`` with the template and the windowed
-    energy ``S2`` a difference of cumulative sums. Equal to the direct sum to ~1e-11 relative
-    (cancellation in ``S2 - 2C``), 5x faster than gathering every window."""
+    ``-(S2(j) - 2 C(j) + |tmpl|^2)``. The cross term ``C`` is one FFT correlation of the record
+    with the template stuffed with ``q - 1`` zeros between samples (the template's spectrum is
+    cached: the same observation meets every simulation); the windowed energy ``S2`` is a
+    difference of running sums taken per residue ``j mod q`` (one cumulative sum over the record
+    folded into rows of ``q``). Equal to the direct sum to ~1e-11 relative (cancellation in
+    ``S2 - 2C``); 1.7-1.9x faster than ``q`` direct correlations of the decimated record (stop 31,
+    400 frames, 200 lags of 10 fine steps), which were 5x faster than gathering every window."""
+    from scipy import fft as sfft
     n = tmpl.size
-    cs = np.empty(j_max + 1)
-    o2 = float(tmpl @ tmpl)
-    for r in range(min(q, j_max + 1)):
-        kmax = (j_max - r) // q
-        x = hr[r::q][: kmax + n]
-        c = np.correlate(x, tmpl, "valid")
-        e = np.concatenate([[0.0], np.cumsum(x * x)])
-        cs[r::q] = -(e[n:n + kmax + 1] - e[: kmax + 1] - 2.0 * c + o2)
-    return cs
+    span = j_max + q * (n - 1) + 1                     # the samples any window reads
+    if hr.size < span:
+        raise ValueError(f"record of {hr.size} samples is too short for lags up to {j_max} of a {n}-frame window")
+    x = hr[:span]
+    nfft = sfft.next_fast_len(span, real=True)        # circular wrap cannot reach lags <= j_max
+    key = (q, nfft, tmpl.tobytes())
+    spec = _TEMPLATE_SPECTRA.get(key)
+    if spec is None:
+        u = np.zeros(q * (n - 1) + 1)
+        u[::q] = tmpl
+        spec = np.conj(sfft.rfft(u, nfft))
+        if len(_TEMPLATE_SPECTRA) >= 8:
+            _TEMPLATE_SPECTRA.clear()
+        _TEMPLATE_SPECTRA[key] = spec
+    c = sfft.irfft(sfft.rfft(x, nfft) * spec, nfft)[: j_max + 1]
+    rows = -(-span // q)
+    y = np.zeros(rows * q)
+    y[:span] = x * x
+    e = np.concatenate([np.zeros(q), np.cumsum(y.reshape(rows, q), axis=0).ravel()])  # e[k q + r]: sum of y[k' q + r], k' < k
+    s2 = e[q * n: q * n + j_max + 1] - e[: j_max + 1]
+    return -(s2 - 2.0 * c + float(tmpl @ tmpl))
 
 
 def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,

@@ -102,6 +102,21 @@ def test_profile_scores_equal_the_direct_sum_at_every_fine_lag():
     assert int(np.argmax(fast)) == int(np.argmax(direct)) == 237
 
 
+def test_profile_scores_keep_each_template_apart_and_refuse_a_short_record():
+    """The template's spectrum is cached (stop 31): interleaving two templates of the same length,
+    and another oversampling, still gives each its own direct sum; a record too short for the
+    lags asked is an error, not a wrapped correlation."""
+    from vfcore.observe import _profile_scores
+    rng = np.random.default_rng(2)
+    hr = rng.standard_normal(5000)
+    n, j_max = 200, 300
+    for q, t in [(10, rng.standard_normal(n)), (10, rng.standard_normal(n)), (7, rng.standard_normal(n))] * 2:
+        direct = -np.array([np.sum((hr[j + q * np.arange(n)] - t) ** 2) for j in range(j_max + 1)])
+        assert np.max(np.abs(_profile_scores(hr, t, q, j_max) - direct)) < 1e-9 * np.max(np.abs(direct))
+    with pytest.raises(ValueError, match="too short"):
+        _profile_scores(hr[:10 * (n - 1) + j_max], rng.standard_normal(n), 10, j_max)
+
+
 def test_window_search_finds_a_recording_deep_in_a_drifting_simulation():
     """Stop 25. A vibration still drifting across the kept window (its amplitude doubles
     over 600 frames), recorded from frame 137.4 on: the 1.5-period search (lags <= 48 frames)
