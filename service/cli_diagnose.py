@@ -30,6 +30,31 @@ def _f(x, fmt: str = ".4g") -> str:
     return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
 
 
+def stage_line(ev: dict) -> str:
+    """One line for a progress event of :mod:`vfcore.diagnose.progress`."""
+    where = ev["stage"] + (f" {ev['step']}/{ev['steps']}" if ev.get("step") and ev.get("steps") else "")
+    what = f": {ev['entry']}" if ev.get("entry") else ""
+    m, sec = divmod(int(ev["elapsed_s"]), 60)
+    return f"{m:3d}:{sec:02d}  {where}{what} · {ev['simulations']:,} simulations"
+
+
+class StageReporter:
+    """The command's progress: a line at each new stage, and a status line that follows the
+    simulations (shown on a terminal only)."""
+
+    def __init__(self, status=None):
+        self.status = status
+        self.last = None
+
+    def __call__(self, ev: dict) -> None:
+        key = (ev["stage"], ev.get("entry"))
+        if key != self.last:
+            self.last = key
+            console.print(stage_line(ev), highlight=False)
+        if self.status is not None:
+            self.status.update(stage_line(ev))
+
+
 def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
                   duration: float, discard: float, sigma_e: float, noise: str = "fixed"):
     """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line."""
@@ -184,17 +209,18 @@ def diagnose_cmd(
         if store.exists():
             console.print(f"resuming: reading finished simulations back from {store}")
     try:
-        kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
-                  seed=seed, continuation=continuation)
-        if workers == 1:
-            cmap = CachedMap(map, store) if resume else None
-            report = diagnose(problem, map=cmap or map, **kw)
-        else:
-            from concurrent.futures import ProcessPoolExecutor
-            chunk = max(1, math.ceil(particles / (2 * workers)))
-            with ProcessPoolExecutor(workers) as pool:
-                cmap = CachedMap(pool.map, store) if resume else None
-                report = diagnose(problem, map=cmap or pool.map, chunk_size=chunk, **kw)
+        with console.status("starting", spinner="dots") as status:
+            kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
+                      seed=seed, continuation=continuation, progress=StageReporter(status))
+            if workers == 1:
+                cmap = CachedMap(map, store) if resume else None
+                report = diagnose(problem, map=cmap or map, **kw)
+            else:
+                from concurrent.futures import ProcessPoolExecutor
+                chunk = max(1, math.ceil(particles / (2 * workers)))
+                with ProcessPoolExecutor(workers) as pool:
+                    cmap = CachedMap(pool.map, store) if resume else None
+                    report = diagnose(problem, map=cmap or pool.map, chunk_size=chunk, **kw)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)
         raise typer.Exit(1) from None

@@ -121,6 +121,7 @@ class _Registry:
     def __init__(self):
         self.lock = threading.Lock()
         self.running: dict[str, threading.Thread] = {}
+        self.progress: dict[str, dict] = {}     # job id -> latest vfcore.diagnose.progress event
 
 
 def _registry(request: Request) -> _Registry:
@@ -172,6 +173,9 @@ class DiagnosisStatus(BaseModel):
     state: str
     error: str | None = None
     report: dict | None = None
+    progress: dict | None = Field(default=None, description=(
+        "while running: the stage, the catalogue entry, its place (step of steps), the simulations "
+        "evaluated so far and the seconds elapsed (vfcore.diagnose.progress)"))
 
 
 # ------------------------------------------------------------------------------------ worker
@@ -191,9 +195,13 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         client = manager.client
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
         cmap = CachedMap(dask_map(client), store)
+
+        def progress(ev: dict) -> None:
+            reg.progress[job_id] = jsonable(ev)
+
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
                           map=cmap, chunk_size=chunk, max_refits=req.max_refits,
-                          refit_particles=req.refit_particles, continuation=req.continuation)
+                          refit_particles=req.refit_particles, continuation=req.continuation, progress=progress)
         d = jsonable(account(report.to_dict(), cmap))   # a resumed run counts its earlier attempts' time
         d["request"] = req.model_dump()
         plot_atomic(report, problem, png)
@@ -208,6 +216,7 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
     finally:
         with reg.lock:
             reg.running.pop(job_id, None)
+            reg.progress.pop(job_id, None)
 
 
 # ------------------------------------------------------------------------------------ routes
@@ -243,7 +252,7 @@ def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request:
     reg = _registry(request)
     with reg.lock:
         if jid in reg.running:
-            return DiagnosisStatus(state="running")
+            return DiagnosisStatus(state="running", progress=reg.progress.get(jid))
     js, _, err = _paths(manager, jid)
     if js.exists():
         return DiagnosisStatus(state="done", report=json.loads(js.read_text()))

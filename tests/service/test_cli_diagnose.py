@@ -74,6 +74,10 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     assert d["n_simulations"] > 0
     assert (out / "diagnosis.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "missing physics: leak" in r.output and "Screening" in r.output
+    import re
+    stages = [m.group(1) for m in re.finditer(r"^\s*\d+:\d\d  (.+?) · [\d,]+ simulations$", r.output, re.M)]
+    assert stages[:4] == ["base fit", "regularity check", "screening", "refit 1/1: leak"], stages   # progress lines
+    assert stages[-1] == "done"
     assert not (out / ".resume").exists()          # the resume store (on by default) is gone once written
     rs = d["resume_store"]                          # a first attempt: everything simulated, nothing earlier
     assert rs["parts_read"] == 0 and rs["parts_simulated"] > 0 and rs["earlier_attempts"] == 0

@@ -12,7 +12,7 @@ from svc_helpers import auth, dying_diagnosis, toy_spec, wait_done
 FPS = 4000.0
 
 
-def _wait_diagnosis(http, job_id, user, timeout=300.0) -> dict:
+def _wait_diagnosis(http, job_id, user, timeout=300.0, progress: list | None = None) -> dict:
     t0 = time.time()
     while True:
         r = http.get(f"/jobs/{job_id}/diagnosis", headers=auth(user))
@@ -21,6 +21,8 @@ def _wait_diagnosis(http, job_id, user, timeout=300.0) -> dict:
         if d["state"] in ("done", "failed"):
             return d
         assert d["state"] == "running", d
+        if progress is not None and d["progress"] is not None:
+            progress.append(d["progress"])
         if time.time() - t0 > timeout:
             raise TimeoutError(f"diagnosis of {job_id} still running")
         time.sleep(0.25)
@@ -41,7 +43,7 @@ def test_diagnose_rules(service):
     assert r.status_code == 422 and "fe" in r.text, r.text
     # nothing ever started on it
     assert http.get(f"/jobs/{toy}/diagnosis", headers=auth("alice")).json() == \
-        {"state": "none", "error": None, "report": None}
+        {"state": "none", "error": None, "report": None, "progress": None}
     assert http.get(f"/jobs/{toy}/diagnosis/figure", headers=auth("alice")).status_code == 404
     # body validation: unknown / unimplemented candidates are named, ranges enforced, extras refused
     r = http.post(f"/jobs/{toy}/diagnose", json={"candidates": ["leak", "warp_drive"]}, headers=auth("alice"))
@@ -90,9 +92,15 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert http.get(f"/jobs/{job}/diagnosis/figure", headers=auth("alice")).status_code == 404
     assert http.get(f"/jobs/{job}/diagnosis", headers=auth("bob")).status_code == 404
 
-    d = _wait_diagnosis(http, job, "alice")
+    seen = []
+    d = _wait_diagnosis(http, job, "alice", progress=seen)
     wall = time.perf_counter() - t0
     assert d["state"] == "done", d
+    # while it ran, the status told where it was: known stages, simulations only growing
+    from vfcore.diagnose.progress import STAGES
+    assert seen and all(p["stage"] in STAGES for p in seen), seen
+    assert [p["simulations"] for p in seen] == sorted(p["simulations"] for p in seen)
+    assert seen[-1]["simulations"] > 0 and d["progress"] is None
     rep = d["report"]
     assert isinstance(rep["verdict"], str) and rep["verdict"]
     assert rep["winner"] == "leak", rep["verdict"]          # the hidden 1.5 mm^2 leak is found

@@ -178,9 +178,9 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     pb = Problem(y, 2000.0, prior, config=cfg, sigma_e=0.3)
     small = {"n_design": 4, "n_keep": 1, "maxfev0": 6, "maxfev_step": 3}
 
-    def go(mapper):
+    def go(mapper, progress=None):
         rep = diagnose(pb, n_particles=12, refit_particles=10, seed=3, candidates=["scale"], base_runs=1, map=mapper,
-                       continuation=True, continuation_options=small)
+                       continuation=True, continuation_options=small, progress=progress)
         def strip(x):                                    # wall times are the only clock readings
             if isinstance(x, dict):
                 return {k: strip(v) for k, v in x.items() if k != "wall_s"}
@@ -207,10 +207,21 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     with pytest.raises(Killed):
         go(CachedMap(dies, tmp_path / "b"))
     resumed = CachedMap(map, tmp_path / "b")
-    assert go(resumed) == ref
+    events = []
+    assert go(resumed, events.append) == ref             # progress reporting changes nothing
     assert resumed.hits == n // 2 and resumed.misses == n - n // 2
     replay = CachedMap(lambda fn, parts: pytest.fail("simulated on a replay"), tmp_path / "a")
-    assert go(replay) == ref and replay.hits == n
+    with pytest.warns(RuntimeWarning, match="progress callback raised ZeroDivisionError"):
+        assert go(replay, lambda ev: 1 / 0) == ref and replay.hits == n     # a broken display neither
+    # the stages in order, the counts only growing, one report after each of the n parts
+    stages = [(e["stage"], e["entry"], e["step"], e["steps"]) for e in events]
+    assert [s for i, s in enumerate(stages) if i == 0 or s != stages[i - 1]] == [
+        ("base fit", None, None, None), ("regularity check", None, None, None), ("screening", None, None, 1),
+        ("refit", "scale", 1, 1), ("continuation", "base", 0, 1), ("continuation", "scale", 1, 1),
+        ("mode check", "scale", None, None), ("done", None, None, None)]
+    sims = [e["simulations"] for e in events]
+    assert sims == sorted(sims) and sims[-1] >= n and len(set(sims)) == n + 1
+    assert [e["elapsed_s"] for e in events] == sorted(e["elapsed_s"] for e in events)
 
 
 _DIGESTS = r"""

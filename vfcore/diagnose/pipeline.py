@@ -30,6 +30,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -38,6 +39,7 @@ from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
 from .locate import LocateReport, locate, measure_pvalues
+from .progress import ProgressTracker
 from .rank import (NO_FINDING, RankReport, local_passes, null_consistent, prefer_nested, prefer_parsimonious,
                    promote_local, rank_best_of_base, rank_extensions, residual_removed)
 
@@ -375,7 +377,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              rescue_half_width: float = 0.15, rescue_method: str = "reference",
              rescue_inflate: float = 2.0, regularity_check: bool = True,
              best_of_base: bool = True, shared_mode: bool = False, continuation: bool = False,
-             continuation_options: dict | None = None) -> DiagnoseReport:
+             continuation_options: dict | None = None,
+             progress: Callable[[dict], None] | None = None) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     ``refit_forward``: refit every forward-level extension whatever its screening score. Screening
@@ -497,10 +500,17 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     the best material mode any of them found. Off by default: on the three development cases it
     was built for (seed 8 cases 01, 14 and, for the zipper, 18) it changed no verdict to the right
     one, and it cost 10,000-20,000 more simulations a case (docs/diagnose_history.md, stop 27).
+
+    ``progress``: a callback given a dict at each stage and after each batch of simulations (the
+    stage, the entry, its place, the rows evaluated so far, the seconds elapsed;
+    :mod:`.progress`). It only watches: the result is the same with or without it.
     """
     if rescue_method not in ("reference", "box"):
         raise ValueError(f"rescue_method must be 'reference' or 'box', got {rescue_method!r}")
     t0 = time.perf_counter()
+    track = ProgressTracker(progress, t0)
+    if progress is not None:
+        map = track.wrap(map)                              # noqa: A001 - counts rows, changes nothing
     opts = dict(smc_options or {})
     cand = [n for n in (candidates or CATALOGUE) if get(n).implemented]
     notes = []
@@ -508,6 +518,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     tau = 0.0
     refit_n = refit_particles or n_particles
     all_base: list = []
+    track.at("base fit")
     if base is None:
         base, tau, factor, nb, bnotes = base_fit(problem, n_particles=n_particles, base_runs=base_runs, seed=seed,
                                                  map=map, chunk_size=chunk_size, escalate_tau=escalate_tau,
@@ -525,6 +536,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     rough = 0.0
     if regularity_check:
         from .regularity import sensitivity
+        track.at("regularity check")
         sens = sensitivity(problem, _best_particles(base, 1)[0], seed=seed)
         n_sims += sens.n_simulations
         before["regularity"] = sens.to_dict()
@@ -536,6 +548,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                          "the luck of the simulated points (the between-run error measures part of it); the local "
                          "check counts that change as an error of its comparison")
     t1 = time.perf_counter()
+    track.at("screening", steps=len(cand))
     scr = screen(problem, base, cand, seed=seed, map=map, **(screen_options or {}))
     n_sims += sum(int(v["n_simulations"]) for v in scr.values())
     scr["_base"]["wall_s"] = time.perf_counter() - t1
@@ -591,6 +604,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         return prev
     for i, name in enumerate(chosen):
         t1 = time.perf_counter()
+        track.at("refit", name, i + 1, len(chosen))
         post = fit_extended(problem, name, n_particles=refit_n, seed=seed + 101 * (i + 1),
                             map=map, chunk_size=chunk_size, integrate=integrate, **opts)
         refits[name] = post
@@ -615,6 +629,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             if math.isfinite(z1) and z1 >= z0 - max(min_gain, k_se * gap_se):
                 continue
             t1 = time.perf_counter()
+            track.at("rescue", name)
             first_sims = int(refits[name].n_simulations)
             if rescue_method == "box":
                 zb, sb, near = base_near(problem, base, n_particles=refit_n, seed=seed + 262147 + j, map=map,
@@ -648,6 +663,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             lead_post = refits[leader]
             for j, name in enumerate(n for n in chosen if n != leader and n in refits):
                 t1 = time.perf_counter()
+                track.at("shared mode", name)
                 z1 = float(refits[name].log_evidence)
                 zb, sb, near = shared_mode_refit(problem, lead_post, name, n_particles=refit_n,
                                                  seed=seed + 524287 + 31 * j, map=map, chunk_size=chunk_size,
@@ -674,6 +690,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         references (returns the summary, also kept in ``before["mode_checks"]``)."""
         nonlocal n_sims
         t1 = time.perf_counter()
+        track.at("mode check", name)
         zb, sb, near = base_near(problem, refits[name], n_particles=refit_n,
                                  seed=seed + 65537 + len(before.get("mode_checks", {})) + 1, map=map,
                                  chunk_size=chunk_size, **opts)
@@ -728,6 +745,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         from .fit import ExtendedPrior
         from .search import continuation_search, continued_fit
         sd = seed + 1048573
+        entries = [n for n in chosen if n in refits]
+        track.at("continuation", "base", 0, len(entries))
         got = search_base(_best_particles(base, 1), sd, "continuation", copts)
         fb = None
         if got is not None:
@@ -735,8 +754,9 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
             notes.append(f"continuation: the base model searched by window continuation (best log-likelihood "
                          f"{fb.loglik:.1f}, {fb.n_simulations} simulations) and fitted from there: log Z = {zc:.1f} "
                          f"+- {sc:.1f}, residual {sn['residual_rms']:.3f} mm^2")
-        for j, name in enumerate(n for n in chosen if n in refits):
+        for j, name in enumerate(entries):
             t1 = time.perf_counter()
+            track.at("continuation", name, j + 1, len(entries))
             prior_e = ExtendedPrior(bounds={}, base=problem.prior, extension=name, integrate=bool(integrate))
             starts = [th for th in _best_particles(refits[name], 1) if th.size == prior_e.ndim]
             if fb is not None:
@@ -772,6 +792,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                                    by_drop=True):
                 continue
             t1 = time.perf_counter()
+            track.at("nested check", simpler)
             zb, sb, near = base_near(problem, refits[w], n_particles=refit_n, seed=seed + 131071, map=map,
                                      chunk_size=chunk_size, extension=simpler, integrate=integrate, **opts)
             n_sims += int(near.n_simulations)
@@ -857,8 +878,10 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         ranking = nested(ranking, local, rerank)
     ranking = prefer_parsimonious(ranking, parsimony_se)
     notes.extend(ranking.notes)
-    return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
-                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)
+    report = DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
+                            n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)
+    track.at("done")
+    return report
 
 
 def plot_diagnosis(report: DiagnoseReport, problem: Problem, path, level: float = 0.9):

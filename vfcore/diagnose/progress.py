@@ -1,0 +1,85 @@
+"""Progress of a running diagnosis, for the people waiting on it.
+
+A blind diagnosis runs for an hour or more on one core (tens of thousands of forward
+simulations, docs/diagnose.md "Cost"). :func:`vfcore.diagnose.pipeline.diagnose` accepts
+``progress=callback``; the callback receives a dict at each stage and after each batch of
+simulations returns:
+
+- ``stage``: ``"base fit"``, ``"regularity check"``, ``"screening"``, ``"refit"``, ``"rescue"``,
+  ``"shared mode"``, ``"continuation"``, ``"mode check"``, ``"nested check"`` or ``"done"``;
+- ``entry``: the catalogue entry the stage works on (``"base"`` for the base model's
+  continuation search; None where none);
+- ``step`` / ``steps``: the entry's place among the stage's entries (None where not counted);
+- ``simulations``: rows of parameters evaluated through the diagnosis' ``map`` so far (forward
+  simulations, or rows read back from a resume store); screening's few simulations, run in the
+  main process, are not counted;
+- ``elapsed_s``: seconds since the diagnosis started.
+
+The stage sequence depends on the data (rescues, mode checks and the nested check run only when
+their triggers fire), so there is no honest "percent done"; ``step`` of ``steps`` is given where
+the count is known in advance. Reporting never changes a result: the batch function and parts
+reach the inner map unchanged (tests/vfcore/test_diagnose_progress.py). A callback that raises is
+reported once as a warning and then ignored: an hour of simulation is not lost to a display.
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["STAGES", "ProgressTracker"]
+
+STAGES = ("base fit", "regularity check", "screening", "refit", "rescue", "shared mode", "continuation",
+          "mode check", "nested check", "done")
+
+
+class ProgressTracker:
+    """Keeps the current stage and the rows evaluated; calls ``callback`` with the event dict."""
+
+    def __init__(self, callback: Callable[[dict], None] | None, t0: float | None = None):
+        self.callback = callback
+        self.t0 = time.perf_counter() if t0 is None else t0
+        self.stage = "base fit"
+        self.entry: str | None = None
+        self.step: int | None = None
+        self.steps: int | None = None
+        self.simulations = 0
+        self._broken = False
+
+    def event(self) -> dict:
+        return {"stage": self.stage, "entry": self.entry, "step": self.step, "steps": self.steps,
+                "simulations": self.simulations, "elapsed_s": time.perf_counter() - self.t0}
+
+    def emit(self, **extra) -> None:
+        if self.callback is None or self._broken:
+            return
+        try:
+            self.callback({**self.event(), **extra})
+        except Exception as exc:  # noqa: BLE001 - a display must not end a diagnosis
+            self._broken = True
+            warnings.warn(f"the progress callback raised {type(exc).__name__}: {exc}; progress is no longer "
+                          "reported for this diagnosis", RuntimeWarning, stacklevel=2)
+
+    def at(self, stage: str, entry: str | None = None, step: int | None = None, steps: int | None = None) -> None:
+        """Enter ``stage`` (one of :data:`STAGES`) and report it."""
+        if stage not in STAGES:
+            raise ValueError(f"unknown progress stage {stage!r}; known: {STAGES}")
+        self.stage, self.entry, self.step, self.steps = stage, entry, step, steps
+        self.emit()
+
+    def wrap(self, inner: Callable) -> Callable:
+        """A ``map(fn, parts)`` that passes everything to ``inner`` unchanged and reports after each
+        part's result arrives (results in order, one per part, as :func:`map_evaluate` needs)."""
+        def counted(fn, parts):
+            parts = list(parts)
+            out = []
+            for part, result in zip(parts, inner(fn, parts)):
+                out.append(result)
+                self.simulations += int(np.shape(part)[0]) if np.ndim(part) >= 1 else 1
+                self.emit()
+            if len(out) != len(parts):
+                raise RuntimeError(f"the map returned {len(out)} results for {len(parts)} parts")
+            return out
+        return counted
