@@ -150,6 +150,11 @@ def print_report(d: dict) -> None:
     colour = "green" if d.get("winner") else "bold"
     console.print(f"[{colour}]{d['verdict']}[/{colour}]", highlight=False)
     console.print(f"{d['n_simulations']} simulations, wall time {d['wall_s']:.1f} s")
+    by = (d.get("cost") or {}).get("by_stage") or {}
+    if by:
+        console.print("time by stage: " + ", ".join(
+            f"{k} {_f(v.get('wall_s'), '.0f')} s" for k, v in sorted(by.items(), key=lambda kv: -(kv[1].get("wall_s") or 0))),
+            highlight=False)
 
 
 def diagnose_cmd(

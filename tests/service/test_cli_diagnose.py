@@ -78,6 +78,7 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     stages = [m.group(1) for m in re.finditer(r"^\s*\d+:\d\d  (.+?) · [\d,]+ simulations$", r.output, re.M)]
     assert stages[:4] == ["base fit", "regularity check", "screening", "refit 1/1: leak"], stages   # progress lines
     assert stages[-1] == "done"
+    assert "time by stage: " in r.output and set(d["cost"]["by_stage"]) >= {"base fit", "screening", "refit"}
     assert not (out / ".resume").exists()          # the resume store (on by default) is gone once written
     rs = d["resume_store"]                          # a first attempt: everything simulated, nothing earlier
     assert rs["parts_read"] == 0 and rs["parts_simulated"] > 0 and rs["earlier_attempts"] == 0

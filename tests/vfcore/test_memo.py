@@ -222,6 +222,12 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     sims = [e["simulations"] for e in events]
     assert sims == sorted(sims) and sims[-1] >= n and len(set(sims)) == n + 1
     assert [e["elapsed_s"] for e in events] == sorted(e["elapsed_s"] for e in events)
+    # the report's cost: every row evaluated is booked to exactly one stage and one entry
+    cost = json.loads(ref)["cost"]
+    assert set(cost["by_stage"]) == {"base fit", "regularity check", "screening", "refit", "continuation", "mode check"}
+    assert set(cost["by_entry"]) == {"-", "scale", "base"}
+    for book in cost.values():
+        assert sum(v["simulations"] for v in book.values()) == sims[-1]
 
 
 _DIGESTS = r"""

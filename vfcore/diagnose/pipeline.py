@@ -342,6 +342,8 @@ class DiagnoseReport:
     n_simulations: int
     wall_s: float
     notes: list[str] = field(default_factory=list)
+    #: wall time and rows evaluated per stage and per entry (:meth:`.progress.ProgressTracker.cost`)
+    cost: dict = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -361,6 +363,7 @@ class DiagnoseReport:
                               for kk, vv in v.items()} for k, v in self.screening.items()},
             "refits": self.after, "ranking": rows, "reference": self.ranking.reference,
             "n_simulations": self.n_simulations, "wall_s": self.wall_s, "notes": self.notes,
+            "cost": self.cost,
         }
 
 
@@ -509,8 +512,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         raise ValueError(f"rescue_method must be 'reference' or 'box', got {rescue_method!r}")
     t0 = time.perf_counter()
     track = ProgressTracker(progress, t0)
-    if progress is not None:
-        map = track.wrap(map)                              # noqa: A001 - counts rows, changes nothing
+    map = track.wrap(map)                                  # noqa: A001 - counts rows, changes nothing
     opts = dict(smc_options or {})
     cand = [n for n in (candidates or CATALOGUE) if get(n).implemented]
     notes = []
@@ -878,10 +880,9 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         ranking = nested(ranking, local, rerank)
     ranking = prefer_parsimonious(ranking, parsimony_se)
     notes.extend(ranking.notes)
-    report = DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
-                            n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes)
     track.at("done")
-    return report
+    return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
+                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes, cost=track.cost())
 
 
 def plot_diagnosis(report: DiagnoseReport, problem: Problem, path, level: float = 0.9):

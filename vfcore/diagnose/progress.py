@@ -15,6 +15,9 @@ simulations returns:
   main process, are not counted;
 - ``elapsed_s``: seconds since the diagnosis started.
 
+The tracker also keeps where the time went: :meth:`ProgressTracker.cost` gives the wall time and
+the rows evaluated per stage and per entry, which the diagnosis report carries as ``cost``.
+
 The stage sequence depends on the data (rescues, mode checks and the nested check run only when
 their triggers fire), so there is no honest "percent done"; ``step`` of ``steps`` is given where
 the count is known in advance. Reporting never changes a result: the batch function and parts
@@ -47,6 +50,11 @@ class ProgressTracker:
         self.steps: int | None = None
         self.simulations = 0
         self._broken = False
+        self._open = False                  # a stage is being timed
+        self._since = self.t0
+        self._rows_at = 0
+        self._stages: dict[str, dict] = {}
+        self._entries: dict[str, dict] = {}
 
     def event(self) -> dict:
         return {"stage": self.stage, "entry": self.entry, "step": self.step, "steps": self.steps,
@@ -66,8 +74,29 @@ class ProgressTracker:
         """Enter ``stage`` (one of :data:`STAGES`) and report it."""
         if stage not in STAGES:
             raise ValueError(f"unknown progress stage {stage!r}; known: {STAGES}")
+        self._close()
         self.stage, self.entry, self.step, self.steps = stage, entry, step, steps
+        self._open = stage != "done"
         self.emit()
+
+    def _close(self) -> None:
+        now = time.perf_counter()
+        if self._open:
+            rows = self.simulations - self._rows_at
+            for book, key in ((self._stages, self.stage), (self._entries, self.entry or "-")):
+                d = book.setdefault(key, {"wall_s": 0.0, "simulations": 0, "visits": 0})
+                d["wall_s"] += now - self._since
+                d["simulations"] += rows
+                d["visits"] += 1
+        self._since, self._rows_at = now, self.simulations
+
+    def cost(self) -> dict:
+        """``{"by_stage": {stage: {"wall_s", "simulations", "visits"}}, "by_entry": {entry: ...}}``
+        for the stages closed so far (``"-"``: stages without an entry; ``"base"``: the base
+        model's continuation search). Rows counted as in the events; screening's own few
+        simulations are in its wall time, not its count."""
+        return {"by_stage": {k: dict(v) for k, v in self._stages.items()},
+                "by_entry": {k: dict(v) for k, v in self._entries.items()}}
 
     def wrap(self, inner: Callable) -> Callable:
         """A ``map(fn, parts)`` that passes everything to ``inner`` unchanged and reports after each
