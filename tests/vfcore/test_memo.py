@@ -59,18 +59,21 @@ def test_a_store_left_by_other_code_is_not_read(tmp_path, monkeypatch):
     assert (other.hits, other.misses) == (0, 5)
 
 
+class Killed(Exception):
+    """A worker that died."""
+
+
+def dies_after(k):
+    """A map whose worker dies before its ``k``-th part."""
+    def inner(fn, parts):
+        for i, part in enumerate(parts):
+            if i == k:
+                raise Killed
+            yield fn(part)
+    return inner
+
+
 def test_an_interrupted_run_resumes_from_the_parts_it_finished(tmp_path):
-    class Killed(Exception):
-        pass
-
-    def dies_after(k):
-        def inner(fn, parts):
-            for i, part in enumerate(parts):
-                if i == k:
-                    raise Killed
-                yield fn(part)
-        return inner
-
     with pytest.raises(Killed):
         CachedMap(dies_after(3), tmp_path)(_Square(), _parts())
     resumed = CachedMap(map, tmp_path)
@@ -96,17 +99,6 @@ class _Slow(_Square):
 
 def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path):
     import time
-
-    class Killed(Exception):
-        pass
-
-    def dies_after(k):
-        def inner(fn, parts):
-            for i, part in enumerate(parts):
-                if i == k:
-                    raise Killed
-                yield fn(part)
-        return inner
 
     fn = _Slow(0.05)
     t0 = time.perf_counter()
