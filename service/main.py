@@ -27,9 +27,11 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
         manager = JobManager(s, db, cl)
         app.state.settings, app.state.manager = s, manager
         manager.start()
+        diagnose.on_startup(app, manager)          # interrupted diagnoses go on
         try:
             yield
         finally:
+            diagnose.on_shutdown(app)
             await asyncio.to_thread(manager.stop)
             db.close()
             if own:

@@ -7,6 +7,13 @@ Ownership rules are those of the other job endpoints (another user's job answers
 result lies next to the job's store (``<id>.diagnosis.json`` / ``.png``; a failure leaves
 ``<id>.diagnosis.error``), each written to a temporary file and renamed, so a half-written result
 is never served.  One diagnosis per job at a time.
+
+A diagnosis outlives a restart of the service: its request is kept in
+``<id>.diagnosis.request.json`` until it ends, and at the next start (:func:`on_startup`) every
+diagnosis that a shutdown or a crash interrupted is started again with the same request, reading
+its finished simulations back from ``<id>.diagnosis.resume`` (at most ``MAX_AUTO_RESUMES`` times,
+so a diagnosis that brings the service down cannot do so forever).  A diagnosis that fails on its
+own is recorded as failed and is not started again.
 """
 from __future__ import annotations
 
@@ -122,6 +129,7 @@ class _Registry:
         self.lock = threading.Lock()
         self.running: dict[str, threading.Thread] = {}
         self.progress: dict[str, dict] = {}     # job id -> latest vfcore.diagnose.progress event
+        self.stopping = threading.Event()        # set at shutdown: failures from then on are interruptions
 
 
 def _registry(request: Request) -> _Registry:
@@ -131,6 +139,14 @@ def _registry(request: Request) -> _Registry:
         if reg is None:
             reg = st.diagnoses = _Registry()
     return reg
+
+
+#: automatic restarts of one interrupted diagnosis before it is recorded as failed
+MAX_AUTO_RESUMES = 3
+
+
+def _request_path(manager, job_id: str) -> Path:
+    return manager.store_path(job_id).parent / f"{job_id}.diagnosis.request.json"
 
 
 def _paths(manager, job_id: str) -> tuple[Path, Path, Path]:
@@ -207,16 +223,89 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         plot_atomic(report, problem, png)
         write_atomic(js, json.dumps(d).encode())       # the JSON's presence means "done"
         shutil.rmtree(store, ignore_errors=True)
+        _request_path(manager, job_id).unlink(missing_ok=True)
     except BaseException as exc:  # noqa: BLE001 - recorded as the diagnosis' failure
+        if reg.stopping.is_set():     # the service is going down: resumed at its next start
+            log.warning("diagnosis of job %s interrupted by the shutdown (%s: %s); it resumes at the next start",
+                        job_id, type(exc).__name__, exc)
+            return
         log.exception("diagnosis of job %s failed", job_id)
         try:
             write_atomic(err, f"{type(exc).__name__}: {exc}"[:4000].encode())
         except OSError:
             pass
+        _request_path(manager, job_id).unlink(missing_ok=True)
     finally:
         with reg.lock:
             reg.running.pop(job_id, None)
             reg.progress.pop(job_id, None)
+
+
+def _launch(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseRequest, resumes: int = 0) -> None:
+    """Keep the request on disk, then start the diagnosis thread (the caller holds ``reg.lock``)."""
+    write_atomic(_request_path(manager, job_id),
+                 json.dumps({"request": req.model_dump(), "resumes": int(resumes)}).encode())
+    t = threading.Thread(target=_run, args=(manager, reg, job_id, spec, req), name=f"vfinfer-diagnose-{job_id[:8]}",
+                         daemon=True)
+    reg.running[job_id] = t
+    t.start()
+
+
+def resume_pending(manager, reg: _Registry) -> list[str]:
+    """Start again every diagnosis whose request is on disk without a result (a shutdown or a crash
+    interrupted it); returns their job ids. A request for a job that is gone, or no longer done, is
+    dropped with its store; one interrupted ``MAX_AUTO_RESUMES`` times is recorded as failed."""
+    started = []
+    for f in sorted(_paths(manager, "0" * 32)[0].parent.glob("*.diagnosis.request.json")):
+        jid = f.name.split(".", 1)[0]
+        if len(jid) != 32 or any(c not in "0123456789abcdef" for c in jid):
+            continue                                     # not a name this service writes
+        js, _, err = _paths(manager, jid)
+        try:
+            saved = json.loads(f.read_text())
+            req = DiagnoseRequest.model_validate(saved["request"])
+            resumes = int(saved.get("resumes", 0))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            log.warning("dropping the unreadable diagnosis request %s (%s)", f.name, exc)
+            f.unlink(missing_ok=True)
+            continue
+        rec = manager.db.get(jid)
+        if rec is None or rec["state"] != "done" or js.exists():
+            f.unlink(missing_ok=True)
+            if rec is None:
+                shutil.rmtree(resume_store(manager, jid), ignore_errors=True)
+            continue
+        if resumes >= MAX_AUTO_RESUMES:
+            write_atomic(err, (f"InterruptedError: the diagnosis was interrupted {resumes + 1} times by a stop of "
+                               f"the service and is not started again automatically; POST /jobs/{jid}/diagnose "
+                               "again to go on from its finished simulations").encode())
+            f.unlink(missing_ok=True)
+            continue
+        with reg.lock:
+            if jid in reg.running:
+                continue
+            err.unlink(missing_ok=True)
+            _launch(manager, reg, jid, JobSpec.from_json(rec["spec"]), req, resumes + 1)
+        started.append(jid)
+    if started:
+        log.info("resuming %d interrupted diagnosis(es)", len(started))
+    return started
+
+
+def on_startup(app, manager) -> list[str]:
+    """The app's diagnosis registry, and the interrupted diagnoses started again (lifespan)."""
+    with _REG_LOCK:
+        reg = getattr(app.state, "diagnoses", None)
+        if reg is None:
+            reg = app.state.diagnoses = _Registry()
+    return resume_pending(manager, reg)
+
+
+def on_shutdown(app) -> None:
+    """From now on a diagnosis that fails was interrupted: it resumes at the next start."""
+    reg = getattr(app.state, "diagnoses", None)
+    if reg is not None:
+        reg.stopping.set()
 
 
 # ------------------------------------------------------------------------------------ routes
@@ -238,10 +327,7 @@ def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reques
         js, png, err = _paths(manager, jid)
         for p in (js, png, err):        # a new diagnosis replaces the previous result
             p.unlink(missing_ok=True)
-        t = threading.Thread(target=_run, args=(manager, reg, jid, spec, req), name=f"vfinfer-diagnose-{jid[:8]}",
-                             daemon=True)
-        reg.running[jid] = t
-        t.start()
+        _launch(manager, reg, jid, spec, req)
     return DiagnoseStarted(id=jid, state="running", status_url=f"/jobs/{jid}/diagnosis")
 
 

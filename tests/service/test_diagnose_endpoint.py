@@ -138,3 +138,106 @@ def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatc
     _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
     assert (maps[1].hits, maps[1].misses) == (3, 0)
     assert maps[1].earlier_attempts == 1                  # the dead attempt's time is on record
+
+
+def httpx_client(srv):
+    import httpx
+    return httpx.Client(base_url=srv.url, timeout=60)
+
+
+def _done_fe_job(settings, owner: str = "alice") -> str:
+    """A finished finite-element job put straight into the job table (its diagnosis is replaced
+    by a stand-in in the tests that use it, so nothing of it is simulated)."""
+    import json
+
+    from service.db import JobDB
+    from service.manager import new_job_id
+    t = np.arange(800) / FPS
+    areas = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0) + 0.5
+    spec = {"model": "fe", "gaw": {"areas": [float(a) for a in areas], "fps": FPS, "units": "mm2"},
+            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
+            "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1, "mesh": "coarse",
+            "dt": 1e-4, "duration": 0.35, "discard": 0.15}
+    settings.stores_dir.mkdir(parents=True, exist_ok=True)
+    db = JobDB(settings.db_path)
+    jid = new_job_id()
+    db.insert(jid, owner, json.dumps(spec), 16)
+    db.update(jid, state="done")
+    db.close()
+    return jid
+
+
+def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, dask_client, monkeypatch):
+    """The service stops while a diagnosis runs (its cluster calls then fail): the failure is not
+    recorded, the request stays on disk, and the next start of the service runs the same request
+    again; a failure of its own is then recorded, and the request is gone (no third start)."""
+    import threading
+
+    import vfcore.diagnose.pipeline as P
+    from service.main import create_app
+    from svc_helpers import ServerThread
+
+    jid = _done_fe_job(settings)
+    body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 6, "max_refits": 2,
+            "continuation": False, "seed": 5}
+    gate, entered, calls = threading.Event(), threading.Event(), []
+
+    def first(problem, *, map, **kw):          # runs until the service stops, then loses its cluster
+        calls.append(kw)
+        entered.set()
+        gate.wait(30)
+        raise OSError("connection to the scheduler lost")
+
+    monkeypatch.setattr(P, "diagnose", first)
+    request_file = settings.stores_dir / f"{jid}.diagnosis.request.json"
+    with ServerThread(create_app(settings, client=dask_client)) as srv:
+        with httpx_client(srv) as http:
+            assert http.post(f"/jobs/{jid}/diagnose", json=body, headers=auth("alice")).status_code == 202
+            assert entered.wait(30)
+            assert http.get(f"/jobs/{jid}/diagnosis", headers=auth("alice")).json()["state"] == "running"
+            assert request_file.exists()
+    gate.set()                                  # the shutdown has happened: now the thread fails
+    for t in threading.enumerate():
+        if t.name.startswith(f"vfinfer-diagnose-{jid[:8]}"):
+            t.join(30)
+    assert request_file.exists() and not (settings.stores_dir / f"{jid}.diagnosis.error").exists()
+
+    def second(problem, *, map, **kw):
+        calls.append(kw)
+        raise RuntimeError("a failure of its own")
+
+    monkeypatch.setattr(P, "diagnose", second)
+    with ServerThread(create_app(settings, client=dask_client)) as srv:
+        with httpx_client(srv) as http:
+            d = _wait_diagnosis(http, jid, "alice", timeout=60)
+    assert d["state"] == "failed" and "a failure of its own" in d["error"], d
+    assert len(calls) == 2 and calls[1]["candidates"] == ["leak", "scale"]
+    assert {k: calls[1][k] for k in ("n_particles", "refit_particles", "max_refits", "continuation", "seed")} == \
+        {"n_particles": 14, "refit_particles": 6, "max_refits": 2, "continuation": False, "seed": 5}
+    assert not request_file.exists()
+
+
+def test_resume_pending_drops_what_it_cannot_run_and_gives_up_after_repeated_stops(settings, monkeypatch):
+    """A request whose job is gone is dropped with its store; one interrupted MAX_AUTO_RESUMES times
+    becomes a failure saying how to go on; an unreadable one is dropped; none of them starts."""
+    import json
+    from types import SimpleNamespace
+
+    from service.db import JobDB
+    from service.routers.diagnose import MAX_AUTO_RESUMES, _Registry, resume_pending
+
+    jid = _done_fe_job(settings)
+    gone = "ab" * 16
+    d = settings.stores_dir
+    (d / f"{gone}.diagnosis.request.json").write_text(json.dumps({"request": {}, "resumes": 0}))
+    (d / f"{gone}.diagnosis.resume").mkdir()
+    (d / f"{jid}.diagnosis.request.json").write_text(json.dumps({"request": {}, "resumes": MAX_AUTO_RESUMES}))
+    (d / f"{'cd' * 16}.diagnosis.request.json").write_text("{broken")
+    db = JobDB(settings.db_path)
+    manager = SimpleNamespace(store_path=lambda j: d / f"{j}.zarr", db=db, client=None)
+    reg = _Registry()
+    assert resume_pending(manager, reg) == [] and not reg.running
+    db.close()
+    assert not list(d.glob("*.diagnosis.request.json")) and not (d / f"{gone}.diagnosis.resume").exists()
+    err = (d / f"{jid}.diagnosis.error").read_text()
+    assert f"interrupted {MAX_AUTO_RESUMES + 1} times" in err and f"POST /jobs/{jid}/diagnose" in err
