@@ -130,6 +130,23 @@ class _Registry:
         self.running: dict[str, threading.Thread] = {}
         self.progress: dict[str, dict] = {}     # job id -> latest vfcore.diagnose.progress event
         self.stopping = threading.Event()        # set at shutdown: failures from then on are interruptions
+        self.cancel: dict[str, threading.Event] = {}   # job id -> set by DELETE /jobs/{id}/diagnosis
+
+
+class DiagnosisCancelled(Exception):
+    """Raised inside a running diagnosis at its next batch of simulations once it is cancelled."""
+
+
+def cancellable(inner, event: threading.Event):
+    """``map`` that refuses to start, or to return, a batch once ``event`` is set."""
+    def _map(fn, parts):
+        if event.is_set():
+            raise DiagnosisCancelled("cancelled")
+        out = list(inner(fn, parts))
+        if event.is_set():
+            raise DiagnosisCancelled("cancelled")
+        return out
+    return _map
 
 
 def _registry(request: Request) -> _Registry:
@@ -147,6 +164,10 @@ MAX_AUTO_RESUMES = 3
 
 def _request_path(manager, job_id: str) -> Path:
     return manager.store_path(job_id).parent / f"{job_id}.diagnosis.request.json"
+
+
+def _cancelled_path(manager, job_id: str) -> Path:
+    return manager.store_path(job_id).parent / f"{job_id}.diagnosis.cancelled"
 
 
 def _paths(manager, job_id: str) -> tuple[Path, Path, Path]:
@@ -186,7 +207,7 @@ class DiagnoseStarted(BaseModel):
 
 
 class DiagnosisStatus(BaseModel):
-    state: str
+    state: str = Field(description='"none", "running", "done", "failed" or "cancelled"')
     error: str | None = None
     report: dict | None = None
     progress: dict | None = Field(default=None, description=(
@@ -211,18 +232,25 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         client = manager.client
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
         cmap = CachedMap(dask_map(client), store)
+        with reg.lock:
+            stop = reg.cancel.setdefault(job_id, threading.Event())
 
         def progress(ev: dict) -> None:
             reg.progress[job_id] = jsonable(ev)
 
         report = diagnose(problem, candidates=req.candidates, n_particles=req.n_particles, seed=req.seed,
-                          map=cmap, chunk_size=chunk, max_refits=req.max_refits,
+                          map=cancellable(cmap, stop), chunk_size=chunk, max_refits=req.max_refits,
                           refit_particles=req.refit_particles, continuation=req.continuation, progress=progress)
         d = jsonable(account(report.to_dict(), cmap))   # a resumed run counts its earlier attempts' time
         d["request"] = req.model_dump()
         plot_atomic(report, problem, png)
         write_atomic(js, json.dumps(d).encode())       # the JSON's presence means "done"
         shutil.rmtree(store, ignore_errors=True)
+        _request_path(manager, job_id).unlink(missing_ok=True)
+    except DiagnosisCancelled:
+        log.info("diagnosis of job %s cancelled", job_id)
+        shutil.rmtree(store, ignore_errors=True)
+        write_atomic(_cancelled_path(manager, job_id), b"cancelled by DELETE /jobs/{id}/diagnosis")
         _request_path(manager, job_id).unlink(missing_ok=True)
     except BaseException as exc:  # noqa: BLE001 - recorded as the diagnosis' failure
         if reg.stopping.is_set():     # the service is going down: resumed at its next start
@@ -239,6 +267,7 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         with reg.lock:
             reg.running.pop(job_id, None)
             reg.progress.pop(job_id, None)
+            reg.cancel.pop(job_id, None)
 
 
 def _launch(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseRequest, resumes: int = 0) -> None:
@@ -325,7 +354,7 @@ def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reques
         if jid in reg.running:
             raise HTTPException(status.HTTP_409_CONFLICT, "a diagnosis of this job is already running")
         js, png, err = _paths(manager, jid)
-        for p in (js, png, err):        # a new diagnosis replaces the previous result
+        for p in (js, png, err, _cancelled_path(manager, jid)):    # a new diagnosis replaces the previous result
             p.unlink(missing_ok=True)
         _launch(manager, reg, jid, spec, req)
     return DiagnoseStarted(id=jid, state="running", status_url=f"/jobs/{jid}/diagnosis")
@@ -344,7 +373,23 @@ def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request:
         return DiagnosisStatus(state="done", report=json.loads(js.read_text()))
     if err.exists():
         return DiagnosisStatus(state="failed", error=err.read_text())
+    if _cancelled_path(manager, jid).exists():
+        return DiagnosisStatus(state="cancelled")
     return DiagnosisStatus(state="none")
+
+
+@router.delete("/jobs/{job_id}/diagnosis", status_code=status.HTTP_202_ACCEPTED)
+def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> dict:
+    """Cancel a running diagnosis: it stops at its next batch of simulations (seconds to a minute),
+    its stored simulations are deleted and its state becomes "cancelled"."""
+    rec = _own(manager, job_id, user)
+    jid = rec["id"]
+    reg = _registry(request)
+    with reg.lock:
+        if jid not in reg.running:
+            raise HTTPException(status.HTTP_409_CONFLICT, "no diagnosis of this job is running")
+        reg.cancel.setdefault(jid, threading.Event()).set()
+    return {"id": jid, "state": "cancelling", "status_url": f"/jobs/{jid}/diagnosis"}
 
 
 @router.get("/jobs/{job_id}/diagnosis/figure", responses={200: {"content": {"image/png": {}}}})

@@ -241,3 +241,56 @@ def test_resume_pending_drops_what_it_cannot_run_and_gives_up_after_repeated_sto
     assert not list(d.glob("*.diagnosis.request.json")) and not (d / f"{gone}.diagnosis.resume").exists()
     err = (d / f"{jid}.diagnosis.error").read_text()
     assert f"interrupted {MAX_AUTO_RESUMES + 1} times" in err and f"POST /jobs/{jid}/diagnose" in err
+
+
+def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch):
+    """DELETE /jobs/{id}/diagnosis stops a running diagnosis at its next batch: its state becomes
+    "cancelled", its stored simulations and request are deleted, a second DELETE is a 409, another
+    user's is a 404, and a new POST starts afresh."""
+    import threading
+
+    import vfcore.diagnose.pipeline as P
+    from service.main import create_app
+    from svc_helpers import ServerThread
+
+    jid = _done_fe_job(settings)
+    batches = []
+    started = threading.Event()
+
+    def endless(problem, *, map, **kw):         # batch after batch through the service's map
+        for k in range(100_000):
+            map(np.square, [np.full((2, 1), float(k)), np.full((2, 1), -float(k))])
+            batches.append(k)
+            started.set()
+            time.sleep(0.02)
+        raise AssertionError("never cancelled")
+
+    monkeypatch.setattr(P, "diagnose", endless)
+    d = settings.stores_dir
+    with ServerThread(create_app(settings, client=dask_client)) as srv:
+        with httpx_client(srv) as http:
+            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409   # none running
+            assert http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).status_code == 202
+            assert started.wait(60)
+            assert (d / f"{jid}.diagnosis.resume").exists()
+            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("bob")).status_code == 404
+            r = http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice"))
+            assert r.status_code == 202 and r.json()["state"] == "cancelling", r.text
+            t0 = time.time()
+            while (st := http.get(f"/jobs/{jid}/diagnosis", headers=auth("alice")).json())["state"] == "running":
+                assert time.time() - t0 < 60
+                time.sleep(0.1)
+            assert st["state"] == "cancelled", st
+            n = len(batches)
+            time.sleep(0.3)
+            assert len(batches) == n                    # it stopped
+            assert not (d / f"{jid}.diagnosis.resume").exists()
+            assert not (d / f"{jid}.diagnosis.request.json").exists()
+            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409
+
+            def fails(problem, *, map, **kw):
+                raise RuntimeError("second run")
+            monkeypatch.setattr(P, "diagnose", fails)
+            assert http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).status_code == 202
+            st = _wait_diagnosis(http, jid, "alice", timeout=60)
+            assert st["state"] == "failed" and "second run" in st["error"]     # the cancelled mark is gone
