@@ -81,6 +81,7 @@ class CaseRecord:
     audit_present: bool | None = None             # presence under audit.json, None without one
     floor_gain: float = math.nan                  # 1 - sigma / RMS of the diagnosis' reference fit
     regenerated: bool = True                      # load_table: the row's recording regenerated
+    wall_by_stage: dict = field(default_factory=dict)   # report "cost" (since stop 31): stage -> seconds
 
 
 def _truth_table(cases_dir: Path) -> dict:
@@ -171,7 +172,9 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
             suite, cid, label, present, strength, win, physics, ok, float(gain), float(imp),
             int(d.get("n_simulations", 0)), float(d.get("wall_s", 0.0)), el,
             None if reg is None else bool(reg["irregular"]),
-            _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", [])), aud, floor))
+            _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", [])), aud, floor,
+            wall_by_stage={k: float(v.get("wall_s") or 0.0)
+                           for k, v in ((d.get("cost") or {}).get("by_stage") or {}).items()}))
     return recs
 
 
@@ -299,7 +302,15 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
                                      sum(math.isfinite(r.floor_gain) for r in missed)],
         "simulations_per_case": float(np.mean([r.n_simulations for r in recs])) if recs else math.nan,
         "wall_s_per_case": float(np.mean([r.wall_s for r in recs])) if recs else math.nan,
+        # mean seconds per case in each stage, over the reports that carry their cost
+        "wall_by_stage": _wall_by_stage([r for r in recs if r.wall_by_stage]),
     }
+
+
+def _wall_by_stage(recs) -> dict:
+    stages = sorted({k for r in recs for k in r.wall_by_stage})
+    out = {k: float(np.mean([r.wall_by_stage.get(k, 0.0) for r in recs])) for k in stages}
+    return {"cases": len(recs), "mean_s": dict(sorted(out.items(), key=lambda kv: -kv[1]))}
 
 
 def _fmt_rate(x: dict) -> str:
@@ -333,5 +344,8 @@ def format_summary(s: dict) -> str:
              "rescue refits: " + (", ".join(f"{m} fired {v['fired']} kept {v['kept']}" for m, v in s["rescues"].items())
                                   or "none"),
              f"simulations per case: mean {s['simulations_per_case']:.0f}; wall per case: mean "
-             f"{s['wall_s_per_case']:.0f} s"]
+             f"{s['wall_s_per_case']:.0f} s",
+             *([f"wall per case by stage ({s['wall_by_stage']['cases']} reports with their cost): "
+                + ", ".join(f"{k} {v:.0f} s" for k, v in s["wall_by_stage"]["mean_s"].items())]
+               if s.get("wall_by_stage", {}).get("cases") else [])]
     return "\n".join(lines)

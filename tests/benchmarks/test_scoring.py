@@ -52,14 +52,16 @@ def _suite(tmp_path: Path, name: str, cases: dict) -> tuple[Path, Path]:
 @pytest.fixture
 def suite(tmp_path):
     return _suite(tmp_path, "s1", {
-        "00": (_truth("leak", unabs=3.0), _report("leak", irregular=False, notes=[BOX_NOTE])),
+        "00": (_truth("leak", unabs=3.0), {**_report("leak", irregular=False, notes=[BOX_NOTE]), "cost": {
+            "by_stage": {"base fit": {"wall_s": 100.0}, "refit": {"wall_s": 200.0}, "continuation": {"wall_s": 600.0}}}}),
         # lr_stiffness is an asymmetry model: a zipper named as it is a miss
         "01": (_truth("zipper", unabs=1.5), _report("lr_stiffness", physics="asymmetry", irregular=True)),
         "02": (_truth("control"), _report(None, notes=[REF_NOTE])),
         "03": (_truth("control"), _report("scale", rms=0.2, gain=-1.0)),
         "04": (_truth("scale", present=False, unabs=0.5), _report(None)),
         # the physics field is absent: the scorer maps lr_stiffness to asymmetry itself
-        "05": (_truth("asymmetry", unabs=1.0), _report("lr_stiffness", irregular=False)),
+        "05": (_truth("asymmetry", unabs=1.0), {**_report("lr_stiffness", irregular=False), "cost": {
+            "by_stage": {"base fit": {"wall_s": 20.0}, "refit": {"wall_s": 100.0}}}}),
         # named wrong, but the truth is listed as a rival the evidence does not separate
         "08": (_truth("scale", unabs=2.5), _report("zipper", rivals=["scale", "sep_ratio"])),
         "06": (_truth("subglottal", unabs=5.0), {"error": "GAW has NaN at frame 3", "winner": None}),
@@ -106,6 +108,10 @@ def test_summary_counts(suite):
     # named: 00, 01, 03, 05, 08; 03's gain is negative and its RMS gain 20 %
     assert s["named_rms_ge_30pct"] == [4, 5] and s["named_positive_gain"] == [4, 5]
     assert "2/5 (40 %" in format_summary(s)
+    # time by stage: only the reports that carry their cost (00 and 05), a stage absent from one counts 0 s
+    assert s["wall_by_stage"] == {"cases": 2, "mean_s": {"continuation": 300.0, "refit": 150.0, "base fit": 60.0}}
+    assert "wall per case by stage (2 reports with their cost): continuation 300 s, refit 150 s, base fit 60 s" \
+        in format_summary(s)
 
 
 def test_suites_pool(tmp_path, suite):
