@@ -284,6 +284,67 @@ from .cli_diagnose import diagnose_cmd as _diagnose  # noqa: E402  (model diagno
 app.command("diagnose")(_diagnose)
 
 
+@app.command("diagnosis")
+def diagnosis(job_id: str, url: Url = "http://127.0.0.1:8000", token: Token = None,
+              start: Annotated[bool, typer.Option(help="start a diagnosis of the finished job (POST)")] = False,
+              candidates: Annotated[Optional[str], typer.Option(help="with --start: comma-separated catalogue "
+                                                                     "entries (default: all implemented)")] = None,
+              particles: Annotated[Optional[int], typer.Option(help="with --start: SMC particles of each base fit")] = None,
+              refit_particles: Annotated[Optional[int], typer.Option(help="with --start: particles of each refit")] = None,
+              max_refits: Annotated[Optional[int], typer.Option(help="with --start: most observation-level refits")] = None,
+              continuation: Annotated[Optional[bool], typer.Option(
+                  "--continuation/--no-continuation", help="with --start: the window-continuation search")] = None,
+              seed: Annotated[Optional[int], typer.Option(help="with --start: random seed")] = None,
+              wait: Annotated[bool, typer.Option(help="poll, printing each new stage, until it ends")] = False,
+              cancel: Annotated[bool, typer.Option(help="cancel the running diagnosis (DELETE)")] = False,
+              out: Annotated[Optional[Path], typer.Option(help="when done: write diagnosis.json and "
+                                                               "diagnosis.png here and print the report")] = None,
+              ) -> None:
+    """A job's diagnosis on a running service: start it, follow it, cancel it, fetch it
+    (POST/GET/DELETE /jobs/{id}/diagnosis; the same pipeline as ``vfinfer diagnose``)."""
+    from .cli_diagnose import print_report, stage_line
+    if start and cancel:
+        console.print("[red]error:[/red] --start and --cancel exclude each other")
+        raise typer.Exit(2)
+    body = {k: v for k, v in (("n_particles", particles), ("refit_particles", refit_particles),
+                              ("max_refits", max_refits), ("continuation", continuation), ("seed", seed)) if v is not None}
+    if candidates:
+        body["candidates"] = [c.strip() for c in candidates.split(",") if c.strip()]
+    if body and not start:
+        console.print("[red]error:[/red] diagnosis settings need --start")
+        raise typer.Exit(2)
+    with _http(url, token) as http:
+        if start:
+            _check(http.post(f"/jobs/{job_id}/diagnose", json=body or None))
+            console.print(f"diagnosis of {job_id} started")
+        if cancel:
+            _check(http.delete(f"/jobs/{job_id}/diagnosis"))
+            console.print(f"diagnosis of {job_id} cancelling")
+        last = None
+        while True:
+            d = _check(http.get(f"/jobs/{job_id}/diagnosis"))
+            p = d.get("progress")
+            if p and (p["stage"], p.get("entry")) != last:
+                last = (p["stage"], p.get("entry"))
+                console.print(stage_line(p), highlight=False)
+            if not wait or d["state"] != "running":
+                break
+            time.sleep(2)
+        console.print(f"{job_id}  diagnosis {d['state']}")
+        if d.get("error"):
+            console.print(f"[red]{d['error']}[/red]", highlight=False)
+        if d["state"] == "done" and out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "diagnosis.json").write_text(json.dumps(d["report"], indent=1))
+            r = http.get(f"/jobs/{job_id}/diagnosis/figure")
+            if r.status_code == 200:
+                (out / "diagnosis.png").write_bytes(r.content)
+            print_report(d["report"])
+            console.print(f"wrote {out / 'diagnosis.json'}" + (" and diagnosis.png" if r.status_code == 200 else ""))
+    if d["state"] == "failed":
+        raise typer.Exit(1)
+
+
 def _check_demo_truth(summary: dict) -> None:
     """Say whether the 90% intervals cover the values the demo GAW was made with."""
     from vfcore.params import TABLE3

@@ -146,6 +146,7 @@ def cancellable(inner, event: threading.Event):
         if event.is_set():
             raise DiagnosisCancelled("cancelled")
         return out
+    _map.inner = inner
     return _map
 
 

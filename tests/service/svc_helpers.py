@@ -89,3 +89,27 @@ def dying_diagnosis(seen: list, message: str, n_parts: int = 3):
         list(map(HalfSquare(), [np.full((2, 1), float(k)) for k in range(n_parts)]))
         raise RuntimeError(message)
     return diagnose
+
+
+def done_fe_job(settings, owner: str = "alice") -> str:
+    """A finished finite-element job put straight into the job table (its diagnosis is replaced
+    by a stand-in in the tests that use it, so nothing of it is simulated)."""
+    import json
+
+    import numpy as np
+
+    from service.db import JobDB
+    from service.manager import new_job_id
+    t = np.arange(800) / 4000.0
+    areas = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0) + 0.5
+    spec = {"model": "fe", "gaw": {"areas": [float(a) for a in areas], "fps": 4000.0, "units": "mm2"},
+            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
+            "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1, "mesh": "coarse",
+            "dt": 1e-4, "duration": 0.35, "discard": 0.15}
+    settings.stores_dir.mkdir(parents=True, exist_ok=True)
+    db = JobDB(settings.db_path)
+    jid = new_job_id()
+    db.insert(jid, owner, json.dumps(spec), 16)
+    db.update(jid, state="done")
+    db.close()
+    return jid

@@ -54,3 +54,55 @@ def test_job_ids_are_valid_cli_arguments():
     ids = {new_job_id() for _ in range(2000)}
     assert len(ids) == 2000
     assert all(JOB_ID_RE.match(j) and not j.startswith("-") for j in ids)
+
+
+def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypatch):
+    """``vfinfer diagnosis JOB --start --wait --out DIR`` posts the settings given, prints each new
+    stage while it runs, and writes and prints the finished report (the diagnosis itself is a
+    stand-in: the real one is tested in test_diagnose_endpoint.py); misuse exits 2, another user's
+    job and cancelling a finished diagnosis exit 1 with the service's answer."""
+    import json
+    import threading
+
+    import vfcore.diagnose.pipeline as P
+    import service.routers.diagnose as R
+    from svc_helpers import done_fe_job
+
+    jid = done_fe_job(service.settings, owner="carol")
+    report = {"verdict": "missing physics: leak", "winner": "leak", "physics": "leak", "rivals": [],
+              "base": {"residual_rms": 1.5, "log_evidence": -500.0, "log_evidence_se": 0.3,
+                       "dominant_phase": "closed", "n_simulations": 100},
+              "screening": {"leak": {"score": 40.0, "best_phi": {"leak_mm2": 1.4}, "n_simulations": 0}},
+              "refits": {"leak": {"params": {"leak_mm2": {"mean": 1.5, "sd": 0.1}}, "residual_rms": 0.3,
+                                  "rms_improvement": 0.8}},
+              "ranking": [{"name": "leak", "delta": 300.0, "delta_se": 0.5, "found": True}], "reference": "base",
+              "notes": [], "n_simulations": 500, "wall_s": 12.0,
+              "cost": {"by_stage": {"base fit": {"wall_s": 7.0}, "refit": {"wall_s": 5.0}}}}
+    seen, go = {}, threading.Event()
+
+    def stand_in(problem, *, map, progress, **kw):
+        seen.update(kw)
+        progress({"stage": "base fit", "entry": None, "step": None, "steps": None, "simulations": 0, "elapsed_s": 0.0})
+        go.wait(2.5)                        # long enough for the first poll to see it running
+        progress({"stage": "refit", "entry": "leak", "step": 1, "steps": 1, "simulations": 40, "elapsed_s": 2.6})
+        go.wait(2.5)
+        return type("Report", (), {"to_dict": lambda self: dict(report)})()
+
+    monkeypatch.setattr(P, "diagnose", stand_in)
+    monkeypatch.setattr(R, "plot_atomic", lambda rep, pb, path: path.write_bytes(b"\x89PNG\r\n\x1a\nfake"))
+    env = {"VFINFER_URL": service.url, "VFINFER_TOKEN": TOKENS["carol"], "COLUMNS": "200"}
+    out = tmp_path / "diag"
+    r = CliRunner().invoke(app, ["diagnosis", jid, "--start", "--candidates", "leak,scale", "--particles", "12",
+                                 "--no-continuation", "--wait", "--out", str(out)], env=env)
+    assert r.exit_code == 0, r.output
+    assert seen["candidates"] == ["leak", "scale"] and seen["n_particles"] == 12 and seen["continuation"] is False
+    assert re.search(r"0:0\d  base fit · 0 simulations", r.output) and "refit 1/1: leak · 40 simulations" in r.output
+    assert "diagnosis done" in r.output and "missing physics: leak" in r.output and "time by stage" in r.output
+    assert json.loads((out / "diagnosis.json").read_text())["winner"] == "leak"
+    assert (out / "diagnosis.png").read_bytes().startswith(b"\x89PNG")
+    r = CliRunner().invoke(app, ["diagnosis", jid, "--cancel"], env=env)
+    assert r.exit_code == 1 and "409" in r.output, r.output           # nothing running
+    r = CliRunner().invoke(app, ["diagnosis", jid, "--particles", "12"], env=env)
+    assert r.exit_code == 2 and "--start" in r.output
+    r = CliRunner().invoke(app, ["diagnosis", jid], env={**env, "VFINFER_TOKEN": TOKENS["alice"]})
+    assert r.exit_code == 1 and "404" in r.output

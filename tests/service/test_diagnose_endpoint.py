@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from svc_helpers import auth, dying_diagnosis, toy_spec, wait_done
+from svc_helpers import auth, done_fe_job, dying_diagnosis, toy_spec, wait_done
 
 FPS = 4000.0
 
@@ -136,35 +136,14 @@ def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatc
     assert "worker lost" in (tmp_path / "j1.diagnosis.error").read_text()
     assert len(list(resume_store(manager, "j1").rglob("*.pkl"))) == 3
     _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
-    assert (maps[1].hits, maps[1].misses) == (3, 0)
-    assert maps[1].earlier_attempts == 1                  # the dead attempt's time is on record
+    store = maps[1].inner                                 # the store, inside the cancellable map
+    assert (store.hits, store.misses) == (3, 0)
+    assert store.earlier_attempts == 1                    # the dead attempt's time is on record
 
 
 def httpx_client(srv):
     import httpx
     return httpx.Client(base_url=srv.url, timeout=60)
-
-
-def _done_fe_job(settings, owner: str = "alice") -> str:
-    """A finished finite-element job put straight into the job table (its diagnosis is replaced
-    by a stand-in in the tests that use it, so nothing of it is simulated)."""
-    import json
-
-    from service.db import JobDB
-    from service.manager import new_job_id
-    t = np.arange(800) / FPS
-    areas = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0) + 0.5
-    spec = {"model": "fe", "gaw": {"areas": [float(a) for a in areas], "fps": FPS, "units": "mm2"},
-            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
-            "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1, "mesh": "coarse",
-            "dt": 1e-4, "duration": 0.35, "discard": 0.15}
-    settings.stores_dir.mkdir(parents=True, exist_ok=True)
-    db = JobDB(settings.db_path)
-    jid = new_job_id()
-    db.insert(jid, owner, json.dumps(spec), 16)
-    db.update(jid, state="done")
-    db.close()
-    return jid
 
 
 def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, dask_client, monkeypatch):
@@ -177,7 +156,7 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     from service.main import create_app
     from svc_helpers import ServerThread
 
-    jid = _done_fe_job(settings)
+    jid = done_fe_job(settings)
     body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 6, "max_refits": 2,
             "continuation": False, "seed": 5}
     gate, entered, calls = threading.Event(), threading.Event(), []
@@ -226,7 +205,7 @@ def test_resume_pending_drops_what_it_cannot_run_and_gives_up_after_repeated_sto
     from service.db import JobDB
     from service.routers.diagnose import MAX_AUTO_RESUMES, _Registry, resume_pending
 
-    jid = _done_fe_job(settings)
+    jid = done_fe_job(settings)
     gone = "ab" * 16
     d = settings.stores_dir
     (d / f"{gone}.diagnosis.request.json").write_text(json.dumps({"request": {}, "resumes": 0}))
@@ -253,7 +232,7 @@ def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch
     from service.main import create_app
     from svc_helpers import ServerThread
 
-    jid = _done_fe_job(settings)
+    jid = done_fe_job(settings)
     batches = []
     started = threading.Event()
 
