@@ -132,6 +132,11 @@ def run(a) -> None:
                   + ", ".join(f"{r['name']} d={r['delta']:.0f} rms={100 * r['rms_gain']:.0f}%"
                               + ("" if r["found"] else f" [{r['reason'].split(':')[0]}]") for r in d["ranking"]),
                   flush=True)
+            by = d.get("cost", {}).get("by_stage", {})
+            if by:
+                print(f"case {case['id']}: time by stage " + ", ".join(
+                    f"{k} {v['wall_s']:.0f} s" for k, v in sorted(by.items(), key=lambda kv: -kv[1]["wall_s"])),
+                    flush=True)
     finally:
         if pool is not None:
             pool.close()
