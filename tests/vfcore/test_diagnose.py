@@ -566,3 +566,17 @@ def test_best_of_base_keeps_the_effect_size_against_a_null_consistent_reference(
     r = rank_best_of_base((-1500.0, 0.5), fits, base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)], rms=rms, base_rms=1.0,
                           null={"asymmetry": False, "exposure": False})
     assert r.winner == "asymmetry"
+
+
+def test_strip_sum_equals_interpolated_delays_with_held_ends():
+    """The zipper's fused kernel (stop 31): sum_k w_k y(i - d_k) equals np.interp of each delayed
+    copy (ends held) for delays inside, beyond and exactly at whole samples, to rounding."""
+    from vfcore.diagnose._kernels import strip_sum
+    rng = np.random.default_rng(4)
+    y = np.cumsum(rng.standard_normal(500))
+    i = np.arange(y.size, dtype=float)
+    for delays in (rng.uniform(-3, 3, 24), rng.uniform(-700, 700, 24), np.round(rng.uniform(-50, 50, 24)),
+                   np.array([0.0, 499.0, -499.0, 0.5])):
+        w = rng.random(delays.size)
+        ref = sum(wk * np.interp(i - dk, i, y) for dk, wk in zip(delays, w))
+        assert np.max(np.abs(strip_sum(y, delays, w) - ref)) < 1e-12 * np.max(np.abs(ref))

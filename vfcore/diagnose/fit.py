@@ -31,6 +31,7 @@ from ..measures import estimate_f0
 from ..result import HR_OVERSAMPLE
 from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
+from ._kernels import strip_sum
 from .extensions import Extension, apply_leak, get
 
 __all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "observer", "extended_config", "fit_extended",
@@ -150,11 +151,9 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
         def zipper(phi):
             e = phi["end_fraction"]
             taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
-            shape = ys ** phi["ap_power"] - 0.5              # in [-1/2, 1/2]: within the padding
-            out = np.zeros_like(y)
-            for sk, wk in zip(shape, taper):
-                out += wk * _delayed(yp, pad, y.size, phi["ap_phase_lag"] * T0 * rate * sk)
-            return out / n
+            shape = ys ** phi["ap_power"] - 0.5              # in [-1/2, 1/2]
+            # one fused pass per strip (numba; the same sums as shifting each strip, to ~1e-15)
+            return strip_sum(y, phi["ap_phase_lag"] * T0 * rate * shape, taper / n)
         return zipper
     raise ValueError(f"{name!r} is not an observation-level extension")
 
