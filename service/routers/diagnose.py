@@ -163,17 +163,22 @@ def _registry(request: Request) -> _Registry:
 MAX_AUTO_RESUMES = 3
 
 
+def _stores_dir(manager) -> Path:
+    """The folder holding every job's store and its diagnosis files."""
+    return Path(manager.settings.stores_dir)
+
+
 def _request_path(manager, job_id: str) -> Path:
-    return manager.store_path(job_id).parent / f"{job_id}.diagnosis.request.json"
+    return _stores_dir(manager) / f"{job_id}.diagnosis.request.json"
 
 
 def _cancelled_path(manager, job_id: str) -> Path:
-    return manager.store_path(job_id).parent / f"{job_id}.diagnosis.cancelled"
+    return _stores_dir(manager) / f"{job_id}.diagnosis.cancelled"
 
 
 def _paths(manager, job_id: str) -> tuple[Path, Path, Path]:
     # job_id comes from the table row (see _own), never from request text
-    base = manager.store_path(job_id).parent
+    base = _stores_dir(manager)
     return (base / f"{job_id}.diagnosis.json", base / f"{job_id}.diagnosis.png",
             base / f"{job_id}.diagnosis.error")
 
@@ -286,7 +291,7 @@ def resume_pending(manager, reg: _Registry) -> list[str]:
     interrupted it); returns their job ids. A request for a job that is gone, or no longer done, is
     dropped with its store; one interrupted ``MAX_AUTO_RESUMES`` times is recorded as failed."""
     started = []
-    for f in sorted(_paths(manager, "0" * 32)[0].parent.glob("*.diagnosis.request.json")):
+    for f in sorted(_stores_dir(manager).glob("*.diagnosis.request.json")):
         jid = f.name.split(".", 1)[0]
         if len(jid) != 32 or any(c not in "0123456789abcdef" for c in jid):
             continue                                     # not a name this service writes

@@ -130,7 +130,7 @@ def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatc
 
     maps = []
     monkeypatch.setattr(P, "diagnose", dying_diagnosis(maps, "worker lost"))
-    manager = SimpleNamespace(store_path=lambda jid: tmp_path / f"{jid}.zarr", client=None)
+    manager = SimpleNamespace(settings=SimpleNamespace(stores_dir=tmp_path), store_path=lambda jid: tmp_path / f"{jid}.zarr", client=None)
     spec = SimpleNamespace(to_problem=lambda: None)
     _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
     assert "worker lost" in (tmp_path / "j1.diagnosis.error").read_text()
@@ -213,7 +213,7 @@ def test_resume_pending_drops_what_it_cannot_run_and_gives_up_after_repeated_sto
     (d / f"{jid}.diagnosis.request.json").write_text(json.dumps({"request": {}, "resumes": MAX_AUTO_RESUMES}))
     (d / f"{'cd' * 16}.diagnosis.request.json").write_text("{broken")
     db = JobDB(settings.db_path)
-    manager = SimpleNamespace(store_path=lambda j: d / f"{j}.zarr", db=db, client=None)
+    manager = SimpleNamespace(settings=settings, store_path=lambda j: d / f"{j}.zarr", db=db, client=None)
     reg = _Registry()
     assert resume_pending(manager, reg) == [] and not reg.running
     db.close()

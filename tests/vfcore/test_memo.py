@@ -97,9 +97,11 @@ class _Slow(_Square):
         return super().__call__(rows)
 
 
-def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path):
+def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path, monkeypatch):
     import time
 
+    from vfcore.inference import memo
+    monkeypatch.setattr(memo, "NOTE_EVERY_S", 0.0)      # note every part
     fn = _Slow(0.05)
     t0 = time.perf_counter()
     with pytest.raises(Killed):
@@ -120,6 +122,21 @@ def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path):
     third = CachedMap(map, tmp_path)
     assert third.earlier_attempts == 3 and third.earlier_wall_s >= 0.25
     assert account({"wall_s": 1.0}, None) == {"wall_s": 1.0}      # no store: unchanged
+
+
+def test_the_attempt_record_is_rewritten_at_most_every_few_seconds_and_after_each_call(tmp_path, monkeypatch):
+    import json
+
+    from vfcore.inference import memo
+    monkeypatch.setattr(memo, "NOTE_EVERY_S", 3600.0)
+    records = lambda store: [json.loads(f.read_text()) for f in (store.root / "attempts").glob("*.json")]
+    with pytest.raises(Killed):                      # killed inside a call: nothing noted since the start
+        dying = CachedMap(dies_after(3), tmp_path)
+        dying(_Square(), _parts())
+    assert [r["parts_stored"] for r in records(dying)] == [0]
+    whole = CachedMap(map, tmp_path)                 # a call that ends is always noted
+    whole(_Square(), _parts())
+    assert sorted(r["parts_stored"] for r in records(whole)) == [0, 2]   # 3 read back, 2 stored
 
 
 def test_an_unreadable_entry_is_simulated_again_and_an_unpicklable_function_runs_uncached(tmp_path):

@@ -21,10 +21,11 @@ for resuming one piece of work; it is not an archive. Delete it when that work i
 are pickles: keep a store where only its owner can write (as the service's data directory).
 
 Cost of a resumed run. Each ``CachedMap`` also keeps an attempt record under ``attempts/`` (its
-start and the seconds from its start to its latest stored part, rewritten as each part is
-stored), so the run that finishes can report the wall time of the attempts before it
+start and the seconds from its start to its latest stored part, rewritten as parts are stored,
+at most every ``NOTE_EVERY_S`` seconds and always after a call's last part), so the run that finishes can report the wall time of the attempts before it
 (:meth:`CachedMap.resume_summary`, :func:`account`). An attempt that was killed is counted up to
-its last stored part: the part it was computing when it died, whose result was lost, is not.
+its last noted part (at most ``NOTE_EVERY_S`` before its last stored one): the part it was
+computing when it died, whose result was lost, is not.
 """
 from __future__ import annotations
 
@@ -93,6 +94,24 @@ def _part_key(fdigest: bytes, part) -> str | None:
     return h.hexdigest()
 
 
+#: the attempt record is rewritten at most this often while parts arrive (and always after the
+#: last part of a call), so a killed attempt loses at most this much of its accounted time
+NOTE_EVERY_S = 5.0
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same folder, then rename: a
+    reader sees the old file or the whole new one, never a half-written one."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 class CachedMap:
     """``map(fn, parts)`` through ``inner``, each part's result stored under ``root``.
 
@@ -113,7 +132,7 @@ class CachedMap:
         earlier = [self._read_attempt(f) for f in sorted(runs.glob("*.json"))]
         self.earlier_attempts = len(earlier)
         self.earlier_wall_s = float(sum(earlier))
-        self._t0 = time.perf_counter()
+        self._t0 = self._noted = time.perf_counter()
         self._started = time.time()
         self._attempt = runs / f"{time.strftime('%Y%m%dT%H%M%S', time.gmtime(self._started))}-{uuid.uuid4().hex[:8]}.json"
         self._note_attempt()
@@ -125,17 +144,13 @@ class CachedMap:
         except (OSError, ValueError, KeyError, TypeError):   # unreadable record: counted as 0 s
             return 0.0
 
-    def _note_attempt(self) -> None:
-        rec = {"started_unix": self._started, "elapsed_s": time.perf_counter() - self._t0,
-               "parts_stored": self._stored}
-        fd, tmp = tempfile.mkstemp(dir=self._attempt.parent, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as f:
-                json.dump(rec, f)
-            os.replace(tmp, self._attempt)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+    def _note_attempt(self, force: bool = True) -> None:
+        now = time.perf_counter()
+        if not force and now - self._noted < NOTE_EVERY_S:
+            return
+        self._noted = now
+        rec = {"started_unix": self._started, "elapsed_s": now - self._t0, "parts_stored": self._stored}
+        _write_atomic(self._attempt, json.dumps(rec).encode())
 
     def resume_summary(self) -> dict:
         """What the store contributed to this run: parts read back, simulated and uncached, the
@@ -149,14 +164,7 @@ class CachedMap:
     def _store(self, key: str, value) -> None:
         path = self._path(key)
         path.parent.mkdir(exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        _write_atomic(path, pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
 
     def _load(self, key: str):
         path = self._path(key)
@@ -192,7 +200,7 @@ class CachedMap:
                 out[i] = value
                 n += 1
                 self._stored += 1
-                self._note_attempt()
+                self._note_attempt(force=n == len(todo))
             if n != len(todo):
                 raise RuntimeError(f"the inner map returned {n} results for {len(todo)} parts; "
                                    "CachedMap needs a map that gives one result per part")
