@@ -102,13 +102,45 @@ def plot_atomic(report, problem, path: Path) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def dask_map(client):
-    """A builtin-map-like callable running every call on the Dask cluster (results in order)."""
+#: how often (s) a map waiting on a running simulation looks whether it was cancelled
+POLL_S = 0.25
+
+
+def dask_map(client, stop: threading.Event | None = None, stopping: threading.Event | None = None):
+    """A builtin-map-like callable running every call on the Dask cluster.
+
+    Results come back in order, each as soon as it and those before it are done, so the
+    diagnosis' store (:class:`vfcore.inference.memo.CachedMap`) keeps every finished part of a
+    batch that is later interrupted. While it waits it looks every ``POLL_S`` seconds at
+    ``stop`` (set by a cancel: :class:`DiagnosisCancelled`) and ``stopping`` (set when the
+    service shuts down: ``DiagnosisInterrupted``); either cancels the batch's unfinished futures,
+    so a cancel takes effect within a poll, not after the batch in flight."""
     if client is None:
         return map
+    from distributed import TimeoutError as DaskTimeout
+
+    def _check():
+        if stop is not None and stop.is_set():
+            raise DiagnosisCancelled("cancelled")
+        if stopping is not None and stopping.is_set():
+            raise DiagnosisInterrupted("the service is stopping")
 
     def _map(fn, xs):
-        return client.gather(client.map(fn, list(xs), pure=False))
+        futures = client.map(fn, list(xs), pure=False)
+        try:
+            for fut in futures:
+                while True:
+                    _check()
+                    try:
+                        value = fut.result(timeout=POLL_S)
+                        break
+                    except DaskTimeout:
+                        continue
+                yield value
+        finally:                      # stopped early, failed or cancelled: drop what is left
+            left = [f for f in futures if not f.done()]
+            if left:
+                client.cancel(left)
     return _map
 
 
@@ -134,7 +166,11 @@ class _Registry:
 
 
 class DiagnosisCancelled(Exception):
-    """Raised inside a running diagnosis at its next batch of simulations once it is cancelled."""
+    """Raised inside a running diagnosis once it is cancelled (within a poll, :func:`dask_map`)."""
+
+
+class DiagnosisInterrupted(Exception):
+    """Raised inside a running diagnosis when the service stops; it resumes at the next start."""
 
 
 def cancellable(inner, event: threading.Event):
@@ -237,9 +273,9 @@ def _run(manager, reg: _Registry, job_id: str, spec: JobSpec, req: DiagnoseReque
         problem = spec.to_problem()
         client = manager.client
         chunk = max(1, math.ceil(req.n_particles / _n_workers(client)))
-        cmap = CachedMap(dask_map(client), store)
         with reg.lock:
             stop = reg.cancel.setdefault(job_id, threading.Event())
+        cmap = CachedMap(dask_map(client, stop, reg.stopping), store)
 
         def progress(ev: dict) -> None:
             reg.progress[job_id] = jsonable(ev)
@@ -386,8 +422,9 @@ def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request:
 
 @router.delete("/jobs/{job_id}/diagnosis", status_code=status.HTTP_202_ACCEPTED)
 def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> dict:
-    """Cancel a running diagnosis: it stops at its next batch of simulations (seconds to a minute),
-    its stored simulations are deleted and its state becomes "cancelled"."""
+    """Cancel a running diagnosis: it stops within a quarter of a second of waiting on the cluster
+    (its batch's unstarted simulations are cancelled; :func:`dask_map`), its stored simulations
+    are deleted and its state becomes "cancelled"."""
     rec = _own(manager, job_id, user)
     jid = rec["id"]
     reg = _registry(request)

@@ -1,0 +1,78 @@
+"""The service's Dask map (service.routers.diagnose.dask_map): results in order and streamed, so a
+diagnosis' store keeps the finished parts of an interrupted batch; a cancel or a shutdown ends a
+batch while it waits, and the batch's unstarted parts never run."""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.routers.diagnose import DiagnosisCancelled, DiagnosisInterrupted, dask_map
+
+
+class _Marked:
+    """Squares a part after ``delay`` seconds and leaves a file per finished part in ``folder``."""
+
+    def __init__(self, folder: Path, delay: float):
+        self.folder, self.delay = str(folder), delay
+
+    def __call__(self, part):
+        time.sleep(self.delay)
+        (Path(self.folder) / f"{float(part.ravel()[0]):g}.done").touch()
+        return np.square(part)
+
+
+def _parts(n: int) -> list[np.ndarray]:
+    return [np.full((2, 1), float(k)) for k in range(n)]
+
+
+def test_results_come_in_order_and_equal_the_builtin_map(dask_client, tmp_path):
+    parts = [np.random.default_rng(k).standard_normal((3, 2)) for k in range(7)]
+    got = list(dask_map(dask_client)(np.square, parts))
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(got, map(np.square, parts))) and len(got) == 7
+    assert dask_map(None) is map                             # no cluster: the builtin map
+
+
+@pytest.mark.parametrize("which, error", [("stop", DiagnosisCancelled), ("stopping", DiagnosisInterrupted)])
+def test_a_cancel_or_a_shutdown_ends_the_batch_while_it_waits(dask_client, tmp_path, which, error):
+    events = {"stop": threading.Event(), "stopping": threading.Event()}
+    fn = _Marked(tmp_path, 1.0)
+    timer = threading.Timer(0.4, events[which].set)         # set while the first parts still run
+    got = []
+    timer.start()
+    try:
+        with pytest.raises(error):
+            for v in dask_map(dask_client, events["stop"], events["stopping"])(fn, _parts(10)):
+                got.append(v)
+    finally:
+        timer.cancel()
+    assert len(got) < 10
+    time.sleep(2.5)                   # long enough for several more parts, had they not been cancelled
+    # 10 parts of 1 s on 2 workers: at most the parts already running when it was set (2), and
+    # those a worker had taken before the cancel reached it, finish; never the whole batch
+    assert len(list(tmp_path.glob("*.done"))) <= 4
+
+
+def test_the_store_keeps_the_parts_finished_before_a_cancel(dask_client, tmp_path):
+    from vfcore.inference.memo import CachedMap
+
+    stop = threading.Event()
+    (tmp_path / "marks").mkdir()
+    fn = _Marked(tmp_path / "marks", 0.3)
+    store = CachedMap(dask_map(dask_client, stop), tmp_path / "store")
+    timer = threading.Timer(1.0, stop.set)
+    timer.start()
+    try:
+        with pytest.raises(DiagnosisCancelled):
+            store(fn, _parts(40))
+    finally:
+        timer.cancel()
+    kept = len(list(store.root.rglob("*.pkl")))
+    assert 1 <= kept < 40                                   # the parts done in the first second are kept
+    again = CachedMap(map, tmp_path / "store")               # and read back by the next attempt
+    out = again(fn, _parts(40))
+    assert (again.hits, again.misses) == (kept, 40 - kept)
+    assert all(o.tobytes() == np.square(p).tobytes() for o, p in zip(out, _parts(40)))
