@@ -110,6 +110,35 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
 
 
+def _p(p) -> str:
+    if p is None or (isinstance(p, float) and not math.isfinite(p)):
+        return "-"
+    return f"[red]{p:.3f} *[/red]" if p < 0.05 else f"{p:.3f}"
+
+
+def measures_table(d: dict) -> None:
+    """GAW measures of the recording against the base fit's (and the named extension's) replicated
+    recordings: predicted mean and two-sided posterior-predictive p-value, * below 0.05."""
+    b = d["base"]
+    meas = b.get("measures")
+    if not meas:
+        return
+    win = d.get("winner")
+    a = (d.get("refits") or {}).get(win) if win else None
+    t = Table(title="GAW measures (posterior-predictive two-sided p; * p < 0.05; replicate noise "
+                    f"{_f(b.get('predictive_noise_sd'), '.3g')} mm^2, from the recording)")
+    t.add_column("measure")
+    for col in ("recording", "base predicts", "base p") + ((f"{win} predicts", f"{win} p") if a else ()):
+        t.add_column(col, justify="right")
+    for k, m in meas.items():
+        row = [k, _f(m.get("observed")), _f(m.get("predicted")), _p(b["pvalues"].get(k))]
+        if a:
+            am = (a.get("measures") or {}).get(k, {})
+            row += [_f(am.get("predicted")), _p((a.get("pvalues") or {}).get(k))]
+        t.add_row(*row)
+    console.print(t)
+
+
 def print_report(d: dict) -> None:
     """Rich tables of a ``DiagnoseReport.to_dict()`` (after :func:`jsonable`)."""
     b = d["base"]
@@ -145,6 +174,7 @@ def print_report(d: dict) -> None:
                       _f(a["residual_rms"]), "-" if imp is None else f"{100 * imp:.1f} %", pars,
                       "yes" if rk.get("found") else "no")
         console.print(r)
+    measures_table(d)
     for n in d.get("notes") or []:
         console.print(f"[yellow]note[/yellow] {n}", highlight=False)
     colour = "green" if d.get("winner") else "bold"

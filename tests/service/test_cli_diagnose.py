@@ -74,6 +74,10 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     assert d["n_simulations"] > 0
     assert (out / "diagnosis.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "missing physics: leak" in r.output and "Screening" in r.output
+    # the leak shows in the recording's minimum area: the base fit's replicates disagree, the leak's do not
+    pb, pl = d["base"]["pvalues"], d["refits"]["leak"]["pvalues"]
+    assert pb["min_area_mm2"] < 0.05 <= pl["min_area_mm2"], (pb, pl)
+    assert "GAW measures" in r.output and "leak p" in r.output
     import re
     stages = [m.group(1) for m in re.finditer(r"^\s*\d+:\d\d  (.+?) · [\d,]+ simulations$", r.output, re.M)]
     assert stages[:4] == ["base fit", "regularity check", "screening", "refit 1/1: leak"], stages   # progress lines

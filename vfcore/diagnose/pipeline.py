@@ -38,7 +38,7 @@ from ..inference.posterior import Posterior
 from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
-from .locate import LocateReport, locate, measure_pvalues
+from .locate import LocateReport, locate, measure_pvalues, noise_sd
 from .progress import ProgressTracker
 from .rank import (NO_FINDING, RankReport, local_passes, null_consistent, prefer_nested, prefer_parsimonious,
                    promote_local, rank_best_of_base, rank_extensions, residual_removed)
@@ -55,18 +55,27 @@ def _pred(post: Posterior) -> np.ndarray:
     return g[np.asarray(rp.ok, dtype=bool)]
 
 
-def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float) -> dict:
-    """Residual RMS, phase location, measure p-values and parameter summary of one fit."""
+def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float | None = None) -> dict:
+    """Residual RMS, phase location, measure p-values and parameter summary of one fit.
+
+    The p-values' replicated recordings carry the recording's own noise sd, estimated from it
+    (:func:`.locate.noise_sd`; ``predictive_noise_sd``), unless ``sigma_e`` is given: the
+    likelihood's nominal sigma_e is a scale of the fit, not the camera's noise, and a wrong
+    noise level decides the noise-sensitive measures (docs/diagnose.md section 1)."""
     g = _pred(post)
     y = np.asarray(obs, dtype=float)[: g.shape[1]]
     loc = locate(y, g, fps)
-    pv = measure_pvalues(g, y, fps, sigma_e=sigma_e)
+    s_pp = noise_sd(y, g) if sigma_e is None else float(sigma_e)
+    pv = measure_pvalues(g, y, fps, sigma_e=s_pp)
     drops = null_drops(post)
     return {
         "residual_rms": float(np.sqrt(np.mean((y - g.mean(axis=0)) ** 2))),
         "phase_rms": loc.phase_rms, "dominant_phase": loc.dominant_phase,
         "concentration": loc.concentration(),
         "pvalues": {k: v.p_two_sided for k, v in pv.items()},
+        "measures": {k: {"observed": v.observed, "predicted": v.pred_mean, "predicted_sd": v.pred_sd}
+                     for k, v in pv.items()},
+        "predictive_noise_sd": s_pp,
         "params": {n: {"mean": float(m), "sd": float(s), **({"null_drop": drops[n]} if n in drops else {})}
                    for n, m, s in zip(*param_table(post))},
         "log_evidence": float(post.log_evidence), "log_evidence_se": float(post.log_evidence_se),
@@ -531,7 +540,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     else:
         n_sims += int(base.n_simulations)
         all_base.append((float(base.log_evidence), float(base.log_evidence_se)))
-    before = fit_summary(base, problem.obs_compared, problem.fps, problem.sigma_e)
+    before = fit_summary(base, problem.obs_compared, problem.fps)
     before["base_runs"] = [[z, s_] for z, s_ in all_base]
     before["wall_s"] = time.perf_counter() - t0          # all base runs
     before["base_simulations"] = n_sims
@@ -571,7 +580,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     loc0 = locate(problem.obs_compared[: _pred(base).shape[1]], _pred(base), problem.fps)
 
     def summarise(name: str, post: Posterior, t1: float) -> dict:
-        s = fit_summary(post, problem.obs_compared, problem.fps, problem.sigma_e)
+        s = fit_summary(post, problem.obs_compared, problem.fps)
         g = _pred(post)
         s["residual_removed"] = residual_removed(loc0, locate(problem.obs_compared[: g.shape[1]], g, problem.fps))
         s["rms_improvement"] = 1.0 - s["residual_rms"] / before["residual_rms"]
@@ -697,7 +706,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                                  seed=seed + 65537 + len(before.get("mode_checks", {})) + 1, map=map,
                                  chunk_size=chunk_size, **opts)
         n_sims += int(near.n_simulations)
-        sn = fit_summary(near, problem.obs_compared, problem.fps, problem.sigma_e)
+        sn = fit_summary(near, problem.obs_compared, problem.fps)
         sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zb, log_evidence_bound_se=sb,
                   box=near.info["box"], log_box_probability=near.info["log_box_probability"])
         before.setdefault("mode_checks", {})[name] = sn
@@ -735,7 +744,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         zc, sc, pc = continued_fit(problem, fb, None, n_particles=refit_n, seed=sd, map=map,
                                    chunk_size=chunk_size, **opts)
         n_sims += int(pc.n_simulations)
-        sn = fit_summary(pc, problem.obs_compared, problem.fps, problem.sigma_e)
+        sn = fit_summary(pc, problem.obs_compared, problem.fps)
         sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc,
                   continuation=fb.to_dict())
         before.setdefault("mode_checks", {})[label] = sn
