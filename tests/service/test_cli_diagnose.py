@@ -78,6 +78,9 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     pb, pl = d["base"]["pvalues"], d["refits"]["leak"]["pvalues"]
     assert pb["min_area_mm2"] < 0.05 <= pl["min_area_mm2"], (pb, pl)
     assert "GAW measures" in r.output and "leak p" in r.output
+    # the recording's noise (0.3 mm^2) estimated from it, and the note that sigma_e = 1 is not it
+    assert d["base"]["predictive_noise_sd"] == pytest.approx(0.3, rel=0.2)
+    assert any("sigma_e = 1 mm^2 is" in n for n in d["notes"]), d["notes"]
     import re
     stages = [m.group(1) for m in re.finditer(r"^\s*\d+:\d\d  (.+?) · [\d,]+ simulations$", r.output, re.M)]
     assert stages[:4] == ["base fit", "regularity check", "screening", "refit 1/1: leak"], stages   # progress lines

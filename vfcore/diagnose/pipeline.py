@@ -544,6 +544,12 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     before["base_runs"] = [[z, s_] for z, s_ in all_base]
     before["wall_s"] = time.perf_counter() - t0          # all base runs
     before["base_simulations"] = n_sims
+    s_hat = before["predictive_noise_sd"]
+    if problem.noise == "fixed" and s_hat > 0 and not 2.0 / 3.0 <= problem.sigma_e / s_hat <= 1.5:
+        notes.append(f"the likelihood's noise sd sigma_e = {problem.sigma_e:g} mm^2 is {problem.sigma_e / s_hat:.2g} times "
+                     f"the recording's noise as estimated from it ({s_hat:.3g} mm^2, second differences of the base "
+                     "fit's residual): log-likelihood differences scale as 1/sigma_e^2, and the dlogZ nearly so; "
+                     "'noise: marginal' integrates sigma_e out instead")
     rough = 0.0
     if regularity_check:
         from .regularity import sensitivity
