@@ -95,6 +95,27 @@ def test_search_never_returns_less_than_its_start():
     assert res.extra[0, 2] >= 1 and np.all(np.isfinite(res.loglik))
 
 
+def test_halving_drops_the_worse_half_after_each_window_and_keeps_the_leaders_path():
+    """Four starts on three windows with one optimum: after the first window the two worse starts
+    stop, after the second one more; the one left makes exactly the moves and simulations it makes
+    without halving, a dropped start keeps its own whole-window value, and fewer simulations are
+    spent in all."""
+    from types import SimpleNamespace
+    from vfcore.diagnose.search import CONTINUATION, _Continuer, _halving_search
+    prior = SimpleNamespace(lo=np.zeros(2), width=np.ones(2), ndim=2)
+    evs = [_Quadratic(0.3, 0.3), _Quadratic(0.3, 0.2), _Quadratic(0.3, 0.1)]
+    starts = np.array([[0.9, 0.9], [0.32, 0.28], [0.05, 0.95], [0.5, 0.4]])
+    s = {**CONTINUATION, "prior": prior, "maxfev0": 8, "maxfev_step": 4}
+    full = _Continuer(evs, s)(starts)
+    half = _halving_search(evs, starts, s, map)
+    lead = int(np.argmax(full.loglik))
+    assert int(np.argmax(half.loglik)) == lead == 1
+    assert half.loglik[lead] == full.loglik[lead] and half.extra[lead].tobytes() == full.extra[lead].tobytes()
+    for i in (0, 2):                              # far from the optimum: dropped after the first window
+        assert half.loglik[i] == evs[-1](starts[i][None, :]).loglik[0]
+    assert half.extra[:, 2].sum() < full.extra[:, 2].sum()
+
+
 def test_continued_fit_estimates_the_evidence_from_the_found_mode(scaled_problem):
     found = continuation_search(scaled_problem, "scale", seed=4, **SMALL)
     z, se, post = continued_fit(scaled_problem, found, "scale", n_particles=12, seed=2)

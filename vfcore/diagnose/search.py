@@ -43,7 +43,7 @@ __all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "wi
 #: error) the frame-rate search kept two and ended at log L -830.6; with four (another design) it
 #: reached -481.1, and three of the four starts ended above -572.
 CONTINUATION = {"n_design": 256, "n_keep": 4, "cycles0": 3.0, "maxfev0": 30, "maxfev_step": 25,
-                "step0": 0.05, "step_ratio": 4.0, "step_min": 5e-4}
+                "step0": 0.05, "step_ratio": 4.0, "step_min": 5e-4, "halving": False}
 
 
 def windows(n: int, frames_per_cycle: float, cycles0: float = 3.0) -> list[int]:
@@ -89,6 +89,42 @@ def model_prior(problem: Problem, extension: str | None, integrate: bool = True)
     return ExtendedPrior(bounds={}, base=problem.prior, extension=extension, integrate=bool(integrate))
 
 
+def _polish(ev, u: np.ndarray, k: int, last: bool, s: dict, lo, width, state: list) -> np.ndarray:
+    """Nelder-Mead polish of the start ``u`` (unit coordinates) on window ``k``'s evaluator ``ev``;
+    returns the new point. ``state = [n, best_v, best_u]`` is updated in place: simulations made,
+    and on the last window the best value seen and its point."""
+    from scipy.optimize import minimize
+    d = u.size
+
+    def f(z):
+        if np.any(z < 0.0) or np.any(z > 1.0):
+            return 1e300
+        state[0] += 1
+        v = float(ev((lo + z * width)[None, :]).loglik[0])
+        if last and v > state[1]:
+            state[1], state[2] = v, np.array(z, dtype=float)
+        return -v if math.isfinite(v) else 1e300
+    step = max(s["step0"] / s["step_ratio"] ** k, s["step_min"])
+    simplex = np.vstack([u] + [np.clip(u + step * e, 0.0, 1.0) if u[j] + step <= 1.0 else u - step * e
+                               for j, e in enumerate(np.eye(d))])
+    r = minimize(f, u, method="Nelder-Mead",
+                 options={"maxfev": int(s["maxfev0"] + s["maxfev_step"] * k),
+                          "initial_simplex": simplex, "xatol": 1e-7, "fatol": 1e-6})
+    state.append(float(r.fun))                 # the window's optimum (minimised), read by the halving
+    if math.isfinite(r.fun) and r.fun < 1e299:
+        return np.clip(r.x, 0.0, 1.0)
+    return u
+
+
+def _start_state(ev_last, u0: np.ndarray, lo, width) -> tuple[np.ndarray, list]:
+    """A start clipped to the unit box and its own whole-window value: the search never returns
+    less than its start (a start already fitted to the whole window can drift on the short first
+    window)."""
+    u = np.clip(u0, 0.0, 1.0)
+    v0 = float(ev_last((lo + u * width)[None, :]).loglik[0])
+    return u, [1, v0 if math.isfinite(v0) else -math.inf, u.copy()]
+
+
 class _Continuer:
     """Picklable batch function: each row is a start in unit coordinates; returns an Evaluation
     whose ``loglik`` is the best whole-window log-likelihood reached from it and whose ``extra``
@@ -99,7 +135,6 @@ class _Continuer:
         self.s = settings
 
     def __call__(self, starts) -> Evaluation:
-        from scipy.optimize import minimize
         starts = np.atleast_2d(np.asarray(starts, dtype=float))
         k_all = len(self.evaluators)
         prior = self.s["prior"]
@@ -108,34 +143,58 @@ class _Continuer:
         out_ll = np.full(len(starts), -np.inf)
         extra = np.full((len(starts), d + 1), np.nan)
         for i, u0 in enumerate(starts):
-            u = np.clip(u0, 0.0, 1.0)
-            # the start's own whole-window value: the search never returns less than its start
-            # (a start already fitted to the whole window can drift on the short first window)
-            v0 = float(self.evaluators[-1]((lo + u * width)[None, :]).loglik[0])
-            n = 1
-            best = (v0 if math.isfinite(v0) else -math.inf, u.copy())
+            u, state = _start_state(self.evaluators[-1], u0, lo, width)
             for k, ev in enumerate(self.evaluators):
-                def f(z, ev=ev, last=(k == k_all - 1)):
-                    nonlocal n, best
-                    if np.any(z < 0.0) or np.any(z > 1.0):
-                        return 1e300
-                    n += 1
-                    v = float(ev((lo + z * width)[None, :]).loglik[0])
-                    if last and v > best[0]:
-                        best = (v, np.array(z, dtype=float))
-                    return -v if math.isfinite(v) else 1e300
-                step = max(self.s["step0"] / self.s["step_ratio"] ** k, self.s["step_min"])
-                simplex = np.vstack([u] + [np.clip(u + step * e, 0.0, 1.0) if u[j] + step <= 1.0 else u - step * e
-                                           for j, e in enumerate(np.eye(d))])
-                r = minimize(f, u, method="Nelder-Mead",
-                             options={"maxfev": int(self.s["maxfev0"] + self.s["maxfev_step"] * k),
-                                      "initial_simplex": simplex, "xatol": 1e-7, "fatol": 1e-6})
-                if math.isfinite(r.fun) and r.fun < 1e299:
-                    u = np.clip(r.x, 0.0, 1.0)
-            out_ll[i] = best[0]
-            extra[i, :d] = best[1]
-            extra[i, d] = n
+                u = _polish(ev, u, k, k == k_all - 1, self.s, lo, width, state)
+            out_ll[i] = state[1]
+            extra[i, :d] = state[2]
+            extra[i, d] = state[0]
         return Evaluation(loglik=out_ll, ok=np.isfinite(out_ll), extra=extra)
+
+
+class _WindowStep:
+    """Picklable batch function of the halving search: one window's polish of each start. A row is
+    ``[u (d), n, best_v, best_u (d)]`` (``n = 0``: a new start, whose whole-window value is taken
+    first); returns the updated rows in ``extra`` and the window's optimum in ``loglik``."""
+
+    def __init__(self, evaluators, k: int, settings: dict):
+        self.evaluators, self.k, self.s = evaluators, k, settings
+
+    def __call__(self, rows) -> Evaluation:
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        prior = self.s["prior"]
+        lo, width = prior.lo, prior.width
+        d = lo.size
+        last = self.k == len(self.evaluators) - 1
+        out = np.empty_like(rows)
+        val = np.full(len(rows), -np.inf)
+        for i, row in enumerate(rows):
+            if row[d] == 0:
+                u, state = _start_state(self.evaluators[-1], row[:d], lo, width)
+            else:
+                u, state = row[:d].copy(), [int(row[d]), float(row[d + 1]), row[d + 2:].copy()]
+            u = _polish(self.evaluators[self.k], u, self.k, last, self.s, lo, width, state)
+            out[i, :d], out[i, d], out[i, d + 1], out[i, d + 2:] = u, state[0], state[1], state[2]
+            val[i] = -state[3] if state[3] < 1e299 else -np.inf
+        return Evaluation(loglik=val, ok=np.isfinite(val), extra=out)
+
+
+def _halving_search(evs, chosen: np.ndarray, s: dict, map) -> Evaluation:
+    """The starts polished window by window; after each window but the last only the better half
+    of them (by that window's optimum, at least one) goes on. Returns, per start, the same
+    ``Evaluation`` as :class:`_Continuer` (a dropped start keeps the best it had: ``-inf`` unless
+    its whole-window start value was finite) with its simulations."""
+    d = s["prior"].ndim
+    rows = np.hstack([chosen, np.zeros((len(chosen), 1)), np.full((len(chosen), 1), -np.inf), chosen])
+    alive = np.arange(len(chosen))
+    for k in range(len(evs)):
+        res = map_evaluate(_WindowStep(evs, k, s), rows[alive], map=map, chunk_size=1)
+        rows[alive] = res.extra
+        if k < len(evs) - 1 and len(alive) > 1:
+            order = np.argsort(-res.loglik, kind="stable")
+            alive = np.sort(alive[order[: max(1, math.ceil(len(alive) / 2))]])
+    ll = rows[:, d + 1]
+    return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=np.hstack([rows[:, d + 2:], rows[:, d:d + 1]]))
 
 
 @dataclass
@@ -188,7 +247,10 @@ def continuation_search(problem: Problem, extension: str | None = None, *, start
         chosen.append(np.clip((th - prior.lo) / prior.width, 0.0, 1.0))
     if not chosen:
         return SearchResult(tuple(prior.names), np.full(d, np.nan), -math.inf, n_sims, [p.n_compare for p in probs])
-    res = map_evaluate(_Continuer(evs, {**s, "prior": prior}), np.array(chosen), map=map, chunk_size=1)
+    if s["halving"]:
+        res = _halving_search(evs, np.array(chosen), {**s, "prior": prior}, map)
+    else:
+        res = map_evaluate(_Continuer(evs, {**s, "prior": prior}), np.array(chosen), map=map, chunk_size=1)
     n_sims += int(np.nansum(res.extra[:, d]))
     j = int(np.argmax(res.loglik))
     theta = prior.lo + res.extra[j, :d] * prior.width
