@@ -117,9 +117,12 @@ def run(a) -> None:
                                max_refits=a.max_refits or None, refit_particles=a.refit_particles,
                                base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
-                               shared_mode=a.shared_mode, continuation=a.continuation)
+                               shared_mode=a.shared_mode, continuation=a.continuation,
+                               continuation_options={"halving": True} if a.halving else None)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
+            d["runner"] = {"continuation": a.continuation, "halving": a.halving, "shared_mode": a.shared_mode,
+                           "seed": a.seed, "noise": a.noise, "lag_search": a.lag_search}
             if store is not None:          # a resumed case: its earlier attempts' wall time counted in
                 account(d, inner)
             plot_diagnosis(rep, pb, out / f"case_{case['id']}.png")
@@ -202,6 +205,9 @@ def main(argv=None) -> int:
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
+    ap.add_argument("--halving", action="store_true",
+                    help="continuation search with successive halving of its starts (off by default; "
+                         "docs/diagnose.md section 4)")
     ap.add_argument("--continuation", action=argparse.BooleanOptionalAction, default=CONTINUATION,
                     help="search the base and every entry by window continuation and fit from the optimum too "
                          "(diagnose(continuation=...); default: vfcore.diagnose.defaults.CONTINUATION)")
