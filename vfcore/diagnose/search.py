@@ -89,9 +89,9 @@ def model_prior(problem: Problem, extension: str | None, integrate: bool = True)
     return ExtendedPrior(bounds={}, base=problem.prior, extension=extension, integrate=bool(integrate))
 
 
-def _polish(ev, u: np.ndarray, k: int, last: bool, s: dict, lo, width, state: list) -> np.ndarray:
+def _polish(ev, u: np.ndarray, k: int, last: bool, s: dict, lo, width, state: list) -> tuple[np.ndarray, float]:
     """Nelder-Mead polish of the start ``u`` (unit coordinates) on window ``k``'s evaluator ``ev``;
-    returns the new point. ``state = [n, best_v, best_u]`` is updated in place: simulations made,
+    returns the new point and the window's optimum (``-inf`` if none was finite). ``state = [n, best_v, best_u]`` is updated in place: simulations made,
     and on the last window the best value seen and its point."""
     from scipy.optimize import minimize
     d = u.size
@@ -110,10 +110,9 @@ def _polish(ev, u: np.ndarray, k: int, last: bool, s: dict, lo, width, state: li
     r = minimize(f, u, method="Nelder-Mead",
                  options={"maxfev": int(s["maxfev0"] + s["maxfev_step"] * k),
                           "initial_simplex": simplex, "xatol": 1e-7, "fatol": 1e-6})
-    state.append(float(r.fun))                 # the window's optimum (minimised), read by the halving
     if math.isfinite(r.fun) and r.fun < 1e299:
-        return np.clip(r.x, 0.0, 1.0)
-    return u
+        return np.clip(r.x, 0.0, 1.0), -float(r.fun)
+    return u, -math.inf
 
 
 def _start_state(ev_last, u0: np.ndarray, lo, width) -> tuple[np.ndarray, list]:
@@ -145,7 +144,7 @@ class _Continuer:
         for i, u0 in enumerate(starts):
             u, state = _start_state(self.evaluators[-1], u0, lo, width)
             for k, ev in enumerate(self.evaluators):
-                u = _polish(ev, u, k, k == k_all - 1, self.s, lo, width, state)
+                u, _ = _polish(ev, u, k, k == k_all - 1, self.s, lo, width, state)
             out_ll[i] = state[1]
             extra[i, :d] = state[2]
             extra[i, d] = state[0]
@@ -173,9 +172,8 @@ class _WindowStep:
                 u, state = _start_state(self.evaluators[-1], row[:d], lo, width)
             else:
                 u, state = row[:d].copy(), [int(row[d]), float(row[d + 1]), row[d + 2:].copy()]
-            u = _polish(self.evaluators[self.k], u, self.k, last, self.s, lo, width, state)
+            u, val[i] = _polish(self.evaluators[self.k], u, self.k, last, self.s, lo, width, state)
             out[i, :d], out[i, d], out[i, d + 1], out[i, d + 2:] = u, state[0], state[1], state[2]
-            val[i] = -state[3] if state[3] < 1e299 else -np.inf
         return Evaluation(loglik=val, ok=np.isfinite(val), extra=out)
 
 
