@@ -62,6 +62,25 @@ def test_locate_peak_residual_goes_to_peak():
     assert rep.energy_share["closed"] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_locate_constant_offset_is_spread_over_the_cycle():
+    """A constant offset has concentration 1 in every phase: no phase is named, and the fraction of
+    the residual removed is taken over the whole cycle (halving the offset removes 3/4 of it)."""
+    from vfcore.diagnose import SPREAD
+    base = gaw_like()
+    obs = base + 1.0
+    rep = locate(obs, base, FPS)
+    assert rep.dominant_phase == SPREAD
+    assert all(c == pytest.approx(1.0) for c in rep.concentration().values())
+    after = locate(obs, base + 0.5, FPS)
+    assert residual_removed(rep, after) == pytest.approx(0.75)
+    # a residual 1.5x as energetic per sample in the peak phase is concentrated there
+    codes, _ = phase_labels(obs, FPS)
+    bump = np.where(codes == 2, math.sqrt(1.5 * 1.0), 1.0)
+    rep2 = locate(base + bump, base, FPS)
+    assert rep2.concentration()["peak"] > 1.25 and rep2.dominant_phase == "peak"
+    assert locate(base + bump, base, FPS, min_concentration=2.0).dominant_phase == SPREAD
+
+
 # ------------------------------------------------------------------ p-values
 def _ensemble(rng, k):
     oqs = rng.uniform(0.5, 0.7, k)

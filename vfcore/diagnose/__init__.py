@@ -1,13 +1,13 @@
 """Find the missing physics (first slice): locate a fit/recording mismatch on the glottal cycle,
 a catalogue of optional model extensions, and an evidence-based ranking. See docs/diagnose.md."""
 from .extensions import CATALOGUE, Extension, ExtParam, get, implemented, matching
-from .locate import (DEFAULT_MEASURES, PHASES, LocateReport, MeasureCheck, from_posterior, locate,
+from .locate import (DEFAULT_MEASURES, PHASES, SPREAD, LocateReport, MeasureCheck, from_posterior, locate,
                      measure_pvalues, noise_sd, phase_labels, predictive_measures)
 from .rank import NO_FINDING, CandidateRow, RankReport, compare_fits, rank_extensions, residual_removed
 
 __all__ = [
     "CATALOGUE", "Extension", "ExtParam", "get", "implemented", "matching",
-    "DEFAULT_MEASURES", "PHASES", "LocateReport", "MeasureCheck", "from_posterior", "locate", "measure_pvalues", "noise_sd",
+    "DEFAULT_MEASURES", "PHASES", "SPREAD", "LocateReport", "MeasureCheck", "from_posterior", "locate", "measure_pvalues", "noise_sd",
     "phase_labels", "predictive_measures",
     "NO_FINDING", "CandidateRow", "RankReport", "compare_fits", "rank_extensions", "residual_removed",
 ]

@@ -21,7 +21,12 @@ Residual ``r = y - mean_k(pred_k)`` (observation minus posterior-predictive mean
 we report the RMS of ``r`` over the phase's samples and the *share of residual energy*
 ``sum_phase r^2 / sum_classified r^2`` (shares over the four phases sum to 1), and the
 *time share* (fraction of classified samples in the phase), so ``energy_share / time_share``
-> 1 marks a phase where the residual is concentrated. The folded profile averages ``r`` in
+> 1 marks a phase where the residual is concentrated. The *dominant phase* is the phase of largest
+concentration when that concentration is at least ``min_concentration`` (default 1.25);
+otherwise the residual is spread over the cycle and ``dominant_phase`` is :data:`SPREAD`
+("whole cycle"). A constant offset (a leak the model lacks, a scale error of the area floor) has
+concentration 1 in every phase, and naming the phase that happens to lead by a few per cent
+would point the reader at a place in the cycle the mismatch does not prefer. The folded profile averages ``r`` in
 ``n_bins`` bins of normalised cycle phase ``(i - b[k]) / (b[k+1] - b[k])``.
 
 Posterior-predictive p-values (Gelman, Meng & Stern 1996, Statistica Sinica 6:733-807)
@@ -59,6 +64,8 @@ import numpy as np
 from ..measures import DEFAULT_LEVEL, cycle_boundaries, gaw_measures
 
 PHASES = ("closed", "opening", "peak", "closing")
+SPREAD = "whole cycle"          # dominant_phase when no phase holds a concentrated residual
+MIN_CONCENTRATION = 1.25
 _CODE = {p: i for i, p in enumerate(PHASES)}  # none = -1
 
 #: Measures tested by default (keys of ``gaw_measures``), the issue's list.
@@ -104,7 +111,7 @@ class LocateReport:
     time_share: dict[str, float]
     n_samples: dict[str, int]
     total_rms: float
-    dominant_phase: str | None
+    dominant_phase: str | None      # a phase of PHASES, SPREAD, or None when the residual is 0
     fold_phase: np.ndarray = field(repr=False)     # (n_bins,) bin centres in [0, 1)
     fold_mean: np.ndarray = field(repr=False)      # (n_bins,) mean residual per bin (nan if empty)
     residual: np.ndarray = field(repr=False)       # (n,)
@@ -130,7 +137,7 @@ def _mean_prediction(pred) -> np.ndarray:
 
 
 def locate(obs, pred, fps: float, *, level: float = DEFAULT_LEVEL, peak_level: float = 0.9,
-           n_bins: int | None = None) -> LocateReport:
+           n_bins: int | None = None, min_concentration: float = MIN_CONCENTRATION) -> LocateReport:
     """Phase-folded residual analysis of ``obs`` (n,) against ``pred`` ((k, n) ensemble or (n,) mean).
 
     ``n_bins`` of the folded profile defaults to min(50, shortest cycle in samples), so every bin
@@ -155,6 +162,8 @@ def locate(obs, pred, fps: float, *, level: float = DEFAULT_LEVEL, peak_level: f
     if e_tot > 0:
         conc = {p: share[p] / tshare[p] for p in PHASES if tshare[p] > 0}
         dom = max(conc, key=conc.get) if conc else None
+        if dom is not None and conc[dom] < min_concentration:
+            dom = SPREAD
     # fold
     if n_bins is None:
         n_bins = int(min(50, np.diff(b).min())) if b.size > 1 else 1

@@ -38,7 +38,7 @@ from ..inference.posterior import Posterior
 from ..inference.problem import Problem, aligned_loglik
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
-from .locate import LocateReport, locate, measure_pvalues, noise_sd
+from .locate import PHASES, LocateReport, locate, measure_pvalues, noise_sd
 from .progress import ProgressTracker
 from .rank import (NO_FINDING, RankReport, local_passes, null_consistent, prefer_nested, prefer_parsimonious,
                    promote_local, rank_best_of_base, rank_extensions, residual_removed)
@@ -924,8 +924,9 @@ def plot_diagnosis(report: DiagnoseReport, problem: Problem, path, level: float 
         rms = math.sqrt(float(np.mean((y[:n] - g.mean(axis=0)) ** 2)))
         a1.plot(t[:n], g.mean(axis=0), color=c, lw=1, label=f"{label} fit (RMS {rms:.2f} mm$^2$)")
         loc = locate(y[:n], g, problem.fps)
-        a2.plot(loc.fold_phase, loc.fold_mean, color=c, marker="o", ms=3, label=f"{label}: residual, "
-                f"dominant phase {loc.dominant_phase}")
+        where = (f"dominant phase {loc.dominant_phase}" if loc.dominant_phase in PHASES
+                 else "spread over the cycle")
+        a2.plot(loc.fold_phase, loc.fold_mean, color=c, marker="o", ms=3, label=f"{label}: residual, {where}")
     a1.set_xlabel("time (ms)")
     a1.set_ylabel("glottal area (mm$^2$)")
     import textwrap

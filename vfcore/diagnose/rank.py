@@ -105,13 +105,19 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
 def residual_removed(before, after, phase: str | None = None) -> float:
     """Fraction of the residual energy in ``phase`` (default: ``before.dominant_phase``) that the
     extended fit removes, from two :class:`.locate.LocateReport` computed on the same observation.
+    ``phase`` :data:`.locate.SPREAD` ("whole cycle") takes the energy of every classified sample.
     Negative when the extension makes that phase worse."""
     phase = phase or before.dominant_phase
     if phase is None:
         return math.nan
-    eb = before.phase_rms[phase] ** 2 * before.n_samples[phase]
-    ea = after.phase_rms[phase] ** 2 * after.n_samples[phase]
+    eb, ea = _phase_energy(before, phase), _phase_energy(after, phase)
     return float(1.0 - ea / eb) if eb > 0 else math.nan
+
+
+def _phase_energy(rep, phase: str) -> float:
+    from .locate import PHASES, SPREAD
+    phases = PHASES if phase == SPREAD else (phase,)
+    return float(sum(rep.phase_rms[p] ** 2 * rep.n_samples[p] for p in phases if rep.n_samples[p] > 0))
 
 
 @dataclass(frozen=True)
