@@ -13,7 +13,20 @@ if [ ! -e /work/runs/regenS9/truth.json ]; then
   (cd /work/wt7 && PYTHONPATH=/work/wt7 $MAIN/.venv/bin/python -m benchmarks.concealed.generate \
      --out /work/runs/regenS9 --seed 9 --workers 2 > /work/runs/regenS9.unread.log 2>&1)
 fi
-(cd /work/runs/regenS9 && grep -v audit $R/sha256sums.txt | sha256sum -c -)   # all must say OK
+# the recordings and cases.json must match byte for byte (the same random draws, so the same labels)
+(cd /work/runs/regenS9 && grep -v -e audit -e truth $R/sha256sums.txt | sha256sum -c --quiet -)
+# truth.json/npz regenerated in stop 33 differed in their bytes (PROTOCOL.md): say so, and check that
+# the recordings the truth holds are the committed ones to their 6 printed decimals
+(cd /work/runs/regenS9 && grep truth $R/sha256sums.txt | sha256sum -c -) || echo "truth files differ in their bytes"
+$MAIN/.venv/bin/python - <<'PY'
+import json, numpy as np
+z = np.load("/work/runs/regenS9/truth.npz")
+cases = json.load(open("/work/runs/concealedS9/cases.json"))["cases"]
+d = max(float(np.max(np.abs(z[f"noisy_{c['id']}"] - np.loadtxt(f"/work/runs/concealedS9/{c['file']}", skiprows=1))))
+        for c in cases)
+print(f"largest difference between truth.npz's recordings and the committed CSVs: {d:.2e} mm^2")
+assert d <= 5.1e-7, "the regenerated truth is not of the committed recordings"
+PY
 cp /work/runs/regenS9/truth.json /work/runs/regenS9/truth.npz $C/
 cp $R/audit.json $C/
 cd /work/wt9d && PYTHONPATH=/work/wt9d $MAIN/.venv/bin/python benchmarks/bench_diagnose.py \
