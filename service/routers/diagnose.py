@@ -117,7 +117,6 @@ def dask_map(client, stop: threading.Event | None = None, stopping: threading.Ev
     so a cancel takes effect within a poll, not after the batch in flight."""
     if client is None:
         return map
-    from distributed import TimeoutError as DaskTimeout
 
     def _check():
         if stop is not None and stop.is_set():
@@ -129,14 +128,15 @@ def dask_map(client, stop: threading.Event | None = None, stopping: threading.Ev
         futures = client.map(fn, list(xs), pure=False)
         try:
             for fut in futures:
-                while True:
+                # Wait on a local event, not on fut.result(timeout=...): in distributed 2026.8 a
+                # result() whose timeout races the result's arrival can end in UnboundLocalError
+                # (its sync() lets a CancelledError of the timed-out wait through), seen under load.
+                done = threading.Event()
+                fut.add_done_callback(lambda _f, done=done: done.set())
+                _check()
+                while not done.wait(POLL_S):
                     _check()
-                    try:
-                        value = fut.result(timeout=POLL_S)
-                        break
-                    except DaskTimeout:
-                        continue
-                yield value
+                yield fut.result()
         finally:                      # stopped early, failed or cancelled: drop what is left
             left = [f for f in futures if not f.done()]
             if left:
