@@ -12,10 +12,13 @@ export MPLBACKEND := Agg
 
 .PHONY: install test demo bench meshes clean
 
-$(VENV)/.installed: pyproject.toml
+# Installs exactly the committed lock (hashes checked), then the project itself
+# without resolving anything: a fresh clone gets the versions CI tested.
+$(VENV)/.installed: pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[dev]"
+	$(PY) -m pip install -q --require-hashes --no-deps -r requirements.lock
+	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
+	$(PY) -m pip check
 	touch $@
 
 install: $(VENV)/.installed

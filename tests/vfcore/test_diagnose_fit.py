@@ -250,7 +250,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     rep = pipeline.diagnose(pb, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
     assert calls == ["sep_ratio", "sep_ratio"], calls
     res = rep.after["sep_ratio"]["rescued"]
-    lo, hi = res["box"]["E_cover"]
+    lo, hi = res["boxes"][0]["E_cover"]
     m, h = float(rep.base.mean[0]), 0.15 * (950.0 - 250.0)     # +- 15 % of the prior width, clipped to it
     assert abs(lo - max(250.0, m - h)) < 1e-9 and abs(hi - min(950.0, m + h)) < 1e-9
     assert res["first_log_evidence"] < float(rep.base.log_evidence) - 1000.0
@@ -275,8 +275,10 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     with a hidden 12 % scale error and the first scale refit made to fail: it is refitted by an SMC
     started from the base posterior (stop 19, the default), and scale is named with its value
     recovered. The base absorbed part of the scale with a softer cover (E_cover ~477 against the
-    true 636); the stop-17 box rescue (+-15 % of the prior width, +-105 kPa, around it) stops short
-    of 636 and leaves the scale biased low, the reference-started refit has no box and is not.
+    true 636); the box rescue's first box (+-15 % of the prior width around it) stops short of 636.
+    A fit truncated by that box leaves the scale biased low with a residual gain at the naming
+    threshold, a verdict decided by the last bits of the arithmetic; the box is therefore re-centred
+    until the posterior is off its edges, and both rescues recover the truth.
     With ``rescue_observation=False`` the failed refit stays and nothing is named."""
     from vfcore.diagnose import pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
@@ -306,9 +308,12 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     calls.clear()
     box = pipeline.diagnose(pb, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_method="box")
     assert calls == ["scale", "scale"] and box.winner == "scale"
+    boxes = box.after["scale"]["rescued"]["boxes"]
+    assert boxes[0]["E_cover"][1] < TABLE3.E_cover                 # the first box cut the mode off
     lo, hi = box.after["scale"]["rescued"]["box"]["E_cover"]
-    assert hi < TABLE3.E_cover
-    assert 1.05 < box.after["scale"]["params"]["scale"]["mean"] < 1.15
+    assert len(boxes) > 1 and lo < TABLE3.E_cover < hi            # the last one holds it
+    assert abs(box.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
+    assert box.after["scale"]["rms_improvement"] > 0.45           # far from the 30 % naming threshold
     calls.clear()
     off = pipeline.diagnose(pb, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
     assert calls == ["scale"] and "rescued" not in off.after["scale"]
