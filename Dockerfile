@@ -13,13 +13,15 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONPATH=/app
 
 WORKDIR /app
-# dependencies first (layer cache): the root pyproject.toml is the single source of them
+# dependencies first (layer cache): exactly the committed lock, hashes checked, as `make install` does
+COPY requirements.lock ./
+RUN pip install --require-hashes --no-deps -r requirements.lock
 COPY pyproject.toml README.md ./
 COPY vfcore ./vfcore
 COPY vfvideo ./vfvideo
 COPY worker ./worker
 COPY service ./service
-RUN pip install --upgrade pip && pip install . \
+RUN pip install --no-deps --no-build-isolation . \
     && useradd --create-home --uid 1000 vf \
     && mkdir -p /data && chown vf:vf /data
 USER vf
