@@ -64,9 +64,11 @@ class WarmUpPlugin(WorkerPlugin):
 
     name = "vfinfer-warm-up"
 
-    def setup(self, worker) -> None:
+    async def setup(self, worker) -> None:
+        # compiling takes seconds: off the worker's event loop, which must keep answering the scheduler
+        import asyncio
         try:
-            warm_up()
+            await asyncio.to_thread(warm_up)
         except Exception:  # noqa: BLE001 - warming is an optimisation only
             pass
 

@@ -87,6 +87,11 @@ def test_compose_file_wires_scheduler_workers_and_api_together():
 
     assert "scheduler" in _depends(wrk)
     assert "scheduler" in _depends(api)
+    # workers and API wait for the scheduler's healthcheck, which must probe the port its HTTP
+    # server (the dashboard address) listens on, or they would never start
+    dash_port = _arg(sch_cmd, "--dashboard-address").rsplit(":", 1)[1]
+    assert f"localhost:{dash_port}/health" in " ".join(sch["healthcheck"]["test"])
+    assert f"localhost:{_arg(api_cmd, '--port')}/health" in " ".join(api["healthcheck"]["test"])
 
     # a lost worker's chunks are retried, not failed: the scheduler reads this (the fault test
     # below sets it the same way), and the processes keep one math thread each
@@ -144,26 +149,22 @@ class Procs:
                          for p, log in self.procs)
 
     def stop_all(self) -> None:
-        # the API first, so its client leaves before the scheduler goes; then workers, scheduler
+        # newest first, one at a time: the API's client disconnects before the scheduler goes (no
+        # reconnect loop at shutdown), and workers leave before the scheduler they report to
         for p, _ in reversed(self.procs):
-            if p.poll() is None:
+            for sig, wait in ((signal.SIGTERM, 10), (signal.SIGKILL, 10)):
                 try:
-                    os.killpg(p.pid, signal.SIGTERM)
+                    os.killpg(p.pid, sig)            # the whole group: nanny, worker, resource tracker
                 except ProcessLookupError:
                     pass
-        deadline = time.time() + 15
-        for p, _ in reversed(self.procs):
+                try:
+                    p.wait(wait)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
             try:
-                p.wait(max(0.1, deadline - time.time()))
-            except subprocess.TimeoutExpired:
-                pass
-            try:
-                os.killpg(p.pid, signal.SIGKILL)         # stragglers and any child left in the group
+                os.killpg(p.pid, signal.SIGKILL)     # a child that outlived its leader
             except ProcessLookupError:
-                pass
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
                 pass
 
 
@@ -260,7 +261,6 @@ def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive
             httpx.Client(base_url=dep["url"], timeout=60) as http, \
             Client(dep["address"], set_as_default=False, timeout=30) as observer:
         procs: Procs = dep["procs"]
-        print("T up", time.time()-t_start)
         stores = dep["data"] / "stores"
         try:
             # the same job on the in-process LocalCluster (reference) and on the process cluster
@@ -275,26 +275,26 @@ def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive
 
             # again, and SIGKILL the process group of a worker that is running one of its chunks:
             # nanny and worker process die together, as when a worker container is killed
-            print("T job1", time.time()-t_start)
             job2 = _submit(http, SPEC)
             t0 = time.time()
             killed = None
             while killed is None:
+                now = http.get(f"/jobs/{job2}", headers=auth("alice")).json()
+                assert now["state"] in ("queued", "running"), f"job ended before a worker could be killed: {now}"
                 assert time.time() - t0 < 60, "job never had a chunk running on a worker"
-                if http.get(f"/jobs/{job2}", headers=auth("alice")).json()["progress"]["simulations_done"] >= 96:
+                if now["progress"]["simulations_done"] >= 96:            # chunks written: mid-job
                     busy = [w for w, keys in observer.processing().items()
                             if any(f"vfchunk-{job2}" in str(k) for k in keys)]
                     if busy:
                         pid = observer.run(os.getpid, workers=[busy[0]])[busy[0]]
                         group = os.getpgid(pid)
-                        victim = next(p for p in dep["workers"] if p.pid == group)
+                        victim = {p.pid: p for p in dep["workers"]}.get(group)
+                        assert victim is not None, f"busy worker {busy[0]} is not one this test started"
                         os.killpg(group, signal.SIGKILL)
                         victim.wait(30)
                         killed = busy[0]
                 time.sleep(0.02)
-            print("T kill", time.time()-t_start)
             st2 = wait_done(http, job2, "alice", timeout=120)
-            print("T job2", time.time()-t_start)
             assert st2["state"] == "done", st2
             assert st2["progress"]["simulations_done"] == 480
             # one run of all 20 chunks: the lost chunk was retried by the scheduler, not resumed by the API
@@ -305,5 +305,4 @@ def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive
         except BaseException:
             print(procs.logs())                   # shown by pytest on failure only
             raise
-    print("T end", time.time()-t_start)
     print(f"\nprocess cluster test: {time.time() - t_start:.1f} s")
