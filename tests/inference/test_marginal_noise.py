@@ -73,6 +73,7 @@ def test_problem_validates_and_round_trips_the_noise_model():
             Problem(pb.obs_gaw, 4000.0, pb.prior, noise="marginal", sigma_bounds=bad, config=pb.config)
 
 
+@pytest.mark.slow
 def test_intervals_are_calibrated_when_the_noise_level_is_unknown():
     """The toy model (worker/toy.py, scored by vfcore's own likelihood) at the truth, with noise of
     sd 3 mm^2 where Problem assumes sigma_e = 1: with the fixed sigma_e the 90 % intervals are about

@@ -25,6 +25,7 @@ ESTIMATED = ("E_body", "E_cover")
 N_PARTICLES = 80
 
 
+@pytest.mark.slow
 def test_fe_twin_recovers_truth_within_2_sigma():
     try:
         from vfcore.forward import simulate  # noqa: F401

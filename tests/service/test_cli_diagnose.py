@@ -59,6 +59,7 @@ def test_missing_and_invalid_gaw_exit_2(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     out = tmp_path / "out"
     r = _invoke([str(leaky_gaw), "--out", str(out), *TINY, "--estimate", "E_cover", "--particles", "20",

@@ -74,6 +74,7 @@ def leaky_spec():
             "chunk_size": 8, **cfg}
 
 
+@pytest.mark.slow
 def test_diagnose_finished_fe_job(service, leaky_spec):
     http = service.http
     r = http.post("/jobs", json=leaky_spec, headers=auth("alice"))

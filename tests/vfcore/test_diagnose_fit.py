@@ -102,6 +102,7 @@ def test_extended_likelihood_equals_base_at_the_null_extension(base_run):
     assert np.all(np.isfinite(base))
 
 
+@pytest.mark.slow
 def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(base_run):
     """Blind runs (small but real): a 1.5 mm^2 leak is named with a large evidence gain and a >= 30 %
     smaller residual; the same recording without the leak gives 'no missing physics found'."""
@@ -204,6 +205,7 @@ def test_box_refit_of_an_extension_recovers_it_and_bounds_its_evidence(base_run)
     assert abs(zb - (near.log_evidence + want)) < 1e-9 and sb > 0
 
 
+@pytest.mark.slow
 def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run):
     """Blind run with a 12 % scale error where only the best-screened observation-level entry is
     refitted: the asymmetry screens first (it contains every scale), its fit sits at zero phase
@@ -221,6 +223,7 @@ def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
 
 
+@pytest.mark.slow
 def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, monkeypatch):
     """Blind run with a hidden separation ratio (1.1 against the model's 1.3). The first
     separation-ratio refit is made to fail as a sampler that missed the mode does (its evidence
@@ -269,6 +272,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     assert float(rep.refits["sep_ratio"].log_evidence) <= float(rep2.refits["sep_ratio"].log_evidence) + 3 * se
 
 
+@pytest.mark.slow
 def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_region(base_run, monkeypatch):
     """Stop 17: an observation-level entry is the base model at its null value too (scale 1), so a
     scale refit ending thousands of nats below the base is a sampler failure as well. Blind run
@@ -320,6 +324,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     assert off.winner is None
 
 
+@pytest.mark.slow
 def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base_run, monkeypatch):
     """Stop 27, blind runs. A hidden 12 % scale error; the asymmetry entry can reproduce it (in
     phase, amplitude ratio 1.24), but its first refit is made to end as a sampler stuck near the
@@ -368,6 +373,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     assert float(off.refits["asymmetry"].log_evidence) == pytest.approx(base_z["z"] + 1.0)
 
 
+@pytest.mark.slow
 def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(base_run,
                                                                                                  monkeypatch):
     """Stop 25, blind runs through the whole pipeline. The base fit is made to look as it does on

@@ -166,6 +166,7 @@ def test_a_map_that_drops_results_is_an_error(tmp_path):
         CachedMap(lambda fn, parts: [fn(p) for p in parts[:2]], tmp_path)(_Square(), _parts())
 
 
+@pytest.mark.slow
 def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     """A small blind diagnosis (a recording seen 10 % too large; continuation search on) run
     through the store, interrupted part-way in a second run, resumed in a third: the third reads
