@@ -29,15 +29,53 @@ def _kv(items: list[str] | None, what: str) -> dict[str, str]:
     return out
 
 
+def _fail(msg: str) -> typer.Exit:
+    console.print(f"[red]error:[/red] {msg}", highlight=False)
+    return typer.Exit(2)
+
+
+def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:
+    """``--measure NAME=MEAN:SD`` (paper units, repeatable) -> ``{name: [mean, sd]}``; bad input raises
+    ``typer.Exit(2)`` after one ``error:`` line."""
+    import math
+
+    from vfcore.params import PARAM_NAMES, PARAM_UNITS
+    out: dict[str, list[float]] = {}
+    for it in items or []:
+        name, sep, rest = it.partition("=")
+        name = name.strip()
+        mean_s, sep2, sd_s = rest.partition(":")
+        if not sep or not sep2:
+            raise _fail(f"--measure must look like NAME=MEAN:SD (paper units, e.g. p_sub=1000:50), got {it!r}")
+        if name not in PARAM_NAMES:
+            raise _fail(f"--measure: unknown parameter {name!r}; known: {', '.join(PARAM_NAMES)}")
+        try:
+            mean, sd = float(mean_s), float(sd_s)
+        except ValueError:
+            raise _fail(f"--measure {name}: MEAN and SD must be numbers ({PARAM_UNITS[name]}), got {rest!r}") from None
+        if not (math.isfinite(mean) and math.isfinite(sd)):
+            raise _fail(f"--measure {name}: MEAN and SD must be finite, got {rest!r}")
+        if not sd > 0:
+            raise _fail(f"--measure {name}: SD must be > 0 {PARAM_UNITS[name]}, got {sd_s.strip()!r}")
+        if name in out:
+            raise _fail(f"--measure {name} given twice")
+        out[name] = [mean, sd]
+    return out
+
+
 def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
-               fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed"):
+               fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
+               measure: list[str] | None = None):
     """A validated JobSpec from CLI options (exit code 2 with the pydantic message on bad input)."""
     from pydantic import ValidationError
 
     from vfvideo.io import read_gaw
     from worker.jobspec import JobSpec
 
+    if sampler not in ("is", "smc"):
+        raise _fail(f"--sampler must be 'smc' or 'is', got {sampler!r}")
+    measurements = parse_measurements(measure)
     g = read_gaw(gaw, fps=fps)
     priors = {}
     for k, v in _kv(prior, "--prior").items():
@@ -48,12 +86,13 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
             "priors": priors or None, "fixed": fixed, "sampler": smp, "mesh": mesh, "dt": dt,
             "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
-            "chunk_size": chunk_size}
+            "chunk_size": chunk_size, "measurements": measurements}
     try:
         return JobSpec.model_validate(body)
     except ValidationError as exc:
         for e in exc.errors():
-            console.print(f"[red]invalid {'.'.join(map(str, e['loc'])) or 'input'}:[/red] {e['msg']}")
+            console.print(f"[red]error:[/red] invalid {'.'.join(map(str, e['loc'])) or 'input'}: {e['msg']}",
+                          highlight=False)
         raise typer.Exit(2) from None
 
 
@@ -72,8 +111,54 @@ def print_table(summary: dict, title: str = "Posterior") -> None:
                   f"log evidence={le if le is None else round(le, 3)} +- {se if se is None else round(se, 3)}")
     for name, q in (summary.get("predictive") or {}).items():
         console.print(f"  {name}: {q['mean']:.4g} +- {q['sd']:.3g} {q['unit']} (90%: {q['q05']:.4g} .. {q['q95']:.4g})")
+    print_identifiability(summary.get("identifiability"))
     for w in summary.get("warnings", []):
         console.print(f"[yellow]WARNING[/yellow] {w}")
+
+
+def print_identifiability(d: dict | None) -> None:
+    """The identifiability table of a posterior summary (vfcore.inference.identify): what the data
+    determined (posterior sd / prior sd), the common scale, and the combinations a GAW determines."""
+    if not d:
+        return
+    if d.get("error"):
+        console.print(f"[yellow]identifiability table not available:[/yellow] {d['error']}", highlight=False)
+        return
+
+    def f(x, fmt):
+        return "-" if x is None else format(x, fmt)
+    t = Table(title="What the data determined (posterior sd / prior sd: 1 = only the prior, 0 = fully determined)")
+    for col in ("parameter", "unit", "estimate", "sd", "prior sd", "sd / prior sd"):
+        t.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for r in d.get("parameters", []):
+        t.add_row(r["name"], r["unit"], f(r["mean"], ".5g"), f(r["sd"], ".4g"), f(r["prior_sd"], ".4g"),
+                  f(r["ratio"], ".3f"))
+    console.print(t)
+    names = d.get("log_names", [])
+    if d.get("principal"):
+        t = Table(title="Principal directions of the posterior (log coordinates), least narrowed first")
+        for col in ("sd", "prior sd", "ratio", *names):
+            t.add_column(col, justify="right")
+        for r in d["principal"]:
+            t.add_row(f(r["sd"], ".3g"), f(r["prior_sd"], ".3g"), f(r["ratio"], ".3f"),
+                      *(f(r["loadings"].get(n, 0.0), ".2f") for n in names))
+        console.print(t)
+    s = d.get("scale")
+    if s:
+        console.print(f"common scale of {', '.join(s['names'])}: posterior sd {f(s['posterior_sd'], '.3g')} in log, "
+                      f"{f(s['ray_ratio'], '.0%')} of what the prior box allows along it "
+                      f"(prior sd {f(s['prior_sd'], '.3g')}); the common factor's sd in log: {f(s['log_c_sd'], '.3g')}",
+                      highlight=False)
+    if d.get("combinations"):
+        t = Table(title="Combinations a GAW determines (unchanged by the common scale; SI units)")
+        for col in ("combination", "unit", "value", "sd of log", "prior sd of log", "ratio", "5%", "95%"):
+            t.add_column(col, justify="left" if col in ("combination", "unit") else "right")
+        for c in d["combinations"]:
+            t.add_row(c["label"], c["unit"], f(c["value"], ".5g"), f(c["log_sd"], ".3g"), f(c["prior_log_sd"], ".3g"),
+                      f(c["ratio"], ".3f"), f(c["q05"], ".4g"), f(c["q95"], ".4g"))
+        console.print(t)
+    if d.get("anchors"):
+        console.print("scale anchored by: " + "; ".join(d["anchors"]), highlight=False)
 
 
 def export_products(store_path: Path, out: Path) -> dict:
@@ -83,6 +168,10 @@ def export_products(store_path: Path, out: Path) -> dict:
     summary = st.read_summary(store_path)
     (out / "posterior.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
     (out / "posterior_table.txt").write_text(summary.get("formatted", "") + "\n")
+    ident = summary.get("identifiability")
+    if ident and not ident.get("error"):
+        from vfcore.inference.identify import format_identifiability
+        (out / "identifiability.txt").write_text(format_identifiability(ident) + "\n")
     for name in st.PRODUCT_NAMES:
         blob = st.read_blob(store_path, name)
         if blob is not None:
@@ -134,7 +223,8 @@ def _check(r) -> dict:
 
 # ------------------------------------------------------------------------------------ options
 Fps = Annotated[Optional[float], typer.Option(help="frame rate, if the file does not say")]
-Sampler = Annotated[str, typer.Option(help="'is' (importance sampling) or 'smc'")]
+Sampler = Annotated[str, typer.Option(help="'smc' (adaptive, tempered SMC) or 'is' (importance sampling from the "
+                                             "prior, the paper's method)")]
 N = Annotated[int, typer.Option("--n", help="IS: number of prior draws")]
 Particles = Annotated[int, typer.Option(help="SMC: number of particles")]
 Mesh = Annotated[str, typer.Option(help="coarse | medium | fine")]
@@ -145,19 +235,31 @@ Token = Annotated[Optional[str], typer.Option(envvar="VFINFER_TOKEN", help="bear
 Model = Annotated[str, typer.Option(hidden=True, help="'fe' or the 'toy' test double (tests only)")]
 Noise = Annotated[str, typer.Option(help="'fixed': the likelihood uses --sigma-e (paper, Eq. 15); 'marginal': the "
                                          "noise sd is unknown and integrated out (log-uniform, 0.01-100 mm^2)")]
+Measure = Annotated[Optional[list[str]], typer.Option(
+    "--measure", help="NAME=MEAN:SD (paper units), repeatable: a Gaussian measurement of an estimated parameter, "
+                      "e.g. p_sub=1000:50; anchors the common scale a GAW cannot determine")]
+
+
+def _note_is(sampler: str) -> None:
+    if sampler == "is":
+        console.print("note: importance sampling from the prior is the paper's method; beyond one or two free "
+                      "parameters its effective sample size collapses (the run warns when it does); the default "
+                      "--sampler smc needs far fewer simulations", highlight=False)
 
 
 # ------------------------------------------------------------------------------------ commands
 @app.command()
-def infer(gaw: Path, fps: Fps = None, sampler: Sampler = "is", n: N = 2000, particles: Particles = 200,
+def infer(gaw: Path, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, particles: Particles = 200,
           mesh: Mesh = "coarse", dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25,
           sigma_e: float = 1.0, seed: int = 0, prior: Prior = None, fix: Fix = None,
           workers: Annotated[int, typer.Option(help="local worker processes")] = 2,
           out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output"),
-          model: Model = "fe", noise: Noise = "fixed") -> None:
-    """Run an inference on this machine (in-process Dask LocalCluster) and print the posterior table."""
+          model: Model = "fe", noise: Noise = "fixed", measure: Measure = None) -> None:
+    """Run an inference on this machine (in-process Dask LocalCluster) and print the posterior table
+    and what the data determined (the identifiability table)."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise)
+                      model=model, noise=noise, measure=measure)
+    _note_is(sampler)
     summary = run_local(spec, out, workers)
     print_table(summary, title=f"Posterior for {gaw.name}")
     console.print(f"products written to {out}/")
@@ -180,12 +282,14 @@ def serve(host: str = "127.0.0.1", port: int = 8000,
 
 @app.command()
 def submit(gaw: Path, url: Url = "http://127.0.0.1:8000", token: Token = None, fps: Fps = None,
-           sampler: Sampler = "is", n: N = 2000, particles: Particles = 200, mesh: Mesh = "coarse",
+           sampler: Sampler = "smc", n: N = 2000, particles: Particles = 200, mesh: Mesh = "coarse",
            dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25, sigma_e: float = 1.0, seed: int = 0,
-           prior: Prior = None, fix: Fix = None, model: Model = "fe", noise: Noise = "fixed") -> None:
+           prior: Prior = None, fix: Fix = None, model: Model = "fe", noise: Noise = "fixed",
+           measure: Measure = None) -> None:
     """Submit a job to a running service; prints the job id."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise)
+                      model=model, noise=noise, measure=measure)
+    _note_is(sampler)
     with _http(url, token) as http:
         d = _check(http.post("/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"}))
     console.print(d["id"])

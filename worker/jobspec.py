@@ -114,6 +114,10 @@ class JobSpec(_Strict):
                                      "is unknown, log-uniform on sigma_bounds, and integrated out (docs/inference.md)")
     sigma_bounds: tuple[FiniteFloat, FiniteFloat] = Field(
         default=(0.01, 100.0), description="[lo, hi] of the noise sd's log-uniform prior, mm^2 (noise='marginal')")
+    measurements: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
+        default_factory=dict, description="{name: [mean, sd]} in paper units: independent Gaussian measurements of "
+                                          "estimated parameters (e.g. a measured p_sub), added to the likelihood; "
+                                          "they anchor the common scale a GAW cannot determine (docs/inference.md)")
     seed: int = Field(ge=0, lt=2**63)
     chunk_size: int | None = Field(default=None, ge=1, le=10_000,
                                    description="simulations per worker task (default: sized to run for seconds)")
@@ -137,6 +141,16 @@ class JobSpec(_Strict):
                 raise ValueError(f"unknown parameter {name!r}; known: {list(PARAM_NAMES)}")
             if not lo < hi:
                 raise ValueError(f"prior for {name}: lo ({lo}) must be < hi ({hi})")
+        return v
+
+    @field_validator("measurements")
+    @classmethod
+    def _check_measurements(cls, v):
+        for name, (_, sd) in v.items():
+            if name not in PARAM_NAMES:
+                raise ValueError(f"unknown parameter {name!r}; known: {list(PARAM_NAMES)}")
+            if not sd > 0:
+                raise ValueError(f"measurement of {name}: sd ({sd}) must be > 0")
         return v
 
     @field_validator("fixed")
@@ -168,6 +182,10 @@ class JobSpec(_Strict):
             prior = self.to_prior()
         except ValueError as exc:
             raise ValueError(f"priors/fixed: {exc}") from None
+        fixed_measured = sorted(set(self.measurements) - set(prior.names))
+        if fixed_measured:
+            raise ValueError(f"measurements: parameter(s) {fixed_measured} are fixed; a measurement cannot inform "
+                             "a fixed parameter")
         try:
             self._problem(prior)
         except ValueError as exc:
@@ -210,7 +228,8 @@ class JobSpec(_Strict):
         from vfcore.inference.problem import Problem
         return Problem(obs_gaw=self.observed(), fps=float(self.gaw.fps), prior=prior,
                        sigma_e=float(self.sigma_e), config=self.sim_config(), noise=self.noise,
-                       sigma_bounds=tuple(float(b) for b in self.sigma_bounds))
+                       sigma_bounds=tuple(float(b) for b in self.sigma_bounds),
+                       measurements={k: (float(m), float(sd)) for k, (m, sd) in self.measurements.items()})
 
     def to_problem(self):
         """The ``vfcore.inference.Problem`` this job solves (the toy test double scores against it too)."""

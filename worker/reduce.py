@@ -120,6 +120,17 @@ def regularity_of(spec: JobSpec, post) -> dict | None:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
+def identifiability_of(spec: JobSpec, post) -> dict | None:
+    """The identifiability table of the posterior (vfcore.inference.identify: per parameter, principal
+    directions, the common scale of the six scaled parameters and the combinations a GAW determines),
+    as a dict; an error is reported, not raised."""
+    try:
+        from vfcore.inference.identify import identify
+        return identify(post, spec.to_prior(), spec.measurements).to_dict()
+    except Exception as exc:  # noqa: BLE001 - a table must not fail the job; recorded
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
 #: residual RMS / sigma_e beyond which (either way) a fixed-noise job's summary warns
 NOISE_RATIO_WARN = 1.5
 
@@ -153,6 +164,9 @@ def publish_posterior(store_path: str, post) -> dict:
             f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters changes "
             f"the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough here and the "
             "posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')"]
+    ident = identifiability_of(spec, post)
+    if ident is not None and ident.get("warnings"):
+        post.warnings = list(post.warnings) + list(ident["warnings"])
     nc = noise_check(spec, post, resampled)
     if nc is not None and nc["noise"] == "fixed" and not (1 / NOISE_RATIO_WARN <= nc["ratio"] <= NOISE_RATIO_WARN):
         r, se = nc["residual_rms"]["q50"], nc["sigma_e"]
@@ -167,6 +181,8 @@ def publish_posterior(store_path: str, post) -> dict:
         summary["regularity"] = _clean(reg)
     if nc is not None:
         summary["noise_check"] = _clean(nc)
+    if ident is not None:
+        summary["identifiability"] = _clean(ident)
     pg = root.require_group("posterior")
     for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
                       ("log_weights", np.asarray(post.log_weights, dtype=float)),

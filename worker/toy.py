@@ -61,7 +61,7 @@ class ToyEvaluator:
                 time.sleep(self.delay_s)
             g, flow[i], cmean[i], cmax[i] = toy_gaw(full[i], pb.fps, n)
             seg, _, _ = align(g, pb.obs_gaw, pb.fps, (max_lag, n_cmp), method=pb.alignment)
-            ll[i] = pb.loglik(seg)
+            ll[i] = pb.loglik(seg, full[i])
             ok[i] = True
             gaw[i] = seg
         return Evaluation(loglik=ll, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax)

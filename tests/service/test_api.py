@@ -37,6 +37,9 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     assert post["ess"] == direct.ess
     assert [row["mean"] for row in post["table"]] == [float(m) for m in direct.mean]
     assert post["predictive"]["mean_contact"]["mean"] > 0
+    ident = post["identifiability"]                      # what the data determined, stored with the job
+    assert [r["name"] for r in ident["parameters"]] == ["E_cover", "p_sub"]
+    assert abs(ident["parameters"][0]["prior_sd"] - 400.0 / 12 ** 0.5) < 1e-9
     csv = http.get(f"/jobs/{job_id}/samples", headers=auth("alice"))
     assert csv.headers["content-type"].startswith("text/csv")
     assert csv.text.splitlines()[1].startswith("E_cover,p_sub,log_weight")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from svc_helpers import TOKENS, toy_spec
@@ -17,7 +18,7 @@ def _gaw_file(tmp_path):
     return write_gaw_csv(tmp_path / "gaw.csv", np.arange(areas.size) / 4000.0, areas, 4000.0)
 
 
-TOY = ["--model", "toy", "--n", "120", "--duration", "0.35", "--discard", "0.2", "--sigma-e", "10",
+TOY = ["--model", "toy", "--sampler", "is", "--n", "120", "--duration", "0.35", "--discard", "0.2", "--sigma-e", "10",
        "--prior", "E_cover=450:850", "--prior", "p_sub=700:1300", "--fix", "E_body=12.15", "--fix", "E_lig=1.808",
        "--fix", "rho=1051", "--fix", "eta=3.079", "--fix", "x0=8.4"]
 
@@ -43,6 +44,49 @@ def test_bad_cli_input_names_field(tmp_path):
     gaw = _gaw_file(tmp_path)
     r = CliRunner().invoke(app, ["infer", str(gaw), *TOY, "--prior", "E_cover=900:400"], env={"COLUMNS": "200"})
     assert r.exit_code == 2 and "priors" in r.output
+
+
+@pytest.mark.parametrize("bad", ["p_sub", "p_sub=1000", "p_sub=abc:50", "p_sub=1000:0", "p_sub=1000:-5",
+                                 "p_sub=1000:nan", "p_sub=inf:5", "p_subglottal=1000:50", "rho=1051:10"])
+def test_bad_measure_is_one_error_line(tmp_path, bad):
+    """--measure NAME=MEAN:SD: a malformed, non-finite, non-positive-sd, unknown or fixed (rho, in TOY)
+    measurement exits 2 with one 'error:' line and no traceback, before anything runs."""
+    gaw = _gaw_file(tmp_path)
+    r = CliRunner().invoke(app, ["infer", str(gaw), *TOY, "--measure", bad, "--out", str(tmp_path / "o")],
+                           env={"COLUMNS": "300"})
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and "measure" in lines[0], r.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, monkeypatch):
+    """`vfinfer infer` builds an SMC job unless told otherwise, carries --measure into the job, and after
+    the fit prints the identifiability table stored with the posterior (the fit itself is a stand-in
+    here: the toy model's importance sampler in this process, reduced by the worker's own code)."""
+    import service.cli as cli
+    from vfcore.inference import importance_sample
+    from worker.reduce import identifiability_of, posterior_summary
+    from worker.toy import ToyEvaluator
+    seen = {}
+
+    def fake_run_local(spec, out, workers, job_id="local"):
+        seen["spec"] = spec
+        pb = spec.to_problem()
+        post = importance_sample(ToyEvaluator(pb), pb.prior, 400, seed=1)
+        summary = posterior_summary(post)
+        summary["identifiability"] = identifiability_of(spec, post)
+        return summary
+    monkeypatch.setattr(cli, "run_local", fake_run_local)
+    gaw = _gaw_file(tmp_path)
+    args = [a for a in TOY if a not in ("--sampler", "is")]
+    r = CliRunner().invoke(app, ["infer", str(gaw), *args, "--measure", "p_sub=1000:50"], env={"COLUMNS": "250"})
+    assert r.exit_code == 0, r.output
+    spec = seen["spec"]
+    assert spec.sampler.kind == "smc" and spec.measurements == {"p_sub": (1000.0, 50.0)}
+    for text in ("What the data determined", "sd / prior sd", "E_cover/p_sub", "common scale of E_cover, p_sub",
+                 "measured p_sub = 1000 +- 50 Pa"):
+        assert text in r.output, r.output
 
 
 def test_job_ids_are_valid_cli_arguments():

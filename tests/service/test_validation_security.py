@@ -50,6 +50,12 @@ CASES = [
     ("unknown_field", lambda: _bad(colour="red"), "colour"),
     ("wrong_units", lambda: _bad(gaw__units="px"), "units"),
     ("prior_outside_domain", lambda: _bad(priors={"x0": [7.0, 9.5]}, fixed={}), "priors"),
+    ("measurement_unknown_param", lambda: _bad(measurements={"p_subglottal": [1000.0, 50.0]}), "measurements"),
+    ("measurement_sd_zero", lambda: _bad(measurements={"p_sub": [1000.0, 0.0]}), "measurements"),
+    ("measurement_sd_negative", lambda: _bad(measurements={"p_sub": [1000.0, -50.0]}), "measurements"),
+    ("measurement_not_a_pair", lambda: _bad(measurements={"p_sub": [1000.0]}), "measurements"),
+    ("measurement_infinite", lambda: json.dumps(_bad(measurements={"p_sub": [1000.0, 1e400]})), "measurements"),
+    ("measurement_of_fixed", lambda: _bad(measurements={"rho": [1051.0, 10.0]}), "measurements"),
     ("malformed_json", lambda: '{"gaw": {"areas": [1, 2,', "json"),
     ("missing_gaw", lambda: {k: v for k, v in toy_spec().items() if k != "gaw"}, "gaw"),
 ]

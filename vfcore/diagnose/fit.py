@@ -435,7 +435,7 @@ class ExtendedEvaluator:
             except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble
                 messages.append(f"{i}: {type(exc).__name__}: {exc}")
                 continue
-            loglik[i] = q.log_mean
+            loglik[i] = q.log_mean + pb.measurement_loglik(r.params)   # constant in the integrated parameters
             ok[i] = True
             extra[i, 0:2 * len(names):2] = q.mean
             extra[i, 1:2 * len(names):2] = q.sd

@@ -70,7 +70,7 @@ def sensitivity(problem: Problem, theta, *, step: float = 1e-6, n_dirs: int = 2,
     def ll(r) -> float:
         if not r.ok:
             return -math.inf
-        return float(aligned_loglik(np.asarray(r.gaw_hr, dtype=float), problem)[0])
+        return float(aligned_loglik(np.asarray(r.gaw_hr, dtype=float), problem, r.params)[0])
 
     lls = [ll(r) for r in res]
     if not math.isfinite(lls[0]):

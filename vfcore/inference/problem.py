@@ -12,6 +12,12 @@ log space throughout. A failed simulation has log-likelihood ``-inf``.
 ``Problem(noise="marginal")`` (not in the paper): ``sigma_e`` is unknown, log-uniform on
 ``sigma_bounds``, and integrated out per draw (:func:`marginal_gaussian_loglik`; docs/inference.md,
 "Unknown noise level").
+
+``Problem(measurements={"p_sub": (mean, sd)})`` (not in the paper): independent Gaussian
+measurements of model parameters (paper units), each adding
+``log N(mean | theta_name, sd^2) = -(theta_name - mean)^2 / (2 sd^2) - log(sd sqrt(2 pi))`` to the GAW
+log-likelihood of a draw. A GAW cannot fix the common scale of E_body, E_cover, E_lig, p_sub, rho and
+eta (docs/inference.md, "The common scale"); a measured p_sub (or density) can.
 """
 from __future__ import annotations
 
@@ -24,6 +30,7 @@ import numpy as np
 from ..config import SimConfig
 from ..measures import estimate_f0
 from ..observe import ALIGNMENTS, LAG_SEARCHES, align, alignment_window
+from ..params import PARAM_NAMES, PARAM_UNITS, Params
 from .prior import Prior
 
 
@@ -70,6 +77,61 @@ def n_sim_frames(config: SimConfig) -> int:
     return int(math.floor((config.duration - config.discard) * config.fps + 1e-9))
 
 
+# ---------------------------------------------------------------------------- measurements
+def validate_measurements(measurements, prior: Prior | None = None) -> dict[str, tuple[float, float]]:
+    """``{name: (mean, sd)}`` checked and in ``PARAM_NAMES`` order (paper units).
+
+    ValueError (one line) for: not a mapping, an unknown name, a pair that is not two numbers, a
+    non-finite mean or sd, sd <= 0, or (with ``prior``) a parameter the prior does not estimate, which a
+    measurement could not inform."""
+    if measurements is None:
+        return {}
+    if not hasattr(measurements, "items"):
+        raise ValueError(f"measurements must be a mapping {{name: (mean, sd)}}, got {type(measurements).__name__}")
+    out: dict[str, tuple[float, float]] = {}
+    for name, pair in measurements.items():
+        if name not in PARAM_NAMES:
+            raise ValueError(f"measurement of unknown parameter {name!r}; known: {list(PARAM_NAMES)}")
+        try:
+            if isinstance(pair, (str, bytes)) or len(pair) != 2:
+                raise TypeError
+            mean, sd = float(pair[0]), float(pair[1])
+        except (TypeError, ValueError):
+            raise ValueError(f"measurement of {name} must be a pair (mean, sd) of numbers in "
+                             f"{PARAM_UNITS[name]}, got {pair!r}") from None
+        if not (math.isfinite(mean) and math.isfinite(sd)):
+            raise ValueError(f"measurement of {name} must have a finite mean and sd, got ({mean}, {sd})")
+        if not sd > 0.0:
+            raise ValueError(f"measurement of {name} must have sd > 0 {PARAM_UNITS[name]}, got {sd}")
+        if prior is not None and name not in prior.names:
+            held = "fixed" if name in prior.fixed else "not estimated"
+            raise ValueError(f"measurement of {name}: the parameter is {held} in the prior, so a measurement "
+                             "cannot inform it; estimate it or drop the measurement")
+        out[name] = (mean, sd)
+    return {n: out[n] for n in PARAM_NAMES if n in out}
+
+
+def gaussian_measurement_loglik(values, measurements) -> float:
+    """Sum over ``measurements`` ``{name: (mean, sd)}`` of ``log N(mean | values[name], sd^2)``;
+    ``values``: a ``Params``, a mapping ``{name: value}`` or a full 7-vector in ``PARAM_NAMES`` order."""
+    if not measurements:
+        return 0.0
+    if isinstance(values, Params):
+        get = values.as_dict().__getitem__
+    elif hasattr(values, "items"):
+        get = values.__getitem__
+    else:
+        arr = np.asarray(values, dtype=float).reshape(-1)
+        if arr.size != len(PARAM_NAMES):
+            raise ValueError(f"parameter vector must have {len(PARAM_NAMES)} values ({PARAM_NAMES}), got {arr.size}")
+        get = dict(zip(PARAM_NAMES, arr.tolist())).__getitem__
+    total = 0.0
+    for name, (mean, sd) in measurements.items():
+        z = (float(get(name)) - mean) / sd
+        total += -0.5 * z * z - math.log(sd) - 0.5 * math.log(2.0 * math.pi)
+    return total if math.isfinite(total) else -math.inf
+
+
 # ---------------------------------------------------------------------------- problem
 #: noise models: ``fixed`` sigma_e (Eq. 15) or ``marginal`` (sigma_e integrated out, log-uniform prior)
 NOISE_MODELS = ("fixed", "marginal")
@@ -83,6 +145,9 @@ class Problem:
     ``noise``: ``"fixed"`` (Eq. 15 with ``sigma_e``) or ``"marginal"`` (the noise sd unknown,
     log-uniform on ``sigma_bounds`` mm^2 and integrated out; ``sigma_e`` is then only the noise
     added to predictive bands and p-values where a caller asks for it).
+    ``measurements``: ``{name: (mean, sd)}`` in paper units, independent Gaussian measurements of
+    estimated parameters whose log density is added to each draw's GAW log-likelihood (they anchor
+    the common scale a GAW cannot determine; docs/inference.md).
     """
 
     obs_gaw: np.ndarray
@@ -95,6 +160,7 @@ class Problem:
     noise: str = "fixed"
     sigma_bounds: tuple = (0.01, 100.0)
     lag_search: str = "window"
+    measurements: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         y = validate_observation(self.obs_gaw, self.fps)
@@ -127,6 +193,7 @@ class Problem:
             raise ValueError(f"lag_search must be one of {LAG_SEARCHES}, got {self.lag_search!r}")
         if self.model != "fe":
             raise ValueError(f"unknown model {self.model!r}; only 'fe' is available")
+        object.__setattr__(self, "measurements", validate_measurements(self.measurements, self.prior))
         # fails (ValueError) here, before any simulation, if the simulation is too short
         object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config),
                                                              self.lag_search))
@@ -149,7 +216,8 @@ class Problem:
         return {"obs_gaw": self.obs_gaw.tolist(), "fps": self.fps, "sigma_e": self.sigma_e,
                 "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model,
                 "alignment": self.alignment, "noise": self.noise, "sigma_bounds": list(self.sigma_bounds),
-                "lag_search": self.lag_search}
+                "lag_search": self.lag_search,
+                "measurements": {n: [m, sd] for n, (m, sd) in self.measurements.items()}}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Problem":
@@ -162,14 +230,27 @@ class Problem:
                    config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"),
                    alignment=d.get("alignment", "profile"), noise=d.get("noise", "fixed"),
                    sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))),
-                   lag_search=d.get("lag_search", "window"))
+                   lag_search=d.get("lag_search", "window"),
+                   measurements=d.get("measurements") or {})
 
-    def loglik(self, seg) -> float:
+    def measurement_loglik(self, params) -> float:
+        """The measurements' log density at ``params`` (a ``Params``, ``{name: value}`` or a full
+        7-vector; paper units); 0 without measurements."""
+        return gaussian_measurement_loglik(params, self.measurements)
+
+    def loglik(self, seg, params=None) -> float:
         """Log-likelihood of an aligned simulated segment ``seg`` (n_compare,) under this problem's
-        noise model: Eq. 15 (``fixed``) or :func:`marginal_gaussian_loglik` (``marginal``)."""
+        noise model, Eq. 15 (``fixed``) or :func:`marginal_gaussian_loglik` (``marginal``), plus the
+        measurements' term at ``params`` (the draw's full parameters) when ``params`` is given.
+        Without ``params`` it is the GAW's term alone, which only differences between waveforms of
+        one draw may use: a draw's score must include the measurements."""
         if self.noise == "marginal":
-            return marginal_gaussian_loglik(seg, self.obs_compared, *self.sigma_bounds)
-        return gaussian_loglik(seg, self.obs_compared, self.sigma_e)
+            ll = marginal_gaussian_loglik(seg, self.obs_compared, *self.sigma_bounds)
+        else:
+            ll = gaussian_loglik(seg, self.obs_compared, self.sigma_e)
+        if params is not None and self.measurements and ll > -math.inf:
+            ll += self.measurement_loglik(params)
+        return ll
 
 
 # ---------------------------------------------------------------------------- likelihood
@@ -401,22 +482,24 @@ def evaluate(thetas, problem: Problem, simulate_fn: Callable | None = None, bloc
     return score_results(_simulate_rows(thetas, problem, simulate_fn, block), problem)
 
 
-def aligned_loglik(hr: np.ndarray, problem: Problem) -> tuple[float, np.ndarray]:
+def aligned_loglik(hr: np.ndarray, problem: Problem, params=None) -> tuple[float, np.ndarray]:
     """Log-likelihood (Eq. 15) and aligned camera-rate segment of one oversampled simulated area
     ``hr`` (``HR_OVERSAMPLE`` samples per frame) against ``problem``'s observation: the profile /
     xcorr alignment of ``problem.alignment`` over ``problem.window``. For the many waveforms one
-    simulation yields (screening, integrated extension parameters)."""
+    simulation yields (screening, integrated extension parameters). ``params``: the draw's
+    parameters, for the measurements' term (:meth:`Problem.loglik`)."""
     from vfcore.observe import align
     from vfcore.result import HR_OVERSAMPLE
     max_lag, n_cmp = problem.window
     seg, _, _ = align(hr[::HR_OVERSAMPLE], problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
                       oversample=HR_OVERSAMPLE, method=problem.alignment)
-    return problem.loglik(seg), seg
+    return problem.loglik(seg, params), seg
 
 
 def score_results(results, problem: Problem, observe: Callable | None = None) -> Evaluation:
     """Score simulation results (SimResults, or the exceptions their runs raised) against
-    ``problem``'s observation: alignment, Eq. 15 log-likelihood, predictions, flow and contact.
+    ``problem``'s observation: alignment, Eq. 15 log-likelihood (plus the measurements' term at each
+    result's parameters), predictions, flow and contact.
 
     ``observe(i, gaw_hr) -> gaw_hr``, when given, maps result ``i``'s oversampled area to what the
     camera records before alignment (the observation-level model extensions of
@@ -459,7 +542,7 @@ def score_results(results, problem: Problem, observe: Callable | None = None) ->
                                   oversample=HR_OVERSAMPLE, method=problem.alignment)
             else:
                 seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), method=problem.alignment)
-            ll = problem.loglik(seg)
+            ll = problem.loglik(seg, r.params)
         except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble; counted
             messages.append(f"{i}: {type(exc).__name__}: {exc}")
             continue

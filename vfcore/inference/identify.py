@@ -1,0 +1,364 @@
+"""What the data determine and what the prior does: the identifiability table of a fitted posterior.
+
+The model has an exact symmetry (docs/inference.md, "The common scale: what a GAW cannot determine"):
+multiplying E_body, E_cover, E_lig, p_sub, rho and eta by one factor ``c`` (x0 unchanged) leaves the
+glottal area waveform unchanged, while contact pressures scale by ``c`` and the flow rate by ``sqrt(c)``.
+Every quantity of the fold's equations carries one power of mass (stiffness, load, mass, damping) and
+the air density enters the flow velocity only, so ``c`` is a change of the unit of mass that lengths
+and times do not see. A GAW therefore determines at most the scale-invariant combinations (any
+monomial ``prod theta_i^a_i`` with ``sum a_i = 0``, e.g. ``E_cover / p_sub``, ``eta^2 / (rho p_sub)``);
+the common scale is set by the prior's box unless something anchors it: a fixed value of one of the
+six, or a measurement (``Problem(measurements=...)``).
+
+:func:`identify` reports, from a posterior and its prior:
+
+(a) per parameter: posterior mean and sd, and sd / prior sd (uniform prior: sd = width / sqrt(12));
+(b) in log coordinates of the free parameters: the principal directions of the posterior covariance
+    (eigenvectors), the posterior sd along each and the prior's sd along the same direction (their
+    ratio says how much the data narrowed it), least narrowed first;
+(c) the common-scale direction (equal weights on the logs of the free scaled parameters, normalised):
+    its posterior sd against the prior's sd along it and against the sd the prior box allows along
+    the ray through the posterior mean (the conditional prior there, which is what the posterior
+    reduces to where the likelihood is flat along the ray); the scale-invariant combinations with
+    their posterior means and sds;
+(d) plain warnings when the common scale is set by the prior's box.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from ..params import PARAM_UNITS, TABLE3, TO_SI
+from .diagnostics import weighted_quantiles
+from .prior import Prior
+
+#: The parameters that scale together (x0 is geometric and does not).
+SCALED: tuple[str, ...] = ("E_body", "E_cover", "E_lig", "p_sub", "rho", "eta")
+
+#: Dimensions (kg, m, s) of the scaled parameters: every one carries one power of mass.
+_DIMS = {"E_body": (1, -1, -2), "E_cover": (1, -1, -2), "E_lig": (1, -1, -2), "p_sub": (1, -1, -2),
+         "rho": (1, -3, 0), "eta": (1, -1, -1)}
+
+#: The posterior sd along the common scale above this fraction of what the prior box allows there
+#: means the box, not the data, sets the scale.
+SCALE_RATIO_WARN = 0.5
+#: Outer fraction of the ray (each end) and the posterior mass in it that counts as piling against the box.
+EDGE_FRACTION = 0.05
+EDGE_MASS_WARN = 0.25
+
+ANCHOR_HINT = "anchor it (--measure p_sub=MEAN:SD, a density measurement --measure rho=MEAN:SD, or --fix)"
+
+
+def uniform_log_moments(lo: float, hi: float) -> tuple[float, float]:
+    """Mean and variance of ``log theta`` for ``theta ~ Uniform(lo, hi)``, ``0 <= lo < hi``.
+
+    With ``t = theta / hi`` uniform on ``[r, 1]``, ``r = lo / hi``: ``E log t = (r - 1 - r log r) / (1 - r)``
+    and ``E log^2 t = (2 - r (log^2 r - 2 log r + 2)) / (1 - r)`` (integrate ``log t`` and ``log^2 t``
+    by parts). For ``1 - r < 1e-3`` the variance is taken as ``log(r)^2 / 12`` (log nearly linear
+    there; the relative error is below 1e-6), which avoids the cancellation of the exact form."""
+    lo, hi = float(lo), float(hi)
+    if not (0.0 <= lo < hi and math.isfinite(hi)):
+        raise ValueError(f"need 0 <= lo < hi, got ({lo}, {hi})")
+    r = lo / hi
+    lr = math.log(r) if r > 0 else 0.0
+    if 1.0 - r < 1e-3:
+        return math.log(hi) + 0.5 * lr, lr * lr / 12.0
+    rl = r * lr if r > 0 else 0.0
+    m1 = (r - 1.0 - rl) / (1.0 - r)
+    m2 = (2.0 - (r * lr * lr - 2.0 * rl + 2.0 * r)) / (1.0 - r)
+    return math.log(hi) + m1, max(m2 - m1 * m1, 0.0)
+
+
+def _ray_sd(length: float, rate: float) -> float:
+    """sd of ``s`` with density proportional to ``exp(rate s)`` on an interval of ``length``:
+    ``var = 1/rate^2 - length^2 / (4 sinh^2(rate length / 2))`` (``length^2 / 12`` for small ``rate length``)."""
+    if not math.isfinite(length):
+        return math.inf
+    x = rate * length
+    if x < 1e-3:
+        return length / math.sqrt(12.0)
+    var = 1.0 / rate ** 2 - length ** 2 / (4.0 * math.sinh(0.5 * x) ** 2)
+    return math.sqrt(max(var, 0.0))
+
+
+def _ray_end_mass(rate: float, length: float, frac: float) -> tuple[float, float]:
+    """Mass of the density ``exp(rate s)`` on ``[0, length]`` in its first and last ``frac`` of the length."""
+    x = rate * length
+    if not math.isfinite(x) or x < 1e-9:
+        return frac, frac
+    tot = math.expm1(x)
+    return math.expm1(frac * x) / tot, (math.exp(x) - math.exp((1.0 - frac) * x)) / tot
+
+
+def _unit(exponents: Mapping[str, float]) -> str:
+    """SI unit of ``prod theta_i^a_i`` (mass cancels because ``sum a_i = 0``)."""
+    m = sum(a * _DIMS[n][1] for n, a in exponents.items())
+    s = sum(a * _DIMS[n][2] for n, a in exponents.items())
+
+    def part(sym, e):
+        e = int(round(abs(e)))
+        return sym if e == 1 else f"{sym}^{e}"
+    num = [part(sym, e) for sym, e in (("m", m), ("s", s)) if e > 0]
+    den = [part(sym, e) for sym, e in (("m", m), ("s", s)) if e < 0]
+    if not num and not den:
+        return "1"
+    return ("*".join(num) or "1") + ("/" + "/".join(den) if den else "")
+
+
+def _label(exponents: Mapping[str, float]) -> str:
+    def part(n, a):
+        a = int(round(abs(a)))
+        return n if a == 1 else f"{n}^{a}"
+    num = [part(n, a) for n, a in exponents.items() if a > 0]
+    den = [part(n, a) for n, a in exponents.items() if a < 0]
+    top = "*".join(num)
+    bottom = den[0] if len(den) == 1 else "(" + "*".join(den) + ")"
+    return f"{top}/{bottom}"
+
+
+def scale_invariant_combinations(free: tuple[str, ...]) -> list[dict[str, float]]:
+    """Exponent maps ``{name: a}`` (``sum a = 0``) of the combinations a GAW can determine among the
+    free scaled parameters ``free``: each one over p_sub (over the first free one when p_sub is not
+    free), and the viscous length ``eta^2 / (rho p_sub)`` when all three are free."""
+    free = tuple(n for n in SCALED if n in free)
+    if len(free) < 2:
+        return []
+    ref = "p_sub" if "p_sub" in free else free[0]
+    out = [{n: 1.0, ref: -1.0} for n in free if n != ref]
+    if all(n in free for n in ("eta", "rho", "p_sub")):
+        out.append({"eta": 2.0, "rho": -1.0, "p_sub": -1.0})
+    return out
+
+
+@dataclass
+class Identifiability:
+    """The identifiability table of one posterior (module docstring); ``to_dict`` is JSON-able."""
+
+    parameters: list[dict]
+    principal: list[dict]
+    scale: dict | None
+    combinations: list[dict]
+    anchors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    log_names: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return _finite(asdict(self))
+
+    def format(self) -> str:
+        return format_identifiability(self.to_dict())
+
+
+def _finite(x):
+    if isinstance(x, dict):
+        return {str(k): _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def _wmean_cov(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    m = w @ X
+    d = X - m
+    return m, (d * w[:, None]).T @ d
+
+
+def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]] | None = None, *,
+             use: str = "weighted") -> Identifiability:
+    """The identifiability table of ``post`` (a :class:`~vfcore.inference.posterior.Posterior`) fitted
+    under ``prior``; ``measurements`` ``{name: (mean, sd)}`` are those of the problem (they anchor the
+    common scale). ``use``: ``"weighted"`` (every draw with its weight) or ``"resampled"`` (the equally
+    weighted resampled ensemble)."""
+    names = tuple(post.names)
+    if names != tuple(prior.names):
+        raise ValueError(f"posterior parameters {names} differ from the prior's {prior.names}")
+    if use == "weighted":
+        X = np.atleast_2d(np.asarray(post.samples, dtype=float))
+        w = np.asarray(post.weights, dtype=float)
+    elif use == "resampled":
+        X = np.atleast_2d(np.asarray(post.resampled_samples, dtype=float))
+        w = np.full(X.shape[0], 1.0 / max(X.shape[0], 1))
+    else:
+        raise ValueError(f"use must be 'weighted' or 'resampled', got {use!r}")
+    if X.shape != (w.size, len(names)):
+        raise ValueError(f"samples of shape {X.shape} do not match {w.size} weights x {len(names)} parameters")
+    keep = w > 0
+    X, w = X[keep], w[keep] / np.sum(w[keep])
+    measurements = dict(measurements or {})
+    lo, hi = prior.lo, prior.hi
+
+    # (a) per parameter, in paper units
+    mean, cov = _wmean_cov(X, w)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    prior_sd = (hi - lo) / math.sqrt(12.0)
+    parameters = [{"name": n, "unit": PARAM_UNITS[n], "mean": float(mean[i]), "sd": float(sd[i]),
+                   "prior_sd": float(prior_sd[i]), "ratio": float(sd[i] / prior_sd[i])}
+                  for i, n in enumerate(names)]
+
+    # log coordinates of the free parameters whose draws are all > 0
+    cols = [i for i, n in enumerate(names) if np.all(X[:, i] > 0)]
+    log_names = [names[i] for i in cols]
+    L = np.log(X[:, cols])
+    lmom = [uniform_log_moments(lo[i], hi[i]) for i in cols]
+    pvar = np.array([v for _, v in lmom])
+    lmean, lcov = _wmean_cov(L, w)
+
+    def prior_sd_along(v: np.ndarray) -> float:
+        return float(math.sqrt(float(np.sum(v * v * pvar))))
+
+    # (c) the common-scale direction among the free scaled parameters
+    free = tuple(n for n in SCALED if n in log_names)
+    k = len(free)
+    v_scale = None
+    if k >= 2:
+        v_scale = np.array([1.0 / math.sqrt(k) if n in free else 0.0 for n in log_names])
+
+    # (b) principal directions of the posterior covariance, least narrowed first
+    evals, evecs = np.linalg.eigh(lcov) if len(cols) else (np.empty(0), np.empty((0, 0)))
+    principal = []
+    for j in range(evals.size):
+        v = evecs[:, j]
+        v = v if v[np.argmax(np.abs(v))] > 0 else -v
+        psd, qsd = math.sqrt(max(float(evals[j]), 0.0)), prior_sd_along(v)
+        row = {"sd": psd, "prior_sd": qsd, "ratio": psd / qsd if qsd > 0 else math.nan,
+               "loadings": {n: float(v[i]) for i, n in enumerate(log_names)}}
+        if v_scale is not None:
+            row["scale_alignment"] = float(abs(v @ v_scale))
+        principal.append(row)
+    principal.sort(key=lambda r: -r["ratio"] if math.isfinite(r["ratio"]) else math.inf)
+
+    anchors = []
+    for n in SCALED:
+        if n in measurements:
+            m, s = measurements[n]
+            anchors.append(f"measured {n} = {m:g} +- {s:g} {PARAM_UNITS[n]}")
+        elif n in prior.fixed:
+            anchors.append(f"fixed {n} = {prior.fixed[n]:g} {PARAM_UNITS[n]}")
+        elif n not in names:
+            anchors.append(f"{n} held at Table 3 ({getattr(TABLE3, n):g} {PARAM_UNITS[n]})")
+
+    scale = None
+    combinations: list[dict] = []
+    warnings: list[str] = []
+    if v_scale is not None:
+        idx = [log_names.index(n) for n in free]
+        rate = math.sqrt(k)
+        with np.errstate(divide="ignore"):   # a lower bound of 0 (p_sub) bounds nothing in log
+            llo = np.log(np.array([lo[names.index(n)] for n in free]))
+        lhi = np.log(np.array([hi[names.index(n)] for n in free]))
+
+        def ray(x):   # extent along the scale direction of the ray through log point(s) x, in s units
+            d_lo = np.max(llo - x[..., idx], axis=-1)
+            d_hi = np.min(lhi - x[..., idx], axis=-1)
+            return rate * d_lo, rate * d_hi
+        s_lo, s_hi = ray(lmean)
+        ray_len = float(s_hi - s_lo)
+        ray_sd = _ray_sd(ray_len, rate)
+        post_sd = float(math.sqrt(max(float(v_scale @ lcov @ v_scale), 0.0)))
+        q_sd = prior_sd_along(v_scale)
+        a_lo, a_hi = ray(L)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = -a_lo / (a_hi - a_lo)
+        edge = (float(np.sum(w[u < EDGE_FRACTION])), float(np.sum(w[u > 1.0 - EDGE_FRACTION])))
+        edge_expected = _ray_end_mass(rate, ray_len, EDGE_FRACTION)
+        piled = any(e > EDGE_MASS_WARN and e > 2.5 * x for e, x in zip(edge, edge_expected))
+        measured = [n for n in free if n in measurements]
+        exact = k == len(SCALED) and not measured
+        ray_ratio = post_sd / ray_sd if ray_sd > 0 else math.nan
+        set_by_prior = exact or ray_ratio > SCALE_RATIO_WARN or piled
+        scale = {"names": list(free), "direction": {n: float(v_scale[i]) for i, n in enumerate(log_names)
+                                                    if v_scale[i]},
+                 "posterior_sd": post_sd, "prior_sd": q_sd, "ratio": post_sd / q_sd if q_sd > 0 else math.nan,
+                 "ray_prior_sd": ray_sd, "ray_ratio": ray_ratio, "ray_length": ray_len,
+                 "log_c_sd": post_sd / rate, "edge_mass": list(edge), "edge_mass_expected": list(edge_expected),
+                 "exact_symmetry": exact, "measured": measured, "set_by_prior": bool(set_by_prior)}
+        if set_by_prior:
+            how = (f"the posterior sd along it is {ray_ratio:.0%} of what the prior box allows there"
+                   + (f", and {max(edge):.0%} of the posterior lies in the outer {EDGE_FRACTION:.0%} of the box "
+                      "along it" if piled else "")
+                   + "; contact pressure scales with it and flow with its square root")
+            if measured:
+                given = "; ".join(a for a in anchors if a.startswith("measured"))
+                subject = (f"the measurements ({given}) narrow" if len(measured) > 1
+                           else f"the measurement ({given}) narrows")
+                warnings.append(
+                    f"COMMON SCALE: {subject} the common scale of {', '.join(free)} only partly ({how}): absolute moduli, p_sub, contact "
+                    "pressure and flow still rest partly on the prior's box along the common scale; a tighter "
+                    "measurement, or a second one (--measure rho=MEAN:SD), would anchor them "
+                    "(docs/inference.md, 'The common scale')")
+            else:
+                if exact:
+                    why = "a GAW cannot determine the common scale of E_body, E_cover, E_lig, p_sub, rho and eta"
+                elif ray_ratio > SCALE_RATIO_WARN:
+                    why = (f"the data barely determine the common scale of {', '.join(free)}"
+                           + (f" ({'; '.join(anchors)} anchor{'s' if len(anchors) == 1 else ''} it only weakly)"
+                              if anchors else ""))
+                else:
+                    why = f"the posterior is pressed against the prior's box along the common scale of {', '.join(free)}"
+                warnings.append(
+                    f"COMMON SCALE: {why} ({how}): absolute moduli, p_sub, contact pressure and flow are set by the "
+                    f"prior's box along the common scale; {ANCHOR_HINT} (docs/inference.md, 'The common scale')")
+        for ex in scale_invariant_combinations(free):
+            a = np.array([ex.get(n, 0.0) for n in log_names])
+            shift = sum(ex[n] * math.log(TO_SI[n]) for n in ex)
+            vals = L @ a + shift
+            lm = float(w @ vals)
+            lsd = float(math.sqrt(max(float(w @ (vals - lm) ** 2), 0.0)))
+            qsd = prior_sd_along(a)
+            q = weighted_quantiles(vals, w, [0.05, 0.95])
+            combinations.append({"label": _label(ex), "exponents": dict(ex), "unit": _unit(ex),
+                                 "value": math.exp(lm), "log_mean": lm, "log_sd": lsd, "prior_log_sd": qsd,
+                                 "ratio": lsd / qsd if qsd > 0 else math.nan,
+                                 "q05": math.exp(float(q[0])), "q95": math.exp(float(q[1]))})
+    return Identifiability(parameters=parameters, principal=principal, scale=scale, combinations=combinations,
+                           anchors=anchors, warnings=warnings, log_names=log_names)
+
+
+def format_identifiability(d: Mapping) -> str:
+    """Plain-text rendering of :meth:`Identifiability.to_dict` (also of a stored job summary's entry)."""
+    def f(x, fmt=".4g"):
+        return "-" if x is None else format(x, fmt)
+
+    lines = ["identifiability: posterior sd / prior sd (1 = the data said nothing, 0 = fully determined)",
+             f"{'parameter':<9} {'unit':<7} {'mean':>11} {'sd':>10} {'prior sd':>10} {'sd/prior':>8}"]
+    for r in d.get("parameters", []):
+        lines.append(f"{r['name']:<9} {r['unit']:<7} {f(r['mean'], '11.5g')} {f(r['sd'], '10.4g')} "
+                     f"{f(r['prior_sd'], '10.4g')} {f(r['ratio'], '8.3f')}")
+    names = d.get("log_names", [])
+    if d.get("principal"):
+        lines.append("principal directions of the posterior in log coordinates, least narrowed first:")
+        lines.append("  " + f"{'sd':>8} {'prior sd':>8} {'ratio':>6}  " + " ".join(f"{n:>7}" for n in names))
+        for r in d["principal"]:
+            lines.append("  " + f"{f(r['sd'], '8.3g')} {f(r['prior_sd'], '8.3g')} {f(r['ratio'], '6.3f')}  "
+                         + " ".join(f"{r['loadings'].get(n, 0.0):7.3f}" for n in names))
+    s = d.get("scale")
+    if s:
+        lines.append(f"common scale of {', '.join(s['names'])}: posterior sd {f(s['posterior_sd'], '.3g')} "
+                     f"(log units), prior sd {f(s['prior_sd'], '.3g')} (ratio {f(s['ratio'], '.2f')}), "
+                     f"the box along the ray {f(s['ray_prior_sd'], '.3g')} (ratio {f(s['ray_ratio'], '.2f')}); "
+                     f"sd of the common factor {f(s['log_c_sd'], '.3g')} in log"
+                     + ("; exact symmetry, not anchored" if s.get("exact_symmetry") else ""))
+    if d.get("combinations"):
+        lines.append("scale-invariant combinations (SI units): geometric mean, sd of the log, prior sd of the log:")
+        for c in d["combinations"]:
+            lines.append(f"  {c['label']:<20} {f(c['value'], '11.5g')} {c['unit']:<8} sd(log) {f(c['log_sd'], '.3g')} "
+                         f"prior {f(c['prior_log_sd'], '.3g')} ratio {f(c['ratio'], '.3f')} "
+                         f"(90%: {f(c['q05'], '.4g')} .. {f(c['q95'], '.4g')})")
+    if d.get("anchors"):
+        lines.append("anchors of the scale: " + "; ".join(d["anchors"]))
+    lines += [f"WARNING: {w}" for w in d.get("warnings", [])]
+    return "\n".join(lines)
+
+
+__all__ = ["SCALED", "Identifiability", "identify", "format_identifiability", "scale_invariant_combinations",
+           "uniform_log_moments"]
