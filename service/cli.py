@@ -30,8 +30,30 @@ def _kv(items: list[str] | None, what: str) -> dict[str, str]:
 
 
 def _fail(msg: str) -> typer.Exit:
-    console.print(f"[red]error:[/red] {msg}", highlight=False)
+    console.print(f"[red]error:[/red] {msg}", highlight=False, soft_wrap=True)   # one line, however long
     return typer.Exit(2)
+
+
+def reach_gate(spec, force_reach: bool) -> None:
+    """The reach check before any sampling (docs/inference.md, "The model's reach"): a recording outside the
+    reach of the model and prior exits 2 with one ``error:`` line unless ``force_reach`` (then a warning);
+    a marginal or unchecked one gets a warning; an inside one a one-line note."""
+    try:
+        v = spec.reach()
+    except ValueError as exc:
+        raise _fail(f"reach check: {exc}") from None
+    if v.verdict == "outside" and not force_reach:
+        raise _fail(v.message + "; --force-reach fits anyway")
+    if v.verdict == "outside":
+        console.print(f"[yellow]WARNING[/yellow] {v.message} (--force-reach: fitting anyway; expect a posterior "
+                      "piled on the prior's bounds)", highlight=False, soft_wrap=True)
+    elif v.verdict == "marginal":
+        console.print(f"[yellow]WARNING[/yellow] {v.message}", highlight=False, soft_wrap=True)
+    elif v.verdict == "unchecked":
+        if spec.model == "fe":
+            console.print(f"[yellow]WARNING[/yellow] {v.message}", highlight=False, soft_wrap=True)
+    else:
+        console.print(f"reach: {v.message}", highlight=False, soft_wrap=True)
 
 
 def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:
@@ -66,7 +88,7 @@ def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:
 def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
-               measure: list[str] | None = None):
+               measure: list[str] | None = None, force_reach: bool = False):
     """A validated JobSpec from CLI options (exit code 2 with the pydantic message on bad input)."""
     from pydantic import ValidationError
 
@@ -86,7 +108,7 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
             "priors": priors or None, "fixed": fixed, "sampler": smp, "mesh": mesh, "dt": dt,
             "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
-            "chunk_size": chunk_size, "measurements": measurements}
+            "chunk_size": chunk_size, "measurements": measurements, "force_reach": bool(force_reach)}
     try:
         return JobSpec.model_validate(body)
     except ValidationError as exc:
@@ -235,6 +257,9 @@ Token = Annotated[Optional[str], typer.Option(envvar="VFINFER_TOKEN", help="bear
 Model = Annotated[str, typer.Option(hidden=True, help="'fe' or the 'toy' test double (tests only)")]
 Noise = Annotated[str, typer.Option(help="'fixed': the likelihood uses --sigma-e (paper, Eq. 15); 'marginal': the "
                                          "noise sd is unknown and integrated out (log-uniform, 0.01-100 mm^2)")]
+ForceReach = Annotated[bool, typer.Option(
+    "--force-reach", help="fit even when the recording lies outside the model's reach (its f0 or peak area beyond "
+                          "every prior-predictive draw); without it such a recording exits 2 before sampling")]
 Measure = Annotated[Optional[list[str]], typer.Option(
     "--measure", help="NAME=MEAN:SD (paper units), repeatable: a Gaussian measurement of an estimated parameter, "
                       "e.g. p_sub=1000:50; anchors the common scale a GAW cannot determine")]
@@ -254,11 +279,14 @@ def infer(gaw: Path, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, par
           sigma_e: float = 1.0, seed: int = 0, prior: Prior = None, fix: Fix = None,
           workers: Annotated[int, typer.Option(help="local worker processes")] = 2,
           out: Annotated[Path, typer.Option(help="output folder")] = Path("vfinfer_output"),
-          model: Model = "fe", noise: Noise = "fixed", measure: Measure = None) -> None:
+          model: Model = "fe", noise: Noise = "fixed", measure: Measure = None,
+          force_reach: ForceReach = False) -> None:
     """Run an inference on this machine (in-process Dask LocalCluster) and print the posterior table
-    and what the data determined (the identifiability table)."""
+    and what the data determined (the identifiability table). The recording is first checked against
+    the model's reach (``vfinfer reach``)."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise, measure=measure)
+                      model=model, noise=noise, measure=measure, force_reach=force_reach)
+    reach_gate(spec, force_reach)
     _note_is(sampler)
     summary = run_local(spec, out, workers)
     print_table(summary, title=f"Posterior for {gaw.name}")
@@ -285,13 +313,15 @@ def submit(gaw: Path, url: Url = "http://127.0.0.1:8000", token: Token = None, f
            sampler: Sampler = "smc", n: N = 2000, particles: Particles = 200, mesh: Mesh = "coarse",
            dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25, sigma_e: float = 1.0, seed: int = 0,
            prior: Prior = None, fix: Fix = None, model: Model = "fe", noise: Noise = "fixed",
-           measure: Measure = None) -> None:
-    """Submit a job to a running service; prints the job id."""
+           measure: Measure = None, force_reach: ForceReach = False) -> None:
+    """Submit a job to a running service; prints the job id (and the service's warnings)."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise, measure=measure)
+                      model=model, noise=noise, measure=measure, force_reach=force_reach)
     _note_is(sampler)
     with _http(url, token) as http:
         d = _check(http.post("/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"}))
+    for w in d.get("warnings", []):
+        console.print(f"[yellow]WARNING[/yellow] {w}", highlight=False, soft_wrap=True)
     console.print(d["id"])
 
 
@@ -349,6 +379,58 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option("--param", help=
     write_gaw_csv(out, r.t, r.gaw, r.fps, meta={"source": "vfinfer simulate", "params": json.dumps(p.as_dict()),
                                                 "mesh": mesh, "dt": dt})
     console.print(f"f0={r.f0:.1f} Hz, {r.gaw.size} frames, peak area {r.gaw.max():.2f} mm^2 -> {out}")
+
+
+@app.command()
+def reach(mesh: Mesh = "coarse", dt: float = 5e-5, duration: float = 0.55, discard: float = 0.25,
+          prior: Prior = None, fix: Fix = None,
+          n: Annotated[int, typer.Option("--n", help="prior draws to simulate")] = 2000,
+          seed: Annotated[int, typer.Option(help="random seed of the draws")] = 20190613,
+          check: Annotated[Optional[Path], typer.Option(help="a GAW file to check against the reach")] = None,
+          fps: Fps = None,
+          rebuild: Annotated[bool, typer.Option(help="simulate anew even if an ensemble is cached")] = False) -> None:
+    """Build (or show) the model's reach for a configuration and prior: the GAW measures of N prior draws
+    (f0, peak area, open / speed / closing quotients; phonating fraction), cached for `vfinfer infer` and the
+    service (folder: $VFINFER_CACHE_DIR/reach, else the user cache). With --check, compare a recording."""
+    from vfcore.config import SimConfig
+    from vfcore.inference import reach as rc
+    from vfcore.inference.prior import TABLE2_BOUNDS
+    from vfcore.inference.prior import Prior as PriorBox
+
+    try:
+        bounds = {k: tuple(v) for k, v in TABLE2_BOUNDS.items()}
+        for k, v in _kv(prior, "--prior").items():
+            lo, _, hi = v.partition(":")
+            bounds[k] = (float(lo), float(hi))
+        fixed = {k: float(v) for k, v in _kv(fix, "--fix").items()}
+        for k in fixed:
+            bounds.pop(k, None)
+        box = PriorBox(bounds, fixed)
+        cfg = SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=min(4000.0, 1.0 / dt))
+    except (ValueError, typer.BadParameter) as exc:
+        raise _fail(str(exc)) from None
+    if n < 1:
+        raise _fail(f"--n must be >= 1, got {n}")
+    ens, exact = rc.find_ensemble(cfg, box)
+    if rebuild or ens is None or not exact:
+        t0 = time.perf_counter()
+
+        def progress(done, total, el):
+            eta = el / done * (total - done) if done else 0.0
+            console.print(f"reach: {done}/{total} draws simulated, {el:.0f} s elapsed, ~{eta:.0f} s left",
+                          highlight=False, soft_wrap=True)
+        console.print(f"reach: simulating {n} prior draws ({mesh} mesh, dt {dt:g} s, {duration:g} s)", highlight=False)
+        ens = rc.build_ensemble(cfg, box, n, seed, progress=progress)
+        path = rc.save_cached(ens)
+        console.print(f"reach: {ens.n} draws in {time.perf_counter() - t0:.0f} s -> {path}", highlight=False)
+    else:
+        console.print(f"reach: ensemble of {ens.n} draws from {ens.source}", highlight=False)
+    console.print(rc.format_table(ens), highlight=False, soft_wrap=True)
+    if check is not None:
+        from vfvideo.io import read_gaw
+        g = read_gaw(check, fps=fps)
+        v = rc.check_reach(rc.recording_measures(g.area, g.fps), ens)
+        console.print(f"{v.verdict}: {v.message}", highlight=False, soft_wrap=True)
 
 
 @app.command()

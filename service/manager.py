@@ -25,6 +25,8 @@ from .settings import Settings
 log = logging.getLogger("vfinfer.manager")
 
 _STOP = object()
+#: Stats written at submission (service.routers.jobs.reach_gate) that a finished run keeps.
+SUBMIT_NOTES = ("reach", "warnings")
 
 
 def new_job_id() -> str:
@@ -87,9 +89,12 @@ class JobManager:
         # job_id was produced by new_job_id() and read back from the table, never from a request
         return self.settings.stores_dir / f"{job_id}.zarr"
 
-    def submit(self, owner: str, spec: JobSpec) -> str:
+    def submit(self, owner: str, spec: JobSpec, notes: dict | None = None) -> str:
+        """Queue a job; ``notes`` (the reach check and its warnings) start the job's stats and outlive its runs."""
         job_id = new_job_id()
         self.db.insert(job_id, owner, spec.to_json(), spec.n_simulations)
+        if notes:
+            self.db.update(job_id, stats=notes)
         self._q.put(job_id)
         return job_id
 
@@ -162,6 +167,9 @@ class JobManager:
         stats["runs"] = prev.get("runs", []) + [{k: stats[k] for k in ("chunks_computed", "chunks_skipped",
                                                                       "total_s")}]
         stats["queued_s"] = (rec["started"] or now) - rec["created"]
+        for k in SUBMIT_NOTES:
+            if k in prev:
+                stats[k] = prev[k]
         self.db.update(job_id, only_if_state=("running",), state="done", finished=time.time(),
                        n_done=stats["n_simulations"], n_total=stats["n_simulations"], ess=_finite(stats["ess"]),
                        stats=stats)

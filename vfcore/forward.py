@@ -56,24 +56,38 @@ def prestress(system: System, K_vals: np.ndarray, x_mid: float) -> tuple[np.ndar
     return u, -lam
 
 
-def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray) -> CycleSummary:
-    """Cycles between successive upward crossings of the mean area (opening phases)."""
+def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray,
+            force: np.ndarray | None = None, share: np.ndarray | None = None, h: float = 0.0,
+            proj: np.ndarray | None = None) -> CycleSummary:
+    """Cycles between successive upward crossings of the mean area (opening phases).
+
+    ``force`` (n, m) per-step contact forces, N/m, ``share`` (m,) edge share of each surface node, m,
+    and ``h`` the step, s: the contact impulse, duration and pressure in contact of each cycle
+    (see :class:`CycleSummary`); without them those arrays stay empty. ``proj`` (n, m), N s/m: the
+    momentum the inelastic projection removes per step and node (added to the impulse).
+    """
     empty = np.empty(0)
     level = 0.5 * (gaw.max() + gaw.min())
     # a flicker below 0.05 mm^2 (a few camera pixels) is no oscillation
     if gaw.max() - gaw.min() < MIN_CYCLE_AMPLITUDE:
-        return CycleSummary(empty, empty, empty, empty, empty, empty, empty)
+        return CycleSummary(empty, empty, empty, empty, empty, empty, empty, empty, empty, empty)
     up = np.nonzero((gaw[:-1] < level) & (gaw[1:] >= level))[0]
     if up.size >= 2:
         # cycles shorter than 1/1000 s (above any phonation f0) are numerical chatter
         keep = np.concatenate([[True], np.diff(t[up]) > 1e-3])
         up = up[keep]
     if up.size < 2:
-        return CycleSummary(empty, empty, empty, empty, empty, empty, empty)
+        return CycleSummary(empty, empty, empty, empty, empty, empty, empty, empty, empty, empty)
     # sub-sample crossing times
     frac = (level - gaw[up]) / (gaw[up + 1] - gaw[up])
     tc = t[up] + frac * (t[up + 1] - t[up])
     per, pk, mn, qf, cm, cx = [], [], [], [], [], []
+    imp, dur, pin = [], [], []
+    if force is not None:
+        f_tot = force.sum(axis=1)                       # N/m on the whole surface, per step
+        p_tot = proj.sum(axis=1) if proj is not None else np.zeros(f_tot.size)   # N s/m, per step
+        touching = force > 0.0
+        c_len = touching.astype(float) @ share          # m of surface in contact, per step
     for a, b in zip(up[:-1], up[1:]):
         sl = slice(a + 1, b + 1)
         pk.append(gaw[sl].max())
@@ -81,10 +95,17 @@ def _cycles(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray
         qf.append(flow[sl].mean())
         cm.append(cp_max[sl].mean())
         cx.append(cp_max[sl].max())
+        if force is not None:
+            i_c = h * f_tot[sl].sum() + p_tot[sl].sum()
+            ext = h * c_len[sl].sum()
+            imp.append(i_c)
+            dur.append(h * np.count_nonzero(touching[sl].any(axis=1)))
+            pin.append(i_c / ext if ext > 0.0 else 0.0)
     per = np.diff(tc)
     return CycleSummary(t_start=tc[:-1], period=per, peak_area=np.array(pk), min_area=np.array(mn),
-                        mean_flow=np.array(qf), mean_contact_pressure=np.array(cm),
-                        max_contact_pressure=np.array(cx))
+                        mean_flow=np.array(qf), mean_peak_contact_pressure_unconverged=np.array(cm),
+                        max_contact_pressure_unconverged=np.array(cx), contact_impulse=np.array(imp),
+                        contact_duration=np.array(dur), contact_pressure_in_contact=np.array(pin))
 
 
 def flow_coefficient(config: SimConfig) -> float:
@@ -155,31 +176,27 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     tu = np.zeros((n_traj, system.n))
     tv = np.zeros((n_traj, system.n))
     am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
-    if not config.has_subglottal:
-        p_in = None
-        status = kern.integrate(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
-                                D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
-                                u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
-                                config.closure_gap_mm * 1e-3, BLOWUP,
-                                width, gsep, lam, traj_every, tu, tv)
-    else:
-        p_in = np.full(n_steps, si["p_sub"])
-        status = kern.integrate_coupled(
-            n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
-            D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
-            u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
-            config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-            kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in)
-    return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall, p_in)
+    proj = np.zeros((n_steps, m))
+    # no resonator rows: exactly kern.integrate (the inlet pressure stays p_sub)
+    p_in = np.full(n_steps, si["p_sub"]) if config.has_subglottal else np.zeros(0)
+    status = kern.integrate_coupled(
+        n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
+        D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
+        u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
+        config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
+        kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj)
+    return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,
+                   p_in if config.has_subglottal else None, proj)
 
 
 def _result(p: Params, config: SimConfig, system: System, status: int, width: np.ndarray, gsep: np.ndarray,
             lam: np.ndarray, traj_every: int, tu: np.ndarray, t_wall: float,
-            p_in: np.ndarray | None = None) -> SimResult:
+            p_in: np.ndarray | None = None, proj: np.ndarray | None = None) -> SimResult:
     """SimResult from the per-step arrays of one integration (status 0 = ok, else failing step).
 
     ``p_in`` (n_steps,): glottal inlet pressure after each step (subglottal coupling), or None
-    (then it is ``p_sub`` throughout and ``SimResult.p_in`` stays empty).
+    (then it is ``p_sub`` throughout and ``SimResult.p_in`` stays empty). ``proj`` (n_steps, m): the
+    projection impulses of the kernel (N s/m), or None (then the contact impulse is the multipliers' alone).
     """
     si = p.si()
     h = config.dt
@@ -202,7 +219,8 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
     w_share = system.mesh.surface_weights()
     cp_full = lam / np.where(w_share > 0, w_share, np.inf)       # Pa
     keep = t_all >= config.discard - 1e-12
-    cyc = _cycles(t_all[keep] - config.discard, gaw_full[keep], flow_full[keep], cp_full[keep].max(axis=1))
+    cyc = _cycles(t_all[keep] - config.discard, gaw_full[keep], flow_full[keep], cp_full[keep].max(axis=1),
+                  lam[keep], w_share, h, None if proj is None else proj[keep])
     tc, gaw = downsample(t_all, gaw_full, config.fps, config.discard)
     _, gaw_hr = downsample(t_all, gaw_full, config.fps * HR_OVERSAMPLE, config.discard)
     gaw_hr = gaw_hr[: HR_OVERSAMPLE * (gaw.size - 1) + 1]

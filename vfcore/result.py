@@ -16,7 +16,23 @@ HR_OVERSAMPLE = 10
 class CycleSummary:
     """Per-cycle summaries over the kept (post-transient) window.
 
-    All arrays have shape (n_cycles,). Pressures in Pa, areas in mm^2, flow in m^3/s.
+    All arrays have shape (n_cycles,). Pressures in Pa, areas in mm^2, flow in m^3/s. A cycle runs
+    from one upward crossing of the mid-range area to the next, so each closed phase lies inside one
+    cycle.
+
+    Contact (docs/model.md, "Contact"; every quantity per unit fold length, from the per-step
+    contact forces f_j(t_k) >= 0 of the surface nodes, N/m, step h):
+
+    * ``contact_impulse`` (N s/m): h * sum_k sum_j f_j(t_k) over the cycle's steps, the normal
+      momentum the midline takes from the fold per cycle.
+    * ``contact_duration`` (s): h * number of steps with any node in contact.
+    * ``contact_pressure_in_contact`` (Pa): the impulse divided by the space-time extent of the
+      contact, h * sum_k (sum of the edge shares of the nodes in contact at t_k) (m s): the mean
+      pressure over the contact patch while in contact; 0 for a cycle without contact.
+    * ``max_contact_pressure_unconverged`` / ``mean_peak_contact_pressure_unconverged`` (Pa): the
+      nodal contact pressure (force / edge share) at its maximum over the cycle, and the cycle's
+      time-mean of its spatial maximum. Both depend on the time step and the mesh (the impact
+      force scales like m v / h) and are kept for comparison only.
     """
 
     t_start: np.ndarray          # s, cycle start (glottal-area minimum) relative to the kept window
@@ -24,12 +40,30 @@ class CycleSummary:
     peak_area: np.ndarray        # mm^2
     min_area: np.ndarray         # mm^2
     mean_flow: np.ndarray        # m^3/s
-    mean_contact_pressure: np.ndarray  # Pa, time-mean over the cycle of the spatial max over nodes
-    max_contact_pressure: np.ndarray   # Pa, max over the cycle and over nodes
+    mean_peak_contact_pressure_unconverged: np.ndarray  # Pa, time-mean over the cycle of the spatial max
+    max_contact_pressure_unconverged: np.ndarray        # Pa, max over the cycle and over nodes
+    contact_impulse: np.ndarray = field(default_factory=lambda: np.empty(0))              # N s/m
+    contact_duration: np.ndarray = field(default_factory=lambda: np.empty(0))             # s
+    contact_pressure_in_contact: np.ndarray = field(default_factory=lambda: np.empty(0))  # Pa
 
     @property
     def f0(self) -> float:
         return float(1.0 / np.mean(self.period)) if self.period.size else float("nan")
+
+    @property
+    def closed_quotient(self) -> np.ndarray:
+        """(n_cycles,) fraction of each cycle with a node in contact (contact_duration / period)."""
+        return self.contact_duration / self.period
+
+    @property
+    def max_contact_pressure(self) -> np.ndarray:
+        """Alias of ``max_contact_pressure_unconverged`` (time-step and mesh dependent)."""
+        return self.max_contact_pressure_unconverged
+
+    @property
+    def mean_contact_pressure(self) -> np.ndarray:
+        """Alias of ``mean_peak_contact_pressure_unconverged`` (time-step and mesh dependent)."""
+        return self.mean_peak_contact_pressure_unconverged
 
 
 @dataclass(frozen=True)

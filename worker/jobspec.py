@@ -122,6 +122,10 @@ class JobSpec(_Strict):
     chunk_size: int | None = Field(default=None, ge=1, le=10_000,
                                    description="simulations per worker task (default: sized to run for seconds)")
     toy: ToyOptions | None = None
+    force_reach: bool = Field(
+        default=False, description="fit even when the recording lies outside the model's reach (its GAW measures "
+                                   "beyond every prior-predictive draw; docs/inference.md, \"The model's reach\"): "
+                                   "the job is accepted with a warning instead of a 422")
 
     @field_validator("sigma_bounds")
     @classmethod
@@ -234,3 +238,14 @@ class JobSpec(_Strict):
     def to_problem(self):
         """The ``vfcore.inference.Problem`` this job solves (the toy test double scores against it too)."""
         return self._problem(self.to_prior())
+
+    def reach(self):
+        """The reach check of this job's recording (``vfcore.inference.reach.reach_for``): a
+        :class:`~vfcore.inference.reach.ReachVerdict`, "unchecked" where no ensemble matches the configuration
+        and prior (none is built here: that takes minutes) and for the toy test double, which is not the
+        model the ensembles describe."""
+        from vfcore.inference.reach import ReachVerdict, reach_for
+        if self.model != "fe":
+            return ReachVerdict("unchecked", f"the model's reach is not checked for model {self.model!r}",
+                                exact=False)
+        return reach_for(self.observed(), float(self.gaw.fps), self.sim_config(), self.to_prior())

@@ -21,7 +21,14 @@ from vfcore.params import PARAM_UNITS
 from . import store as st
 from .jobspec import JobSpec
 
-SUMMARY_QUANTITIES = {"mean_flow": "m^3/s", "mean_contact": "Pa", "max_contact": "Pa"}
+#: Posterior-predictive summaries. ``contact_impulse`` (per cycle and unit fold length) and
+#: ``contact_pressure_in_contact`` (mean over the contact patch while in contact) are the contact
+#: products to read; ``mean_contact`` / ``max_contact`` are the paper's nodal peak pressures, which grow
+#: as the time step shrinks and change with the mesh (docs/model.md, "Contact").
+SUMMARY_QUANTITIES = {"mean_flow": "m^3/s", "contact_impulse": "N s/m", "contact_pressure_in_contact": "Pa",
+                      "mean_contact": "Pa", "max_contact": "Pa"}
+#: Summaries that depend on the time step and mesh: their entries carry ``"converged": False``.
+UNCONVERGED = frozenset({"mean_contact", "max_contact"})
 
 
 def _clean(x):
@@ -83,6 +90,8 @@ def _predictive_summary(pred) -> tuple[dict, np.ndarray | None]:
         q = np.quantile(a, [0.05, 0.5, 0.95])
         out[name] = {"unit": unit, "mean": float(a.mean()), "sd": float(a.std(ddof=1)) if a.size > 1 else 0.0,
                      "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])}
+        if name in UNCONVERGED:
+            out[name]["converged"] = False
     g = _finite_gaw(pred)
     if g is not None and g.shape[0]:
         bands = np.quantile(g, [0.05, 0.5, 0.95], axis=0)
@@ -133,6 +142,9 @@ def identifiability_of(spec: JobSpec, post) -> dict | None:
 
 #: residual RMS / sigma_e beyond which (either way) a fixed-noise job's summary warns
 NOISE_RATIO_WARN = 1.5
+#: residual RMS / the recording's own noise sd (second differences) above which the summary says the model
+#: does not reproduce the recording; a fit to within the noise has a ratio near 1
+MISFIT_RATIO_WARN = 3.0
 
 
 def noise_check(spec: JobSpec, post, pred) -> dict | None:
@@ -145,12 +157,42 @@ def noise_check(spec: JobSpec, post, pred) -> dict | None:
     g = _finite_gaw(pred)
     if g is None or g.shape[0] == 0 or post.obs_gaw is None:
         return None
+    from vfcore.diagnose.locate import noise_sd
     y = np.asarray(post.obs_gaw, dtype=float)[: g.shape[1]]
     rms = np.sqrt(np.mean((g - y) ** 2, axis=1))
     q = np.quantile(rms, [0.05, 0.5, 0.95])
+    s_rec = noise_sd(y, g)
     return {"noise": spec.noise, "sigma_e": float(spec.sigma_e),
             "residual_rms": {"unit": "mm2", "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])},
-            "ratio": float(q[1] / spec.sigma_e)}
+            "ratio": float(q[1] / spec.sigma_e), "recording_noise_sd": s_rec,
+            "misfit_ratio": float(q[1] / s_rec) if s_rec > 0 else None}
+
+
+def reach_of(spec: JobSpec) -> dict | None:
+    """The reach check of the job's recording (``JobSpec.reach``) as a dict, ``None`` for the toy model; an
+    error is reported, not raised."""
+    if spec.model != "fe":
+        return None
+    try:
+        return spec.reach().to_dict()
+    except Exception as exc:  # noqa: BLE001 - a check must not fail the job; recorded
+        return {"verdict": "unchecked", "message": f"reach check failed: {type(exc).__name__}: {exc}"}
+
+
+def edge_warnings(spec: JobSpec, post, nc: dict | None) -> list[str]:
+    """Plain warnings for a posterior at the edges (docs/inference.md, "The model's reach"): each parameter
+    piled against a bound of the prior's box (:func:`vfcore.inference.identify.at_bounds`), and a residual
+    RMS more than ``MISFIT_RATIO_WARN`` times the recording's own noise sd (``nc``: :func:`noise_check`)."""
+    from vfcore.inference.identify import at_bounds
+    out = [r["warning"] for r in at_bounds(post, spec.to_prior())]
+    if nc is not None and nc.get("misfit_ratio") is not None and nc["misfit_ratio"] > MISFIT_RATIO_WARN:
+        r, s = nc["residual_rms"]["q50"], nc["recording_noise_sd"]
+        out.append(f"MISFIT: the fit's residual RMS is {r:.3g} mm^2, {r / s:.1f} times the recording's noise "
+                   f"({s:.3g} mm^2, estimated from second differences of the residual): the model does not "
+                   "reproduce this recording, and the posterior describes the closest the prior lets it come, "
+                   "not the fold; check the recording against the model's reach (docs/inference.md, "
+                   "\"The model's reach\")")
+    return out
 
 
 def publish_posterior(store_path: str, post) -> dict:
@@ -175,6 +217,13 @@ def publish_posterior(store_path: str, post) -> dict:
             f"NOISE LEVEL: the fit's residual RMS is {r:.3g} mm^2 against sigma_e = {se:g} mm^2; if the misfit is "
             f"noise, the posterior is {how}; set sigma_e to the recording's noise or use noise='marginal' "
             "(docs/inference.md, 'Unknown noise level')"]
+    reach = reach_of(spec)
+    if reach is not None and reach.get("verdict") in ("outside", "marginal"):
+        post.warnings = list(post.warnings) + [f"REACH: {reach['message']}"]
+    try:
+        post.warnings = list(post.warnings) + edge_warnings(spec, post, nc)
+    except Exception as exc:  # noqa: BLE001 - a check must not fail the job; recorded
+        post.warnings = list(post.warnings) + [f"edge check failed: {type(exc).__name__}: {exc}"]
     pred, bands = _predictive_summary(resampled)
     summary = posterior_summary(post, pred)
     if reg is not None:
@@ -183,6 +232,8 @@ def publish_posterior(store_path: str, post) -> dict:
         summary["noise_check"] = _clean(nc)
     if ident is not None:
         summary["identifiability"] = _clean(ident)
+    if reach is not None:
+        summary["reach"] = _clean(reach)
     pg = root.require_group("posterior")
     for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
                       ("log_weights", np.asarray(post.log_weights, dtype=float)),
@@ -277,7 +328,7 @@ def fig_corner(post, bands=None) -> bytes:
 def fig_contact(post, bands=None) -> bytes:
     plt = _plt()
     pred = post.resampled_predictive()
-    fig, axes = plt.subplots(1, 3, figsize=(10, 3))
+    fig, axes = plt.subplots(1, len(SUMMARY_QUANTITIES), figsize=(3.4 * len(SUMMARY_QUANTITIES), 3))
     for ax, (name, unit) in zip(axes, SUMMARY_QUANTITIES.items()):
         a = None if pred is None else getattr(pred, name)
         if a is not None:
@@ -287,7 +338,7 @@ def fig_contact(post, bands=None) -> bytes:
             ax.hist(a, bins=30, color="C2")
         else:
             ax.text(0.5, 0.5, "not available", ha="center", transform=ax.transAxes)
-        ax.set_xlabel(f"{name} ({unit})")
+        ax.set_xlabel(f"{name} ({unit}{', not converged' if name in UNCONVERGED else ''})", fontsize=8)
     axes[0].set_ylabel("posterior count")
     fig.suptitle("posterior contact pressure and flow rate")
     fig.tight_layout()

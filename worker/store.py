@@ -11,7 +11,9 @@
         gaw          (n, n_compare)  float32   aligned simulated GAW (NaN rows for failures)
         mean_flow    (n,)            float64   m^3/s      (flow summary)
         mean_contact (n,)            float64   Pa         (contact summaries)
-        max_contact  (n,)            float64   Pa
+        max_contact  (n,)            float64   Pa         (nodal peaks: time-step and mesh dependent)
+        contact_impulse (n,)         float64   N s/m      (per cycle and unit fold length)
+        contact_pressure_in_contact (n,) float64 Pa       (mean over the contact patch while in contact)
         done         (n_chunks,)     bool      chunk c wrote rows [c*cs, (c+1)*cs)
       posterior/                    attrs: summary (JSON-able dict)
         samples (N, d), log_weights (N,), resampled (M,)
@@ -32,7 +34,9 @@ import zarr
 from vfcore.inference.problem import Evaluation
 
 LAYOUT_VERSION = 1
-EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact")
+EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "contact_impulse",
+               "contact_pressure_in_contact")
+SUMMARY_ARRAYS = ("mean_flow", "mean_contact", "max_contact", "contact_impulse", "contact_pressure_in_contact")
 PRODUCT_NAMES = ("gaw_fit", "corner", "contact_pressure", "samples_csv")
 
 
@@ -78,7 +82,7 @@ def ensure_batch(root, b: int, thetas: np.ndarray):
     g.create_array("loglik", shape=(n,), chunks=(c,), dtype="float64", fill_value=np.nan)
     g.create_array("ok", shape=(n,), chunks=(c,), dtype="bool", fill_value=False)
     g.create_array("gaw", shape=(n, n_cmp), chunks=(c, n_cmp), dtype="float32", fill_value=np.nan)
-    for s in ("mean_flow", "mean_contact", "max_contact"):
+    for s in SUMMARY_ARRAYS:
         g.create_array(s, shape=(n,), chunks=(c,), dtype="float64", fill_value=np.nan)
     g.create_array("done", shape=(n_chunks,), chunks=(1,), dtype="bool", fill_value=False)
     if n:
@@ -92,7 +96,7 @@ def write_chunk(store_path: str, b: int, c: int, lo: int, ev: Evaluation) -> Non
     hi = lo + len(ev)
     for name in EVAL_ARRAYS:
         a = getattr(ev, name)
-        if a is None:
+        if a is None or name not in g:
             continue
         g[name][lo:hi] = a
     g["done"][c] = True
@@ -104,7 +108,8 @@ def done_mask(g) -> np.ndarray:
 
 def read_evaluation(g, lo: int = 0, hi: int | None = None) -> Evaluation:
     hi = int(g.attrs["n"]) if hi is None else hi
-    kw = {name: g[name][lo:hi] for name in EVAL_ARRAYS}
+    # a store written before an array existed lacks it: read as absent
+    kw = {name: g[name][lo:hi] for name in EVAL_ARRAYS if name in g}
     kw["ok"] = np.asarray(kw["ok"], dtype=bool)
     return Evaluation(**kw)
 

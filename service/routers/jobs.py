@@ -31,6 +31,7 @@ class Submitted(BaseModel):
     id: str
     state: str
     status_url: str
+    warnings: list[str] = Field(default_factory=list)
 
 
 class JobStatus(BaseModel):
@@ -43,6 +44,7 @@ class JobStatus(BaseModel):
     sampler: str
     model: str
     stats: dict = Field(default_factory=dict)
+    warnings: list[str] = Field(default_factory=list)
 
 
 class CompareRequest(BaseModel):
@@ -71,7 +73,28 @@ def _status(manager, rec: dict) -> JobStatus:
     return JobStatus(id=rec["id"], state=rec["state"], ess=ess, timings=timings, error=rec["error"],
                      progress={"simulations_done": n_done, "simulations_total": n_total,
                                "fraction": (n_done / n_total) if n_total else 0.0, "phase": phase},
-                     sampler=spec.sampler.kind, model=spec.model, stats=rec["stats"] or {})
+                     sampler=spec.sampler.kind, model=spec.model, stats=rec["stats"] or {},
+                     warnings=list((rec["stats"] or {}).get("warnings", [])))
+
+
+def reach_gate(spec: JobSpec) -> tuple[JSONResponse | None, dict]:
+    """The reach check at submission (docs/inference.md, "The model's reach"): a 422 response for a recording
+    outside the reach unless ``force_reach``, else the notes to store with the job (its warnings). Where no
+    ensemble matches, none is built here (minutes): the job goes on with a warning saying how to build one."""
+    v = spec.reach()
+    if v.verdict == "outside" and not spec.force_reach:
+        return JSONResponse(status_code=422, content={"detail": [{
+            "loc": ["body", "gaw"], "type": "value_error",
+            "msg": v.message + "; send force_reach: true to fit anyway", "reach": v.to_dict()}]}), {}
+    warnings = []
+    if v.verdict == "outside":
+        warnings.append(f"REACH: {v.message} (force_reach: fitting anyway; expect a posterior piled on the "
+                        "prior's bounds)")
+    elif v.verdict == "marginal":
+        warnings.append(f"REACH: {v.message}")
+    elif v.verdict == "unchecked" and spec.model == "fe":
+        warnings.append(f"REACH: {v.message}")
+    return None, {"reach": v.to_dict(), "warnings": warnings}
 
 
 @router.post("/jobs", status_code=status.HTTP_202_ACCEPTED, response_model=Submitted)
@@ -83,8 +106,11 @@ def submit(spec: JobSpec, user: UserDep, manager: ManagerDep, settings: Settings
     if manager.db.count_active(user) >= settings.max_active_jobs_per_user:
         raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS,
                             f"at most {settings.max_active_jobs_per_user} queued/running jobs per user")
-    job_id = manager.submit(user, spec)
-    return Submitted(id=job_id, state="queued", status_url=f"/jobs/{job_id}")
+    refused, notes = reach_gate(spec)
+    if refused is not None:
+        return refused
+    job_id = manager.submit(user, spec, notes=notes)
+    return Submitted(id=job_id, state="queued", status_url=f"/jobs/{job_id}", warnings=notes.get("warnings", []))
 
 
 @router.get("/jobs", response_model=list[JobStatus])

@@ -39,7 +39,9 @@ class FakeSimulator:
         cp = np.tile((amp * 10.0 * np.maximum(-np.sin(2 * math.pi * f0 * t), 0.0))[:, None], (1, 3))
         cyc = CycleSummary(t_start=np.zeros(2), period=np.full(2, 1 / f0), peak_area=np.full(2, amp),
                            min_area=np.zeros(2), mean_flow=np.full(2, flow.mean()),
-                           mean_contact_pressure=np.full(2, cp.max(axis=1).mean()),
-                           max_contact_pressure=np.full(2, cp.max()))
+                           mean_peak_contact_pressure_unconverged=np.full(2, cp.max(axis=1).mean()),
+                           max_contact_pressure_unconverged=np.full(2, cp.max()),
+                           contact_impulse=np.full(2, 1e-3 * amp), contact_duration=np.full(2, 0.5 / f0),
+                           contact_pressure_in_contact=np.full(2, 5.0 * amp))
         return SimResult(ok=True, message="", params=params, config=config, fps=config.fps, t=t, gaw=gaw,
                          width=gaw / config.length_mm, flow=flow, contact_pressure=cp, cycles=cyc)

@@ -95,7 +95,9 @@ def test_products(problem, fitted, tmp_path):
         bn = predictive_bands(post, level=0.9, sigma_e=1.0)
         assert np.all(bn["hi"] - bn["lo"] >= b["hi"] - b["lo"] - 1e-9)
         rows = flow_contact_table(post)
-        assert [r["quantity"] for r in rows] == ["flow rate Q", "mean contact pressure", "max contact pressure"]
+        assert [r["quantity"] for r in rows] == ["flow rate Q", "contact impulse per cycle", "pressure in contact",
+                                             "mean nodal peak contact pressure (not converged)",
+                                             "max nodal contact pressure (not converged)"]
         assert rows[0]["mean"] > 0 and rows[0]["unit"] == "mL/s"
         assert plot_predictive(post, tmp_path / f"pp_{post.method}.png").stat().st_size > 1000
         assert plot_marginals(post, tmp_path / f"m_{post.method}.png", truth={"E_body": 12.5}).exists()

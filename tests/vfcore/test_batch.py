@@ -38,6 +38,10 @@ def test_batch_equals_scalar(scalar, batched):
         # vfcore/solver/_kernels.py)
         for f in ("gaw", "gaw_hr", "width", "flow", "contact_pressure", "contact_force"):
             assert np.array_equal(getattr(s, f), getattr(b, f)), f
+        # the per-cycle contact products include the kernels' projection impulses
+        for f in ("contact_impulse", "contact_duration", "contact_pressure_in_contact",
+                  "max_contact_pressure_unconverged"):
+            assert np.array_equal(getattr(s.cycles, f), getattr(b.cycles, f)), f
 
 
 def test_batch_reruns_bit_identical(rows, batched):

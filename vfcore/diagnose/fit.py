@@ -372,7 +372,7 @@ class ExtendedEvaluator:
 
     def _integrated(self, results, phis) -> Evaluation:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
-        from ..inference.problem import _cycle_means, aligned_loglik
+        from ..inference.problem import _contact_means, _cycle_means, aligned_loglik
         from . import quadrature as _q
         pb = self.problem
         ext = self.extension
@@ -385,7 +385,7 @@ class ExtendedEvaluator:
         loglik = np.full(k, -np.inf)
         ok = np.zeros(k, dtype=bool)
         gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)
-        flow, cmean, cmax = (np.full(k, np.nan) for _ in range(3))
+        flow, cmean, cmax, cimp, cin = (np.full(k, np.nan) for _ in range(5))
         extra = np.full((k, 3 * len(names)), np.nan)
         null_of = {e.name: e.null for e in ext.params}
         nulls = [null_of[n] for n in names]
@@ -441,8 +441,10 @@ class ExtendedEvaluator:
             extra[i, 1:2 * len(names):2] = q.sd
             extra[i, 2 * len(names):] = drops
             flow[i], cmean[i], cmax[i] = _cycle_means(r)
+            cimp[i], cin[i] = _contact_means(r)
         return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax,
-                          extra=extra, messages=tuple(messages))
+                          extra=extra, messages=tuple(messages), contact_impulse=cimp,
+                          contact_pressure_in_contact=cin)
 
 
 def integrated_summary(post, names) -> dict[str, dict[str, float]]:

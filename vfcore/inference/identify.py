@@ -324,6 +324,50 @@ def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]]
                            anchors=anchors, warnings=warnings, log_names=log_names)
 
 
+#: Per parameter: the outer fraction of the prior box (each end) and the posterior weight in it that counts
+#: as a posterior piled against that bound (a flat posterior puts BOUND_FRACTION there).
+BOUND_FRACTION = 0.02
+BOUND_MASS_WARN = 0.20
+
+
+def at_bounds(post, prior: Prior) -> list[dict]:
+    """Parameters whose posterior weight piles against a bound of the prior's box: more than
+    ``BOUND_MASS_WARN`` of the weight within ``BOUND_FRACTION`` of the box's width from the bound.
+
+    Each row: ``name``, ``bound`` ("lower"/"upper"), ``value`` (the bound), ``mass``, ``mean``, ``sd``,
+    ``warning`` (plain text). Per parameter, unlike the common-scale check of :func:`identify`, which looks
+    along the one direction a GAW cannot see: a fit the model cannot make presses single parameters to
+    their bounds (docs/inference.md, "The model's reach")."""
+    names = tuple(post.names)
+    if names != tuple(prior.names):
+        raise ValueError(f"posterior parameters {names} differ from the prior's {prior.names}")
+    X = np.atleast_2d(np.asarray(post.samples, dtype=float))
+    w = np.asarray(post.weights, dtype=float)
+    keep = w > 0
+    if not keep.any():
+        return []
+    X, w = X[keep], w[keep] / np.sum(w[keep])
+    lo, hi = prior.lo, prior.hi
+    mean, cov = _wmean_cov(X, w)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    rows = []
+    for i, n in enumerate(names):
+        edge = BOUND_FRACTION * (hi[i] - lo[i])
+        for side, b, mass in (("lower", lo[i], float(np.sum(w[X[:, i] <= lo[i] + edge]))),
+                              ("upper", hi[i], float(np.sum(w[X[:, i] >= hi[i] - edge])))):
+            if mass > BOUND_MASS_WARN:
+                u = PARAM_UNITS[n]
+                rows.append({"name": n, "bound": side, "value": float(b), "mass": mass, "mean": float(mean[i]),
+                             "sd": float(sd[i]), "warning": (
+                                 f"AT PRIOR BOUND: {n} = {mean[i]:.5g} +- {sd[i]:.3g} {u}: {mass:.0%} of the posterior "
+                                 f"lies within {BOUND_FRACTION:.0%} of the prior's {side} bound {b:g} {u} (box "
+                                 f"[{lo[i]:g}, {hi[i]:g}]); the prior, not the data, stops it there, so the "
+                                 "estimate and its sd are not measurements: widen that bound (--prior), or check "
+                                 "the recording against the model's reach (vfinfer reach --check; "
+                                 "docs/inference.md, \"The model's reach\")")})
+    return rows
+
+
 def format_identifiability(d: Mapping) -> str:
     """Plain-text rendering of :meth:`Identifiability.to_dict` (also of a stored job summary's entry)."""
     def f(x, fmt=".4g"):
@@ -360,5 +404,5 @@ def format_identifiability(d: Mapping) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["SCALED", "Identifiability", "identify", "format_identifiability", "scale_invariant_combinations",
+__all__ = ["SCALED", "BOUND_FRACTION", "BOUND_MASS_WARN", "Identifiability", "at_bounds", "identify", "format_identifiability", "scale_invariant_combinations",
            "uniform_log_moments"]

@@ -197,8 +197,9 @@ class Posterior:
         rp = self.resampled_predictive()
         if rp is not None and rp.gaw is not None:
             pp = {"gaw": (("chain", "draw", "frame"), rp.gaw.astype(np.float64)[None])}
-            for nm in ("mean_flow", "mean_contact", "max_contact"):
-                pp[nm] = (("chain", "draw"), getattr(rp, nm)[None])
+            for nm in ("mean_flow", "mean_contact", "max_contact", "contact_impulse", "contact_pressure_in_contact"):
+                if getattr(rp, nm) is not None:
+                    pp[nm] = (("chain", "draw"), getattr(rp, nm)[None])
             groups["posterior_predictive"] = xr.Dataset(pp)
         if self.obs_gaw is not None:
             groups["observed_data"] = xr.Dataset({"gaw": (("frame",), np.asarray(self.obs_gaw, dtype=float))})
@@ -225,7 +226,9 @@ class Posterior:
             g = pp["gaw"].values[0]
             pred = Evaluation(loglik=np.zeros(g.shape[0]), ok=np.all(np.isfinite(g), axis=1),
                               gaw=g.astype(np.float32), mean_flow=pp["mean_flow"].values[0],
-                              mean_contact=pp["mean_contact"].values[0], max_contact=pp["max_contact"].values[0])
+                              mean_contact=pp["mean_contact"].values[0], max_contact=pp["max_contact"].values[0],
+                              **{nm: pp[nm].values[0] for nm in ("contact_impulse", "contact_pressure_in_contact")
+                                 if nm in pp})
         obs = idata["observed_data"]["gaw"].values if "observed_data" in idata.groups() else None
         fps = json.loads(attrs["fps"]) if isinstance(attrs.get("fps"), str) else attrs.get("fps")
         post = cls(names=names, samples=samples, log_weights=ws["log_weight"].values.astype(float), resampled=res,

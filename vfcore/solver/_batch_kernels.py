@@ -43,7 +43,8 @@ def chol_solve_many(Lp, Lj, Lx, r) -> None:
 @njit(cache=True)
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                    sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
-                   width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out):
+                   width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out,
+                   proj_out):
     """Batched :func:`_kernels.integrate_coupled`.
 
     kval, mval, dval : (nnz, B); Lx : (nnz_L, B); G : (B, n, m); u, v, a : (n, B);
@@ -54,7 +55,8 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     status : (B,) int64, in/out: a sample entering with status != 0 is skipped; one whose
     state becomes non-finite or exceeds ``blowup`` at step k gets status k (-k when its contact
     active set did not settle, as in ``integrate``) and is frozen (its state zeroed) while the
-    others continue.
+    others continue. proj_out : (B, n_steps, m), the projection impulses of ``integrate_coupled``
+    (same arithmetic, :func:`_kernels.projection_impulse` inlined on the sample's column of mval).
     """
     n, B = u.shape
     m = sdx.size
@@ -167,6 +169,11 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
             xm = x_mid[b]
             for j in range(m):
                 if active[b, j]:
+                    d = sdx[j]
+                    md = 0.0
+                    for p in range(indptr[d], indptr[d + 1]):
+                        md += mval[p, b]
+                    proj_out[b, k - 1, j] = md * (v[d, b] + h * (1.0 - gamma) * a[d, b])
                     v[sdx[j], b] = 0.0
                     a[sdx[j], b] = 0.0
             gmin = 1e300

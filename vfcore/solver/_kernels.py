@@ -324,6 +324,21 @@ def subglottal_response(q, coef):
 
 
 @njit(cache=True)
+def projection_impulse(indptr, mval, d, vd, ad, h, gamma):
+    """Lateral momentum (N s/m) removed by zeroing velocity ``vd`` and acceleration ``ad`` of dof ``d``.
+
+    Zeroing v_d changes the momentum in x by -sum_i M_id v_d (consistent mass: the column sum, equal to
+    the row sum); zeroing a_d removes h (1 - gamma) a_d from the next step's velocity update,
+    v_{n+1} = v_n + h ((1 - gamma) a_n + gamma a_{n+1}). Their sum, with the multiplier's impulse
+    h * f, is the normal momentum the midline takes per step (exactly m v for a rigid stop).
+    """
+    md = 0.0
+    for p in range(indptr[d], indptr[d + 1]):
+        md += mval[p]
+    return md * (vd + h * (1.0 - gamma) * ad)
+
+
+@njit(cache=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
               u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
@@ -331,13 +346,14 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
     return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                              sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                              width, gsep_out, lam_out, traj_every, traj_u, traj_v,
-                             np.zeros((0, 3)), 0.0, np.zeros(0))
+                             np.zeros((0, 3)), 0.0, np.zeros(0), np.zeros((0, sdx.size)))
 
 
 @njit(cache=True)
 def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
                       u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
-                      width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out):
+                      width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
+                      proj_out):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
 
     Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
@@ -355,6 +371,9 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     Q(t_k) = flow_coef * gsep(t_k) * sqrt(max(p_in(t_{k-1}) - p_sup, 0)) (explicit: the previous
     p_in; flow_coef = 2 L sqrt(2 / rho_air)) drives the resonators, which give p_in(t_k), written
     to ``p_in_out[k-1]``. Before t = 0 the flow and the resonators are at rest (p_in(t_0) = p_sub).
+
+    ``proj_out`` (n_steps, m) or (0, m) = not recorded: the lateral momentum per unit length (N s/m)
+    the inelastic projection takes from each surface node at step k, :func:`projection_impulse`.
     """
     n = u.size
     m = sdx.size
@@ -423,8 +442,11 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
             return k
         # inelastic impact: a node held at the midline keeps no normal velocity or
         # acceleration (the trapezoidal rule would otherwise bounce it back every step)
+        rec = proj_out.shape[0] > 0
         for j in range(m):
             if active[j]:
+                if rec:
+                    proj_out[k - 1, j] = projection_impulse(indptr, mval, sdx[j], v[sdx[j]], a[sdx[j]], h, gamma)
                 v[sdx[j]] = 0.0
                 a[sdx[j]] = 0.0
         gmin = 1e300
