@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import contact_correct_ws, step_coefficients, subglottal_step, surface_loads
+from ._kernels import contact_correct_ws, projection_impulse, step_coefficients, subglottal_step, surface_loads
 
 
 @njit(cache=True)
@@ -56,7 +56,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     state becomes non-finite or exceeds ``blowup`` at step k gets status k (-k when its contact
     active set did not settle, as in ``integrate``) and is frozen (its state zeroed) while the
     others continue. proj_out : (B, n_steps, m), the projection impulses of ``integrate_coupled``
-    (same arithmetic, :func:`_kernels.projection_impulse` inlined on the sample's column of mval).
+    (:func:`_kernels.projection_impulse` on the sample's column of mval).
     """
     n, B = u.shape
     m = sdx.size
@@ -170,10 +170,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
             for j in range(m):
                 if active[b, j]:
                     d = sdx[j]
-                    md = 0.0
-                    for p in range(indptr[d], indptr[d + 1]):
-                        md += mval[p, b]
-                    proj_out[b, k - 1, j] = md * (v[d, b] + h * (1.0 - gamma) * a[d, b])
+                    proj_out[b, k - 1, j] = projection_impulse(indptr, mval[:, b], d, v[d, b], a[d, b], h, gamma)
                     v[sdx[j], b] = 0.0
                     a[sdx[j], b] = 0.0
             gmin = 1e300
