@@ -58,10 +58,9 @@ def reach_gate(spec, force_reach: bool) -> None:
 
 def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:
     """``--measure NAME=MEAN:SD`` (paper units, repeatable) -> ``{name: [mean, sd]}``; bad input raises
-    ``typer.Exit(2)`` after one ``error:`` line."""
-    import math
-
-    from vfcore.params import PARAM_NAMES, PARAM_UNITS
+    ``typer.Exit(2)`` after one ``error:`` line (the values are checked by
+    :func:`vfcore.inference.problem.validate_measurements`, as in a job spec)."""
+    from vfcore.inference.problem import validate_measurements
     out: dict[str, list[float]] = {}
     for it in items or []:
         name, sep, rest = it.partition("=")
@@ -69,19 +68,16 @@ def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:
         mean_s, sep2, sd_s = rest.partition(":")
         if not sep or not sep2:
             raise _fail(f"--measure must look like NAME=MEAN:SD (paper units, e.g. p_sub=1000:50), got {it!r}")
-        if name not in PARAM_NAMES:
-            raise _fail(f"--measure: unknown parameter {name!r}; known: {', '.join(PARAM_NAMES)}")
-        try:
-            mean, sd = float(mean_s), float(sd_s)
-        except ValueError:
-            raise _fail(f"--measure {name}: MEAN and SD must be numbers ({PARAM_UNITS[name]}), got {rest!r}") from None
-        if not (math.isfinite(mean) and math.isfinite(sd)):
-            raise _fail(f"--measure {name}: MEAN and SD must be finite, got {rest!r}")
-        if not sd > 0:
-            raise _fail(f"--measure {name}: SD must be > 0 {PARAM_UNITS[name]}, got {sd_s.strip()!r}")
         if name in out:
             raise _fail(f"--measure {name} given twice")
-        out[name] = [mean, sd]
+        try:
+            out[name] = [float(mean_s), float(sd_s)]
+        except ValueError:
+            raise _fail(f"--measure {name}: MEAN and SD must be numbers, got {rest!r}") from None
+    try:
+        validate_measurements(out)
+    except ValueError as exc:
+        raise _fail(f"--measure: {exc}") from None
     return out
 
 

@@ -150,11 +150,8 @@ class JobSpec(_Strict):
     @field_validator("measurements")
     @classmethod
     def _check_measurements(cls, v):
-        for name, (_, sd) in v.items():
-            if name not in PARAM_NAMES:
-                raise ValueError(f"unknown parameter {name!r}; known: {list(PARAM_NAMES)}")
-            if not sd > 0:
-                raise ValueError(f"measurement of {name}: sd ({sd}) must be > 0")
+        from vfcore.inference.problem import validate_measurements
+        validate_measurements(v)      # names and sds; against the prior in the model validator
         return v
 
     @field_validator("fixed")
@@ -186,10 +183,11 @@ class JobSpec(_Strict):
             prior = self.to_prior()
         except ValueError as exc:
             raise ValueError(f"priors/fixed: {exc}") from None
-        fixed_measured = sorted(set(self.measurements) - set(prior.names))
-        if fixed_measured:
-            raise ValueError(f"measurements: parameter(s) {fixed_measured} are fixed; a measurement cannot inform "
-                             "a fixed parameter")
+        from vfcore.inference.problem import validate_measurements
+        try:
+            validate_measurements(self.measurements, prior)
+        except ValueError as exc:
+            raise ValueError(f"measurements: {exc}") from None
         try:
             self._problem(prior)
         except ValueError as exc:
