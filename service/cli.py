@@ -44,16 +44,11 @@ def reach_gate(spec, force_reach: bool) -> None:
         raise _fail(f"reach check: {exc}") from None
     if v.verdict == "outside" and not force_reach:
         raise _fail(v.message + "; --force-reach fits anyway")
-    if v.verdict == "outside":
-        console.print(f"[yellow]WARNING[/yellow] {v.message} (--force-reach: fitting anyway; expect a posterior "
-                      "piled on the prior's bounds)", highlight=False, soft_wrap=True)
-    elif v.verdict == "marginal":
-        console.print(f"[yellow]WARNING[/yellow] {v.message}", highlight=False, soft_wrap=True)
-    elif v.verdict == "unchecked":
-        if spec.model == "fe":
-            console.print(f"[yellow]WARNING[/yellow] {v.message}", highlight=False, soft_wrap=True)
-    else:
+    w = v.warning("--force-reach")
+    if w is None:
         console.print(f"reach: {v.message}", highlight=False, soft_wrap=True)
+    elif spec.model == "fe":                      # the toy test double has no reach to check
+        console.print(f"[yellow]WARNING[/yellow] {w}", highlight=False, soft_wrap=True)
 
 
 def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:

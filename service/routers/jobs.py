@@ -86,14 +86,8 @@ def reach_gate(spec: JobSpec) -> tuple[JSONResponse | None, dict]:
         return JSONResponse(status_code=422, content={"detail": [{
             "loc": ["body", "gaw"], "type": "value_error",
             "msg": v.message + "; send force_reach: true to fit anyway", "reach": v.to_dict()}]}), {}
-    warnings = []
-    if v.verdict == "outside":
-        warnings.append(f"REACH: {v.message} (force_reach: fitting anyway; expect a posterior piled on the "
-                        "prior's bounds)")
-    elif v.verdict == "marginal":
-        warnings.append(f"REACH: {v.message}")
-    elif v.verdict == "unchecked" and spec.model == "fe":
-        warnings.append(f"REACH: {v.message}")
+    w = v.warning("force_reach")
+    warnings = [f"REACH: {w}"] if w is not None and spec.model == "fe" else []   # the toy has no reach
     return None, {"reach": v.to_dict(), "warnings": warnings}
 
 

@@ -401,6 +401,16 @@ class ReachVerdict:
     def outside(self) -> bool:
         return self.verdict == "outside"
 
+    def warning(self, forced_by: str) -> str | None:
+        """What a fit that goes ahead says about this verdict: the message of a marginal or unchecked
+        recording, and of one outside the reach fitted anyway because of ``forced_by`` (the option that
+        allowed it); ``None`` inside the reach."""
+        if self.verdict == "outside":
+            return f"{self.message} ({forced_by}: fitting anyway; expect a posterior piled on the prior's bounds)"
+        if self.verdict in ("marginal", "unchecked"):
+            return self.message
+        return None
+
     def to_dict(self) -> dict:
         def clean(x):
             if isinstance(x, dict):
