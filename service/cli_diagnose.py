@@ -11,6 +11,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw, warn
 from vfcore.diagnose.defaults import (BASE_PARTICLES, CONTINUATION, DISCARD_S, DURATION_S, MAX_REFITS,
                                      REFIT_PARTICLES)
 
@@ -18,8 +19,7 @@ console = Console()
 
 
 def _fail(msg: str) -> typer.Exit:
-    console.print(f"[red]error:[/red] {msg}", highlight=False)
-    return typer.Exit(2)
+    return fail(msg)
 
 
 def _names(text: str | None) -> list[str]:
@@ -62,7 +62,6 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
     from vfcore.params import PARAM_NAMES, TABLE3
-    from vfvideo.io import read_gaw
 
     est = list(dict.fromkeys(_names(estimate)))
     bad = [n for n in est if n not in PARAM_NAMES]
@@ -96,18 +95,19 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
                     f"(got dt={dt}, duration={duration}, discard={discard})")
     if not sigma_e > 0:
         raise _fail(f"--sigma-e must be > 0, got {sigma_e}")
-    try:
-        g = read_gaw(gaw, fps=fps)
-    except (ValueError, OSError) as exc:     # GawFileError is a ValueError
-        raise _fail(f"GAW {gaw}: {exc}") from None
+    warnings: list[str] = []
+    g = load_gaw(gaw, fps, warnings)
     if g.fps * dt > 1.0:
         raise _fail(f"--dt: camera fps {g.fps:g} exceeds the simulation rate 1/dt={1 / dt:.0f}")
     try:
         prior = Prior.default(fixed=fixed)
-        return Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e), noise=noise,
+        problem = Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e), noise=noise,
                        config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps)))
     except ValueError as exc:
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
+    for w in warnings:
+        warn(w)
+    return problem
 
 
 def _p(p) -> str:
@@ -190,16 +190,21 @@ def print_report(d: dict) -> None:
 def diagnose_cmd(
         gaw: Annotated[Path, typer.Argument(help="GAW file (CSV as written by 'vfinfer simulate'/'gaw', NPY, NPZ)")],
         out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png)")],
-        fps: Annotated[Optional[float], typer.Option(help="frame rate, if the file does not say")] = None,
+        fps: Annotated[Optional[float], typer.Option(parser=POSITIVE, help="camera frame rate, frames/s, if the "
+                                                                                "file does not say")] = None,
         estimate: Annotated[str, typer.Option(help="comma-separated parameters to estimate")] = "E_body,E_cover,p_sub",
         fix: Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable; "
                                                          "parameters neither estimated nor fixed take Table 3 values")] = None,
-        mesh: Annotated[str, typer.Option(help="coarse | medium | fine")] = "coarse",
-        dt: Annotated[float, typer.Option(help="time step, s")] = 1e-4,
-        duration: Annotated[float, typer.Option(help="simulated time, s (the paper's 0.55)")] = DURATION_S,
-        discard: Annotated[float, typer.Option(help="initial transient discarded, s")] = DISCARD_S,
-        sigma_e: Annotated[float, typer.Option(help="observation noise sd, mm^2")] = 1.0,
-        noise: Annotated[str, typer.Option(help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
+        mesh: Annotated[str, typer.Option(parser=choice("coarse", "medium", "fine"), metavar="[coarse|medium|fine]",
+                                          help="finite-element mesh")] = "coarse",
+        dt: Annotated[float, typer.Option(parser=POSITIVE, help="simulation time step, s")] = 1e-4,
+        duration: Annotated[float, typer.Option(parser=POSITIVE,
+                                                help="simulated time, s (the paper's 0.55)")] = DURATION_S,
+        discard: Annotated[float, typer.Option(parser=NON_NEGATIVE,
+                                               help="initial transient discarded, s")] = DISCARD_S,
+        sigma_e: Annotated[float, typer.Option(parser=POSITIVE, help="observation noise sd, mm^2")] = 1.0,
+        noise: Annotated[str, typer.Option(parser=choice("fixed", "marginal"), metavar="[fixed|marginal]",
+                                           help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
         particles: Annotated[int, typer.Option(help="SMC particles of each base fit")] = BASE_PARTICLES,
         refit_particles: Annotated[int, typer.Option(help="SMC particles of each extended fit")] = REFIT_PARTICLES,
         max_refits: Annotated[Optional[int], typer.Option(
@@ -214,7 +219,7 @@ def diagnose_cmd(
             help="store finished simulations in OUT/.resume while running, so the same command run again "
                  "after an interruption reads them back (same result, bit for bit); deleted once the "
                  "diagnosis is written")] = True,
-        seed: int = 0) -> None:
+        seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = 0) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
     from .routers.diagnose import check_candidates, jsonable
 
@@ -232,6 +237,8 @@ def diagnose_cmd(
         raise _fail(f"--max-refits must be >= 0, got {max_refits}")
     if workers < 1:
         raise _fail(f"--workers must be >= 1, got {workers}")
+    if out.exists() and not out.is_dir():
+        raise _fail(f"--out {out} exists and is not a folder")
     problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise)
 
     from vfcore.diagnose.pipeline import diagnose, plot_diagnosis
@@ -257,8 +264,7 @@ def diagnose_cmd(
                     cmap = CachedMap(pool.map, store) if resume else None
                     report = diagnose(problem, map=cmap or pool.map, chunk_size=chunk, **kw)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
-        console.print(f"[red]diagnosis failed:[/red] {type(exc).__name__}: {exc}", highlight=False)
-        raise typer.Exit(1) from None
+        raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
     d = jsonable(account(report.to_dict(), cmap))      # a resumed run counts its earlier attempts' time
     out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis.json").write_text(json.dumps(d, indent=1))

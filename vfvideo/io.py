@@ -230,7 +230,7 @@ def _col_unit(name: str, kind: str) -> str | None:
 
 
 def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_unit: str | None = None,
-             px_per_mm: float | None = None) -> GawData:
+             px_per_mm: float | None = None, allow_negative: bool = False) -> GawData:
     """Read a GAW file (CSV, NPY, NPZ) into times (s) and areas (mm^2).
 
     Parameters
@@ -242,6 +242,9 @@ def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_
         Override the units found in the file (defaults mm^2 and s).
     px_per_mm : float, optional
         Calibration for areas given in pixels.
+    allow_negative : bool
+        Return negative areas instead of refusing them (for a caller that decides which negative
+        samples are noise around zero, e.g. the command line's clipping rule).
 
     Raises
     ------
@@ -347,7 +350,7 @@ def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_
         raise GawFileError(f"{p}: fewer than two samples")
     if not np.all(np.isfinite(area)):
         raise GawFileError(f"{p}: area contains NaN or infinite values")
-    if np.any(area < 0):
+    if not allow_negative and np.any(area < 0):
         raise GawFileError(f"{p}: negative areas")
     if fps is None and "fps" in meta:
         try:

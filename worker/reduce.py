@@ -8,7 +8,6 @@ posterior bytes.
 from __future__ import annotations
 
 import io
-import json
 import math
 import os
 import tempfile
@@ -243,14 +242,13 @@ def publish_posterior(store_path: str, post) -> dict:
     if bands is not None:
         a = pg.create_array("gaw_bands", shape=bands.shape, chunks=bands.shape, dtype="float64", overwrite=True)
         a[...] = bands
-    # CSV via vfcore's exporter (one definition of the format)
-    fd, tmp = tempfile.mkstemp(suffix=".csv")
-    os.close(fd)
+    csv_bytes, meta = samples_csv(post)
+    st.write_blob(root, "samples_csv", csv_bytes)
+    st.write_blob(root, "samples_meta", meta)
     try:
-        post.to_csv(tmp)
-        st.write_blob(root, "samples_csv", Path(tmp).read_bytes())
-    finally:
-        os.unlink(tmp)
+        st.write_blob(root, "posterior_nc", netcdf_bytes(post))
+    except Exception as exc:  # noqa: BLE001 - an export must not fail the job; recorded
+        summary["export_errors"] = {"posterior_nc": f"{type(exc).__name__}: {exc}"}
     for name, fn in (("gaw_fit", fig_gaw_fit), ("corner", fig_corner), ("contact_pressure", fig_contact)):
         try:
             st.write_blob(root, name, fn(post, bands))
@@ -258,6 +256,46 @@ def publish_posterior(store_path: str, post) -> dict:
             summary.setdefault("figure_errors", {})[name] = f"{type(exc).__name__}: {exc}"
     pg.attrs["summary"] = summary   # written last: its presence means "posterior published"
     return summary
+
+
+# ---------------------------------------------------------------------------------------- data files
+def samples_csv(post) -> tuple[bytes, bytes]:
+    """All weighted draws as plain CSV (header row, then one row per draw: the parameters in paper units,
+    ``log_weight``, ``weight`` and ``n_resampled``, the times the draw occurs in the resampled ensemble),
+    and its metadata as a JSON sidecar (names, units, columns, diagnostics; non-finite numbers as null):
+    any CSV reader takes the file as it is."""
+    import csv
+    import json
+    counts = np.bincount(np.asarray(post.resampled, dtype=np.int64), minlength=post.samples.shape[0])
+    w = post.weights
+    buf = io.StringIO()
+    wr = csv.writer(buf, lineterminator="\n")
+    wr.writerow(list(post.names) + ["log_weight", "weight", "n_resampled"])
+    for i in range(post.samples.shape[0]):
+        lw = float(post.log_weights[i])
+        wr.writerow([repr(float(v)) for v in post.samples[i]]
+                    + [repr(lw) if math.isfinite(lw) else "", repr(float(w[i])), int(counts[i])])
+    meta = _clean({
+        "format": "vfinfer samples v2", "names": list(post.names),
+        "units": {n: PARAM_UNITS[n] for n in post.names},
+        "columns": {"log_weight": "normalised log importance weight (empty: weight 0)",
+                    "weight": "normalised weight", "n_resampled": "copies in the resampled ensemble"},
+        "method": post.method, "ess": post.ess, "pareto_k": post.pareto_k, "log_evidence": post.log_evidence,
+        "log_evidence_se": post.log_evidence_se, "n_simulations": post.n_simulations, "n_failed": post.n_failed,
+        "warnings": list(post.warnings), "fps": post.fps})
+    return buf.getvalue().encode(), json.dumps(meta, indent=1, sort_keys=True).encode()
+
+
+def netcdf_bytes(post) -> bytes:
+    """The posterior as ArviZ InferenceData in NetCDF-4 (``Posterior.to_inference_data``: posterior, weighted
+    samples, observed GAW and posterior predictive where available)."""
+    fd, tmp = tempfile.mkstemp(suffix=".nc")
+    os.close(fd)
+    try:
+        post.to_netcdf(tmp)
+        return Path(tmp).read_bytes()
+    finally:
+        os.unlink(tmp)
 
 
 # ---------------------------------------------------------------------------------------- figures
@@ -367,7 +405,3 @@ def compare_posteriors(named_paths: dict[str, Path]) -> dict:
                 out.append({"job_a": ids[a], "job_b": ids[b], "parameter": name, "mean_a": float(va.mean()),
                             "mean_b": float(vb.mean()), "t": float(t), "p_value": float(p)})
     return _clean({"tests": out, "method": "Welch two-sample t-test on resampled posterior ensembles"})
-
-
-def summary_json(summary: dict) -> str:
-    return json.dumps(summary, sort_keys=True)

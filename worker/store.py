@@ -17,7 +17,7 @@
         done         (n_chunks,)     bool      chunk c wrote rows [c*cs, (c+1)*cs)
       posterior/                    attrs: summary (JSON-able dict)
         samples (N, d), log_weights (N,), resampled (M,)
-      products/                     uint8 blobs: figures (PNG) and the samples CSV
+      products/                     uint8 blobs: figures (PNG), samples CSV + its JSON metadata, NetCDF
 
 Every array is chunked along its first axis with the job's ``chunk_size`` so each worker task
 owns whole Zarr chunks: concurrent tasks never write the same object, and a recomputed task
@@ -37,7 +37,7 @@ LAYOUT_VERSION = 1
 EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "contact_impulse",
                "contact_pressure_in_contact")
 SUMMARY_ARRAYS = ("mean_flow", "mean_contact", "max_contact", "contact_impulse", "contact_pressure_in_contact")
-PRODUCT_NAMES = ("gaw_fit", "corner", "contact_pressure", "samples_csv")
+PRODUCT_NAMES = ("gaw_fit", "corner", "contact_pressure", "samples_csv", "samples_meta", "posterior_nc")
 
 
 def create_job_store(path: Path, job_id: str, spec_json: str, chunk_size: int, n_compare: int, ndim: int):

@@ -37,13 +37,13 @@ def test_submit_status_fetch(service, tmp_path):
     for f in ("posterior.json", "samples.csv", "gaw_fit.png", "corner.png", "contact_pressure.png"):
         assert (tmp_path / "out" / f).stat().st_size > 0
     r = CliRunner().invoke(app, ["status", job_id], env={**env, "VFINFER_TOKEN": TOKENS["alice"]})
-    assert r.exit_code == 1 and "404" in r.output
+    assert r.exit_code == 2 and "404" in r.output
 
 
 def test_bad_cli_input_names_field(tmp_path):
     gaw = _gaw_file(tmp_path)
     r = CliRunner().invoke(app, ["infer", str(gaw), *TOY, "--prior", "E_cover=900:400"], env={"COLUMNS": "200"})
-    assert r.exit_code == 2 and "priors" in r.output
+    assert r.exit_code == 2 and "--prior E_cover" in r.output
 
 
 @pytest.mark.parametrize("bad", ["p_sub", "p_sub=1000", "p_sub=abc:50", "p_sub=1000:0", "p_sub=1000:-5",
@@ -145,8 +145,8 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
     assert json.loads((out / "diagnosis.json").read_text())["winner"] == "leak"
     assert (out / "diagnosis.png").read_bytes().startswith(b"\x89PNG")
     r = CliRunner().invoke(app, ["diagnosis", jid, "--cancel"], env=env)
-    assert r.exit_code == 1 and "409" in r.output, r.output           # nothing running
+    assert r.exit_code == 2 and "409" in r.output, r.output           # nothing running
     r = CliRunner().invoke(app, ["diagnosis", jid, "--particles", "12"], env=env)
     assert r.exit_code == 2 and "--start" in r.output
     r = CliRunner().invoke(app, ["diagnosis", jid], env={**env, "VFINFER_TOKEN": TOKENS["alice"]})
-    assert r.exit_code == 1 and "404" in r.output
+    assert r.exit_code == 2 and "404" in r.output

@@ -74,7 +74,7 @@ def test_infer_with_force_reach_warns_and_fits(tmp_path, gaw_200, monkeypatch):
     assert r.exit_code == 0, r.output
     assert seen["spec"].force_reach is True
     warn = [ln for ln in r.output.splitlines() if "outside this model's reach" in ln]
-    assert len(warn) == 1 and warn[0].startswith("WARNING") and "--force-reach: fitting anyway" in warn[0]
+    assert len(warn) == 1 and warn[0].startswith("warning:") and "--force-reach: fitting anyway" in warn[0]
     assert "AT PRIOR BOUND: E_body" in r.output
 
 
