@@ -41,22 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-
-def _problem(meta: dict, case: dict, cases_dir: Path, duration: float | None, sigma_e: float,
-             discard: float | None = None, noise: str = "fixed", lag_search: str = "window"):
-    """The fitting problem of one case: its GAW and fps, the default prior with the suite's fixed
-    parameters, and the suite's public forward-model settings (``cases.json`` "model"); ``duration``
-    and ``discard`` override the simulated window when given."""
-    from vfcore.config import SimConfig
-    from vfcore.inference import Prior
-    from vfcore.inference.problem import Problem
-    m = meta["model"]
-    cfg = SimConfig(mesh=m["mesh"], dt=m["dt"], duration=m["duration"] if duration is None else duration,
-                    discard=m["discard"] if discard is None else discard, fps=case["fps"])
-    prior = Prior.default(fixed=meta["fixed"])
-    y = np.loadtxt(cases_dir / case["file"], delimiter=",", skiprows=1, ndmin=1)
-    return Problem(y, case["fps"], prior, sigma_e=sigma_e, config=cfg, noise=noise,
-                   lag_search=lag_search)
+from benchmarks.suite import case_problem  # noqa: E402
 
 
 class BalancedMap:
@@ -102,7 +87,7 @@ def run(a) -> None:
             if path.exists():
                 continue
             try:
-                pb = _problem(meta, case, cases_dir, a.duration, a.sigma_e, a.discard, a.noise,
+                pb = case_problem(meta, case, cases_dir, a.duration, a.sigma_e, a.discard, a.noise,
                               a.lag_search)
             except ValueError as exc:          # the recording is rejected before any simulation
                 path.write_text(json.dumps({"error": str(exc), "winner": None, "verdict": "rejected input"}))

@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sigma-e", type=float, default=1.0)
     a = ap.parse_args(argv)
 
-    from benchmarks.bench_diagnose import _problem
+    from benchmarks.suite import case_problem
     from vfcore.diagnose import get
     from vfcore.diagnose.search import CONTINUATION, continuation_search
 
@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     print(f"search settings: {dict(CONTINUATION, **extra)}; seed {a.seed}")
     print(f"{'case':<5}{'model':<13}{'halving':<9}{'log L':>11}{'sims':>7}{'wall s':>8}  log L of each start")
     for cid, ext in runs:
-        pb = _problem(meta, by_id[cid], cases_dir, None, a.sigma_e)
+        pb = case_problem(meta, by_id[cid], cases_dir, None, a.sigma_e)
         for halving in (False, True):
             t0 = time.perf_counter()
             r = continuation_search(pb, ext, seed=a.seed, halving=halving, **extra)

@@ -110,7 +110,7 @@ def entry_at(problem, name: str | None, theta_base: np.ndarray, *, polish_materi
 
 
 def check_case(cases_dir: Path, out_dir: Path, cid: str, *, polish_materials: bool = False) -> dict:
-    from benchmarks.bench_diagnose import _problem
+    from benchmarks.suite import case_problem
     from benchmarks.scoring import load_suite, reference_rms
     from vfcore.diagnose.extensions import CATALOGUE, physics_of
     meta = json.loads((cases_dir / "cases.json").read_text())
@@ -118,7 +118,7 @@ def check_case(cases_dir: Path, out_dir: Path, cid: str, *, polish_materials: bo
     rec = next(r for r in load_suite(cases_dir, out_dir) if r.case == cid)
     truth = json.loads((cases_dir / "truth.json").read_text())["cases"][cid]
     rep = json.loads((out_dir / f"case_{cid}.json").read_text())
-    problem = _problem(meta, case, cases_dir, None, 1.0)
+    problem = case_problem(meta, case, cases_dir, None, 1.0)
     theta = np.array([truth["truth"][n] for n in problem.prior.names], dtype=float)
     rms_ref = reference_rms(rep)
     out = {"case": cid, "label": rec.label, "named": rec.winner, "ok": rec.ok, "sigma": truth["sigma_mm2"],

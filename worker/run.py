@@ -22,6 +22,7 @@ from typing import Callable
 import numpy as np
 from scipy.special import logsumexp
 
+from vfcore.inference.diagnostics import ess_from_logsums
 from vfcore.inference.importance import draw_prior
 from vfcore.inference.problem import Evaluation, Problem, ProblemEvaluator
 
@@ -109,14 +110,6 @@ def run_chunk(c: int, lo: int, thetas: np.ndarray, *, store_path: str, b: int, e
     return np.asarray(ev.loglik, dtype=float)
 
 
-def ess_of(loglik: np.ndarray) -> float:
-    ll = np.asarray(loglik, dtype=float)
-    ll = ll[np.isfinite(ll)]
-    if ll.size == 0:
-        return 0.0
-    return float(math.exp(2.0 * logsumexp(ll) - logsumexp(2.0 * ll)))
-
-
 class RunningESS:
     """ESS of the self-normalised IS weights over the log-likelihoods seen so far, O(chunk) per update."""
 
@@ -134,7 +127,7 @@ class RunningESS:
 
     @property
     def value(self) -> float:
-        return 0.0 if self.lse1 == -math.inf else float(math.exp(2.0 * self.lse1 - self.lse2))
+        return 0.0 if self.lse1 == -math.inf else ess_from_logsums(self.lse1, self.lse2)
 
 
 @dataclass

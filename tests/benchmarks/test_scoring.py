@@ -252,7 +252,7 @@ def test_problem_carries_lag_search(tmp_path, search):
     t = np.arange(400) / 2000.0
     np.savetxt(tmp_path / "c.csv", 5.0 * np.clip(np.sin(2 * np.pi * 120 * t), 0, None)[:, None],
                delimiter=",", header="area", comments="")
-    pb = bench_diagnose._problem(meta, {"file": "c.csv", "fps": 2000.0}, tmp_path, None, 1.0,
-                                 None, "fixed", search)
+    from benchmarks.suite import case_problem
+    pb = case_problem(meta, {"file": "c.csv", "fps": 2000.0}, tmp_path, None, 1.0, None, "fixed", search)
     assert pb.lag_search == search
     assert type(pb).from_dict(pb.to_dict()).lag_search == search

@@ -7,14 +7,14 @@ bounds and source), the GAW signature it explains (phases of :mod:`.locate` and 
 
 Kinds:
 
-- ``observation`` (implemented): act on the simulated GAW only — leak area, camera scale
-  error, exposure averaging, frame-rate mismatch.
-- ``forward`` (implemented): a forward-model parameter, re-simulated — ``sep_ratio``
-  (``SimConfig(sep_ratio=...)``).
-- ``structural`` (NOT implemented, ``implemented=False``; ``apply`` raises
-  ``NotImplementedError``): epithelium layer, anterior–posterior zipper, subglottal
-  resonator, left–right asymmetry. They are listed so that the ranking can name what a
-  signature *would* point to, but they cannot be fitted yet.
+- ``observation``: act on the simulated GAW only — leak area, camera scale error, exposure
+  averaging, frame-rate mismatch, anterior–posterior zipper, left–right phase/amplitude
+  asymmetry.
+- ``forward``: a forward-model parameter, re-simulated — ``sep_ratio``, epithelium layer,
+  subglottal resonator, left–right stiffness asymmetry (``SimConfig`` fields).
+- ``structural``: an entry catalogued with ``implemented=False`` (``apply`` raises
+  ``NotImplementedError``) so that the ranking can name what a signature would point to
+  before it can be fitted; every entry of :data:`CATALOGUE` is implemented.
 
 Sources and prior ranges are in ``docs/diagnose.md``.
 """
@@ -225,10 +225,6 @@ def _sep(base, th, fps, simulate_fn=None, **kw):
         from ..forward import simulate as simulate_fn
     cfg = dataclasses.replace(base.config, sep_ratio=float(th["sep_ratio"]))
     return simulate_fn(base.params, cfg)
-
-
-def _structural(name, phases, measures, signature, params):
-    return Extension(name, "structural", params, phases, measures, signature, implemented=False)
 
 
 CATALOGUE: dict[str, Extension] = {e.name: e for e in [

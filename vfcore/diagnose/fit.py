@@ -372,7 +372,7 @@ class ExtendedEvaluator:
 
     def _integrated(self, results, phis) -> Evaluation:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
-        from ..inference.problem import _contact_means, _cycle_means, aligned_loglik
+        from ..inference.problem import aligned_loglik, contact_means, cycle_means
         from . import quadrature as _q
         pb = self.problem
         ext = self.extension
@@ -440,8 +440,8 @@ class ExtendedEvaluator:
             extra[i, 0:2 * len(names):2] = q.mean
             extra[i, 1:2 * len(names):2] = q.sd
             extra[i, 2 * len(names):] = drops
-            flow[i], cmean[i], cmax[i] = _cycle_means(r)
-            cimp[i], cin[i] = _contact_means(r)
+            flow[i], cmean[i], cmax[i] = cycle_means(r)
+            cimp[i], cin[i] = contact_means(r)
         return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax,
                           extra=extra, messages=tuple(messages), contact_impulse=cimp,
                           contact_pressure_in_contact=cin)

@@ -36,10 +36,31 @@ def normalize_log_weights(log_w) -> np.ndarray:
     return lw - logsumexp(lw)
 
 
+def ess_from_logsums(lse_w: float, lse_w2: float) -> float:
+    """Effective sample size ``(sum w)^2 / sum w^2`` from ``log sum w`` and ``log sum w^2``.
+
+    The one ESS formula: :func:`ess`, :func:`ess_finite` and the worker's running ESS (which
+    accumulates the two log-sums chunk by chunk) all end here."""
+    return float(math.exp(2.0 * lse_w - lse_w2))
+
+
 def ess(log_w) -> float:
-    """Effective sample size ``(sum w)^2 / sum w^2`` of (unnormalised) log weights."""
+    """Effective sample size ``(sum w)^2 / sum w^2`` of (unnormalised) log weights.
+
+    The weights are normalised first (:func:`normalize_log_weights`: NaN counts as a zero weight,
+    all-zero weights raise), so ``log sum w = 0``."""
     lw = normalize_log_weights(log_w)
-    return float(math.exp(-logsumexp(2.0 * lw)))
+    return ess_from_logsums(0.0, logsumexp(2.0 * lw))
+
+
+def ess_finite(log_w) -> float:
+    """Effective sample size of the finite entries of unnormalised log weights; 0 when none is
+    finite (the tolerant form the SMC's tempering bisection needs: it never raises)."""
+    lw = np.asarray(log_w)
+    lw = lw[np.isfinite(lw)]
+    if lw.size == 0:
+        return 0.0
+    return ess_from_logsums(logsumexp(lw), logsumexp(2.0 * lw))
 
 
 def pareto_k(log_w) -> float:

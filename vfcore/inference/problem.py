@@ -430,7 +430,7 @@ class Evaluation:
         return Evaluation(**kw)
 
 
-def _cycle_means(r) -> tuple[float, float, float]:
+def cycle_means(r) -> tuple[float, float, float]:
     """(mean flow m^3/s, mean contact Pa, max contact Pa) of one successful simulation."""
     c = r.cycles
     if c is not None and np.size(c.period) > 0:
@@ -444,7 +444,7 @@ def _cycle_means(r) -> tuple[float, float, float]:
     return flow, math.nan, math.nan
 
 
-def _contact_means(r) -> tuple[float, float]:
+def contact_means(r) -> tuple[float, float]:
     """(contact impulse per cycle N s/m, pressure in contact Pa), means over the cycles of one
     successful simulation; nan when it has no cycles or no per-step contact summaries."""
     c = r.cycles
@@ -569,8 +569,8 @@ def score_results(results, problem: Problem, observe: Callable | None = None) ->
         loglik[i] = ll
         ok[i] = True
         gaw[i] = seg
-        flow[i], cmean[i], cmax[i] = _cycle_means(r)
-        cimp[i], cin[i] = _contact_means(r)
+        flow[i], cmean[i], cmax[i] = cycle_means(r)
+        cimp[i], cin[i] = contact_means(r)
     return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean,
                       max_contact=cmax, messages=tuple(messages), contact_impulse=cimp,
                       contact_pressure_in_contact=cin)

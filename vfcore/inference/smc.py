@@ -39,7 +39,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 
-from .diagnostics import DegenerateEnsembleWarning, systematic_resample
+from .diagnostics import DegenerateEnsembleWarning, ess_finite, systematic_resample
 from .importance import map_evaluate, resolve_target
 from .posterior import Posterior
 from .prior import Prior
@@ -50,23 +50,15 @@ _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL = 0, 1, 2, 3, 4
 DEFAULT_PARTICLES = 300
 
 
-def _ess_of(logw: np.ndarray) -> float:
-    finite = np.isfinite(logw)
-    if not finite.any():
-        return 0.0
-    lw = logw[finite]
-    return float(math.exp(2.0 * logsumexp(lw) - logsumexp(2.0 * lw)))
-
-
 def next_temperature(loglik: np.ndarray, phi: float, target_ess: float, tol: float = 1e-10) -> float:
     """Largest ``phi' in (phi, 1]`` with ``ESS(L^(phi' - phi)) >= target_ess`` (bisection)."""
     ll = np.asarray(loglik, dtype=float)
-    if _ess_of((1.0 - phi) * ll) >= target_ess:
+    if ess_finite((1.0 - phi) * ll) >= target_ess:
         return 1.0
     lo, hi = 0.0, 1.0 - phi
     while hi - lo > tol * max(1.0, hi):
         mid = 0.5 * (lo + hi)
-        if _ess_of(mid * ll) >= target_ess:
+        if ess_finite(mid * ll) >= target_ess:
             lo = mid
         else:
             hi = mid
