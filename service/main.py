@@ -5,6 +5,7 @@ import asyncio
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from fastapi_offline import FastAPIOffline
 
 from .cluster import close_client, make_client
 from . import errors
@@ -37,8 +38,9 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
             if own:
                 await asyncio.to_thread(close_client, cl, cluster)
 
-    app = FastAPI(title="vfinfer", version="0.1.0", lifespan=lifespan,
-                  description="Distributed Bayesian inference of vocal-fold properties from GAWs")
+    # /docs and /redoc load Swagger UI and ReDoc from the installed package, never from a CDN
+    app = FastAPIOffline(title="vfinfer", version="0.1.0", lifespan=lifespan,
+                         description="Distributed Bayesian inference of vocal-fold properties from GAWs")
     errors.install(app)
     app.include_router(health.router)
     app.include_router(jobs.router)

@@ -380,7 +380,8 @@ def on_shutdown(app) -> None:
 
 
 # ------------------------------------------------------------------------------------ routes
-@router.post("/jobs/{job_id}/diagnose", status_code=status.HTTP_202_ACCEPTED, response_model=DiagnoseStarted)
+@router.post("/jobs/{job_id}/diagnose", status_code=status.HTTP_202_ACCEPTED, response_model=DiagnoseStarted,
+             summary="Start a diagnosis of a finished job: which physics is the model missing?")
 def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request,
                     req: DiagnoseRequest | None = Body(default=None)) -> DiagnoseStarted:
     rec = _done(manager, job_id, user)
@@ -402,7 +403,8 @@ def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reques
     return DiagnoseStarted(id=jid, state="running", status_url=f"/jobs/{jid}/diagnosis")
 
 
-@router.get("/jobs/{job_id}/diagnosis", response_model=DiagnosisStatus)
+@router.get("/jobs/{job_id}/diagnosis", response_model=DiagnosisStatus,
+            summary="A diagnosis's state, current stage and, when done, its report")
 def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> DiagnosisStatus:
     rec = _own(manager, job_id, user)
     jid = rec["id"]
@@ -420,7 +422,7 @@ def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request:
     return DiagnosisStatus(state="none")
 
 
-@router.delete("/jobs/{job_id}/diagnosis", status_code=status.HTTP_202_ACCEPTED)
+@router.delete("/jobs/{job_id}/diagnosis", status_code=status.HTTP_202_ACCEPTED, summary="Cancel a running diagnosis")
 def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> dict:
     """Cancel a running diagnosis: it stops within a quarter of a second of waiting on the cluster
     (its batch's unstarted simulations are cancelled; :func:`dask_map`), its stored simulations
@@ -435,7 +437,8 @@ def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reque
     return {"id": jid, "state": "cancelling", "status_url": f"/jobs/{jid}/diagnosis"}
 
 
-@router.get("/jobs/{job_id}/diagnosis/figure", responses={200: {"content": {"image/png": {}}}})
+@router.get("/jobs/{job_id}/diagnosis/figure", responses={200: {"content": {"image/png": {}}}},
+            summary="A finished diagnosis's figure (PNG): base fit, located mismatch, named extension")
 def get_diagnosis_figure(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> Response:
     rec = _own(manager, job_id, user)
     jid = rec["id"]

@@ -8,7 +8,7 @@ from ..deps import ManagerDep
 router = APIRouter(tags=["health"])
 
 
-@router.get("/health")
+@router.get("/health", summary="Liveness and readiness: the job table and the Dask cluster (503 when degraded)")
 def health(manager: ManagerDep, response: Response) -> dict:
     """200 with ``status: ok`` while the Dask client runs; 503 with ``status: degraded`` otherwise, so
     an orchestrator's healthcheck (docker-compose.yml) sees an API that has lost its scheduler."""

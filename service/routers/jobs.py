@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 import numpy as np
 from fastapi import APIRouter, HTTPException, Query, Response, status
-from fastapi.responses import JSONResponse
+from fastapi.responses import HTMLResponse, JSONResponse
 from pydantic import BaseModel, Field
 
 from worker import store as st
@@ -91,7 +91,8 @@ def reach_gate(spec: JobSpec) -> tuple[JSONResponse | None, dict]:
     return None, {"reach": v.to_dict(), "warnings": warnings}
 
 
-@router.post("/jobs", status_code=status.HTTP_202_ACCEPTED, response_model=Submitted)
+@router.post("/jobs", status_code=status.HTTP_202_ACCEPTED, response_model=Submitted,
+             summary="Submit an inference job (a GAW and the sampler's settings); answers its id")
 def submit(spec: JobSpec, user: UserDep, manager: ManagerDep, settings: SettingsDep) -> Submitted:
     if spec.model == "toy" and not settings.allow_toy_model:
         return JSONResponse(status_code=422, content={"detail": [{
@@ -107,12 +108,13 @@ def submit(spec: JobSpec, user: UserDep, manager: ManagerDep, settings: Settings
     return Submitted(id=job_id, state="queued", status_url=f"/jobs/{job_id}", warnings=notes.get("warnings", []))
 
 
-@router.get("/jobs", response_model=list[JobStatus])
+@router.get("/jobs", response_model=list[JobStatus], summary="List your jobs with their state and progress")
 def list_jobs(user: UserDep, manager: ManagerDep) -> list[JobStatus]:
     return [_status(manager, r) for r in manager.db.list(owner=user)]
 
 
-@router.get("/jobs/{job_id}", response_model=JobStatus)
+@router.get("/jobs/{job_id}", response_model=JobStatus,
+            summary="A job's state, progress (simulations done), ESS, times (epoch s) and warnings")
 def get_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> JobStatus:
     return _status(manager, _own(manager, job_id, user))
 
@@ -124,7 +126,8 @@ def _done(manager, job_id: str, user: str) -> dict:
     return rec
 
 
-@router.get("/jobs/{job_id}/posterior")
+@router.get("/jobs/{job_id}/posterior",
+            summary="A finished job's posterior summary: table (paper units), predictive, diagnostics, warnings")
 def get_posterior(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
     rec = _done(manager, job_id, user)
     summary = st.read_summary(manager.store_path(rec["id"]))
@@ -133,17 +136,30 @@ def get_posterior(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
     return {"id": rec["id"], **summary}
 
 
-@router.get("/jobs/{job_id}/samples", responses={200: {"content": {"text/csv": {}, "application/json": {}}}})
+#: ``?format=`` of /samples: store product, media type, file suffix
+SAMPLE_FORMATS = {"csv": ("samples_csv", "text/csv", ".csv"), "meta": ("samples_meta", "application/json", ".json"),
+                  "netcdf": ("posterior_nc", "application/x-netcdf", ".nc")}
+
+
+@router.get("/jobs/{job_id}/samples",
+            summary="A finished job's weighted draws: plain CSV, its JSON metadata, NetCDF (ArviZ) or JSON arrays",
+            responses={200: {"content": {"text/csv": {}, "application/json": {}, "application/x-netcdf": {}}}})
 def get_samples(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
-                format: Annotated[Literal["csv", "json"], Query()] = "csv") -> Response:
+                format: Annotated[Literal["csv", "meta", "netcdf", "json"], Query(
+                    description="csv: one row per weighted draw (parameters in paper units, log_weight, weight, "
+                                "n_resampled); meta: the CSV's metadata (names, units, diagnostics); netcdf: ArviZ "
+                                "InferenceData with the observed GAW and the posterior predictive; json: arrays")
+                ] = "csv") -> Response:
     rec = _done(manager, job_id, user)
     path = manager.store_path(rec["id"])
-    if format == "csv":
-        blob = st.read_blob(path, "samples_csv")
+    if format in SAMPLE_FORMATS:
+        product, media, suffix = SAMPLE_FORMATS[format]
+        blob = st.read_blob(path, product)
         if blob is None:
-            raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "samples missing from the store")
-        return Response(blob, media_type="text/csv",
-                        headers={"Content-Disposition": f'attachment; filename="{rec["id"]}.csv"'})
+            raise HTTPException(status.HTTP_404_NOT_FOUND, f"no {format} export in this job's store (made by an "
+                                                           "older release)")
+        return Response(blob, media_type=media,
+                        headers={"Content-Disposition": f'attachment; filename="{rec["id"]}{suffix}"'})
     arr = st.read_posterior_arrays(path)
     summ = st.read_summary(path) or {}
     lw = arr["log_weights"]
@@ -152,7 +168,8 @@ def get_samples(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
                          "resampled": arr["resampled"].tolist()})
 
 
-@router.get("/jobs/{job_id}/figures/{name}", responses={200: {"content": {"image/png": {}}}})
+@router.get("/jobs/{job_id}/figures/{name}", responses={200: {"content": {"image/png": {}}}},
+            summary="A finished job's figure (PNG): GAW fit with predictive bands, pair plot, flow and contact")
 def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDep) -> Response:
     rec = _done(manager, job_id, user)
     blob = st.read_blob(manager.store_path(rec["id"]), name.value)
@@ -161,7 +178,22 @@ def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDe
     return Response(blob, media_type="image/png")
 
 
-@router.delete("/jobs/{job_id}")
+@router.get("/jobs/{job_id}/report", response_class=HTMLResponse,
+            summary="A finished job's report as one self-contained HTML page (figures embedded)")
+def get_report(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> HTMLResponse:
+    from ..report import FIGURES, data_uri, render_report
+    rec = _done(manager, job_id, user)
+    path = manager.store_path(rec["id"])
+    summary = st.read_summary(path)
+    if summary is None:
+        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "posterior missing from the store")
+    images = {n: data_uri(b) for n in FIGURES if (b := st.read_blob(path, n)) is not None}
+    timings = {"queued_s": (rec["started"] or rec["created"]) - rec["created"],
+               "running_s": ((rec["finished"] or time.time()) - rec["started"]) if rec["started"] else None}
+    return HTMLResponse(render_report(summary, images, f"vfinfer job {rec['id']}", timings=timings))
+
+
+@router.delete("/jobs/{job_id}", summary="Cancel a queued or running job (a finished job keeps its state)")
 def cancel_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
     rec = _own(manager, job_id, user)
     if rec["state"] in ACTIVE:
@@ -169,7 +201,7 @@ def cancel_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
     return {"id": rec["id"], "state": manager.db.get(rec["id"])["state"]}
 
 
-@router.post("/compare")
+@router.post("/compare", summary="Compare finished jobs' posteriors parameter by parameter (Welch t-tests)")
 def compare(req: CompareRequest, user: UserDep, manager: ManagerDep) -> dict:
     ids = list(dict.fromkeys(req.job_ids))
     if len(ids) < 2:

@@ -16,6 +16,24 @@ def _direct_is(spec_dict):
     return importance_sample(ToyEvaluator(problem), problem.prior, spec.sampler.n_samples, spec.seed, chunk_size=37)
 
 
+def _check_netcdf(blob: bytes, direct) -> None:
+    """The NetCDF export is ArviZ InferenceData holding the resampled posterior, the observed GAW and the
+    posterior predictive GAW."""
+    import tempfile
+
+    import arviz as az
+    with tempfile.NamedTemporaryFile(suffix=".nc") as fh:
+        fh.write(blob)
+        fh.flush()
+        idata = az.from_netcdf(fh.name)
+        idata.load() if hasattr(idata, "load") else None
+        groups = set(idata.groups())
+        assert {"posterior", "observed_data", "posterior_predictive"} <= groups, groups
+        np.testing.assert_array_equal(idata["posterior"]["E_cover"].values[0], direct.samples[direct.resampled, 0])
+        assert idata["observed_data"]["gaw"].size > 0
+        assert idata["posterior_predictive"]["gaw"].shape[:2] == (1, direct.resampled.size)
+
+
 def test_submit_poll_fetch_same_posterior_as_direct(service):
     http = service.http
     spec = toy_spec(n=600, seed=11)
@@ -42,7 +60,20 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     assert abs(ident["parameters"][0]["prior_sd"] - 400.0 / 12 ** 0.5) < 1e-9
     csv = http.get(f"/jobs/{job_id}/samples", headers=auth("alice"))
     assert csv.headers["content-type"].startswith("text/csv")
-    assert csv.text.splitlines()[1].startswith("E_cover,p_sub,log_weight")
+    assert csv.text.splitlines()[0] == "E_cover,p_sub,log_weight,weight,n_resampled"   # plain CSV, no comment line
+    rows = list(__import__("csv").DictReader(csv.text.splitlines()))
+    assert len(rows) == 600 and sum(int(r["n_resampled"]) for r in rows) == direct.resampled.size
+    meta = http.get(f"/jobs/{job_id}/samples", params={"format": "meta"}, headers=auth("alice")).json()
+    assert meta["names"] == ["E_cover", "p_sub"] and meta["units"]["p_sub"] == "Pa" and meta["ess"] == direct.ess
+    nc = http.get(f"/jobs/{job_id}/samples", params={"format": "netcdf"}, headers=auth("alice"))
+    assert nc.status_code == 200 and nc.headers["content-type"] == "application/x-netcdf"
+    _check_netcdf(nc.content, direct)
+    page = http.get(f"/jobs/{job_id}/report", headers=auth("alice"))
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    assert page.text.count("data:image/png;base64,") == 3 and "90 % interval" in page.text
+    assert "http://" not in page.text and "https://" not in page.text          # readable offline
+    assert http.get(f"/jobs/{job_id}/report", headers=auth("bob")).status_code == 404
+    assert http.get(f"/jobs/{job_id}/report").status_code == 401
     for name in ("gaw_fit", "corner", "contact_pressure"):
         png = http.get(f"/jobs/{job_id}/figures/{name}", headers=auth("alice"))
         assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
