@@ -41,15 +41,15 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int, search: str = "win
     simulation in an ensemble is compared over the same number of frames (the
     likelihoods are then comparable).
 
-    ``search="window"`` (default since stop 25): every start the simulated window offers,
+    ``search="window"`` (default): every start the simulated window offers,
     ``max_lag = max(ceil(1.5 periods), n_sim - obs.size)``, so the whole observation is compared
-    and the recording may sit anywhere in the kept simulation. ``"periods"`` (stops 1-24): lags up
-    to 1.5 periods, enough for a settled limit cycle, whose cycles repeat; but a vibration that is
+    and the recording may sit anywhere in the kept simulation. ``"periods"``: lags up to 1.5
+    periods, enough for a settled limit cycle, whose cycles repeat; but a vibration that is
     still drifting, or repeats only every few cycles, looks different 100 frames on, and the
-    1.5-period search cannot reach the part of the simulation that matches (measured on held-out
-    seed 7, at the true parameters without the effect: misfits up to 18 mm^2 RMS with
-    ``"periods"``, at most 0.14 mm^2 in every case with ``"window"``; docs/model.md,
-    "Lag range"). Either way, when the simulation is too short for the whole observation the
+    1.5-period search cannot reach the part of the simulation that matches (measured on the
+    concealed-effect suite of seed 7, at the true parameters without the effect: misfits up to
+    18 mm^2 RMS with ``"periods"``, at most 0.14 mm^2 in every case with ``"window"``;
+    docs/model.md, "Lag range"). Either way, when the simulation is too short for the whole observation the
     observation is trimmed to ``n_sim - max_lag`` frames.
 
     Returns (max_lag, n_compare) in frames.
@@ -85,8 +85,9 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
     cached: the same observation meets every simulation); the windowed energy ``S2`` is a
     difference of running sums taken per residue ``j mod q`` (one cumulative sum over the record
     folded into rows of ``q``). Equal to the direct sum to ~1e-11 relative (cancellation in
-    ``S2 - 2C``); 1.7-1.9x faster than ``q`` direct correlations of the decimated record (stop 31,
-    400 frames, 200 lags of 10 fine steps), which were 5x faster than gathering every window."""
+    ``S2 - 2C``); 1.7-1.9x faster than ``q`` direct correlations of the decimated record (400
+    frames, 200 lags of 10 fine steps; ``benchmarks/bench_alignment.py``), which are 5x faster
+    than gathering every window."""
     from scipy import fft as sfft
     n = tmpl.size
     span = j_max + q * (n - 1) + 1                     # the samples any window reads

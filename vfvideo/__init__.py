@@ -1,4 +1,4 @@
-"""High-speed video -> glottal area waveform (issue 6).
+"""High-speed video -> glottal area waveform.
 
 >>> from vfvideo import extract_gaw
 >>> ex = extract_gaw("clip.mp4", fps=2000, px_per_mm=24.4)

@@ -248,7 +248,7 @@ def test_case_presence_flag():
 
 def test_asymmetry_is_entrained(base):
     """A right fold of another f0 is entrained 1:1: the combined GAW has the LEFT fold's f0 and
-    repeats every left cycle (the stops 7-9 generator inverted the warp and produced beating)."""
+    repeats every left cycle (a generator that inverts the warp produces beating instead)."""
     from vfcore.measures import estimate_f0
     right = simulate(TABLE3.replace(E_body=1.3 * TABLE3.E_body, E_cover=1.3 * TABLE3.E_cover,
                                     E_lig=1.3 * TABLE3.E_lig), CFG)

@@ -245,7 +245,7 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
 
 @pytest.mark.parametrize("search", ["window", "periods"])
 def test_problem_carries_lag_search(tmp_path, search):
-    """--lag-search reaches the fitting problem (the controlled comparison of seed 8 depends on it)."""
+    """--lag-search reaches the fitting problem (a controlled comparison of the two lag rules depends on it)."""
     meta = {"model": {"mesh": "coarse", "dt": 1e-4, "duration": 0.55, "discard": 0.25},
             "fixed": {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}}
     import numpy as np

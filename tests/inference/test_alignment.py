@@ -103,7 +103,7 @@ def test_profile_scores_equal_the_direct_sum_at_every_fine_lag():
 
 
 def test_profile_scores_keep_each_template_apart_and_refuse_a_short_record():
-    """The template's spectrum is cached (stop 31): interleaving two templates of the same length,
+    """The template's spectrum is cached: interleaving two templates of the same length,
     and another oversampling, still gives each its own direct sum; a record too short for the
     lags asked is an error, not a wrapped correlation."""
     from vfcore.observe import _profile_scores
@@ -118,7 +118,7 @@ def test_profile_scores_keep_each_template_apart_and_refuse_a_short_record():
 
 
 def test_window_search_finds_a_recording_deep_in_a_drifting_simulation():
-    """Stop 25. A vibration still drifting across the kept window (its amplitude doubles
+    """A vibration still drifting across the kept window (its amplitude doubles
     over 600 frames), recorded from frame 137.4 on: the 1.5-period search (lags <= 48 frames)
     can only compare an earlier, smaller part and is left with a misfit of more than 1 mm^2 RMS;
     the whole-window search (every start the 600 simulated frames offer, 200 for 400 recorded)

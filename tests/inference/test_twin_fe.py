@@ -30,7 +30,7 @@ def test_fe_twin_recovers_truth_within_2_sigma():
     try:
         from vfcore.forward import simulate  # noqa: F401
     except ImportError as exc:  # deliberately not a skip: the twin experiment is a requirement
-        pytest.fail(f"the FE forward model vfcore.simulate is not available yet (issue 2): {exc}")
+        pytest.fail(f"the FE forward model vfcore.simulate is not importable: {exc}")
 
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ESTIMATED})
     cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.45, discard=0.25)

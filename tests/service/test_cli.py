@@ -91,7 +91,7 @@ def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, mon
 
 def test_job_ids_are_valid_cli_arguments():
     """A job id must pass the API's pattern and never start with "-" (typer would read it as an
-    option). Under the old URL-safe tokens 1 id in 64 did: 2,000 draws would all pass with
+    option). With URL-safe tokens 1 id in 64 would: 2,000 draws would all pass with
     probability (63/64)^2000 ~ 2e-14."""
     from service.deps import JOB_ID_RE
     from service.manager import new_job_id

@@ -1,6 +1,6 @@
 """A kernel compiled cold gives the same bits as the same kernel loaded from numba's cache.
 
-Regression test for a reproducibility bug found in stop 9: with fast-math reassociation the
+Regression test for a reproducibility bug: with fast-math reassociation the
 time loop compiled in a fresh process produced other GAWs (up to 22 mm^2 apart on a sensitive
 case) than the cached machine code used by every later run. Each subprocess below gets its own
 empty NUMBA_CACHE_DIR for the first (cold) run, which the second run then loads.

@@ -380,7 +380,7 @@ def test_null_consistent_posteriors():
 
 def test_nested_gate_reads_the_likelihood_drop_at_the_null():
     """The nested check's gate (``by_drop=True``): a phase difference pinned 2.7 sd from zero
-    whose null costs only 2.2 nats passes (seed 8 case 11's asymmetry fit, whose in-phase form is
+    whose null costs only 2.2 nats passes (the asymmetry fit of concealed case 11 of seed 8, whose in-phase form is
     a scale error), one that costs 20 nats does not, and without a measured drop the mean +- 2 sd
     test still applies."""
     from vfcore.diagnose.rank import null_consistent
@@ -488,7 +488,7 @@ def test_between_run_error_from_independent_base_runs():
     assert _between_run_sd([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 0.0
     assert _between_run_sd([_Post(-446.0, 0.6)]) == 0.0
     assert _between_run_sd([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 0.0
-    # stop-9 case 08: base runs 1,027 nats apart; a 3,515-nat gain still clears 3 combined errors
+    # a concealed case with base runs 1,027 nats apart: a 3,515-nat gain still clears 3 combined errors
     tau = _between_run_sd([_Post(-5121.0, 0.3), _Post(-4093.7, 0.6)])
     se = math.hypot(math.hypot(0.6, tau), math.hypot(1.0, tau))
     assert 3 * se < 3515.4 < 5 * se
@@ -561,7 +561,7 @@ def test_rivals_within_the_errors_are_reported_not_named():
 
 
 def test_confusable_entries_are_always_rivals():
-    # zipper vs the phase/amplitude asymmetry: 9 nats apart with 1.4-nat errors (case 05, run E)
+    # zipper vs the phase/amplitude asymmetry: 9 nats apart with 1.4-nat errors (a concealed zipper case)
     r = rank_extensions((-3000.0, 1.0), {"asymmetry": (-2560.7, 1.0), "zipper": (-2570.0, 1.0),
                                           "leak": (-2945.0, 1.0)},
                         rms={"asymmetry": 1.65, "zipper": 1.63, "leak": 3.1}, base_rms=3.25, null={})
@@ -584,7 +584,7 @@ def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred(
     y = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0)
     a = observe_extended("asymmetry", y, 2000.0, {"lr_phase": 0.0, "lr_amp": 1.27})
     np.testing.assert_allclose(a, observe_extended("scale", y, 2000.0, {"scale": 1.135}), atol=1e-12)
-    # case 01 of run I: asymmetry at lr_phase 0.009 +- 0.005 named; scale refitted in its mode
+    # a concealed scale case: asymmetry at lr_phase 0.009 +- 0.005 named; scale refitted in its mode
     r = rank_extensions((-565.4, 0.6), {"asymmetry": (-395.8, 1.0), "scale": (-397.0, 1.0),
                                         "frame_rate": (-410.9, 1.0)},
                         rms={"asymmetry": 0.512, "scale": 0.515, "frame_rate": 0.605}, base_rms=1.102, null={})
@@ -596,7 +596,7 @@ def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred(
 
 
 def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter_swamped():
-    """Held-out seed-7 case 11 (a concealed scale error, irregular base): base runs at -2,506,
+    """Concealed case 11 of seed 7 (a scale error, irregular base): base runs at -2,506,
     -2,378, -2,482 and -1,904 nats (between-run error 409), the scale refit at -644 with its RMS
     59 % lower. With the between-run error in quadrature the 1,260-nat gain is 2.2 se and not
     named; against the best of all base fits by their own errors it is."""
@@ -622,7 +622,7 @@ def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter
 
 
 def test_best_of_base_keeps_the_effect_size_against_a_null_consistent_reference():
-    """Held-out seed-5 case 08, a control with an irregular base: the asymmetry refit is 394 nats
+    """Concealed case 08 of seed 5, a control with an irregular base: the asymmetry refit is 394 nats
     above every base-model fit and 40 % lower in RMS than the base, but only 26 % lower than the
     reference (the exposure refit at its null value, a better base-model fit). Not named."""
     from vfcore.diagnose.rank import rank_best_of_base
@@ -640,7 +640,7 @@ def test_best_of_base_keeps_the_effect_size_against_a_null_consistent_reference(
 
 
 def test_strip_sum_equals_interpolated_delays_with_held_ends():
-    """The zipper's fused kernel (stop 31): sum_k w_k y(i - d_k) equals np.interp of each delayed
+    """The zipper's fused kernel: sum_k w_k y(i - d_k) equals np.interp of each delayed
     copy (ends held) for delays inside, beyond and exactly at whole samples, to rounding."""
     from vfcore.diagnose._kernels import strip_sum
     rng = np.random.default_rng(4)

@@ -274,10 +274,10 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
 
 @pytest.mark.slow
 def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_region(base_run, monkeypatch):
-    """Stop 17: an observation-level entry is the base model at its null value too (scale 1), so a
+    """An observation-level entry is the base model at its null value too (scale 1), so a
     scale refit ending thousands of nats below the base is a sampler failure as well. Blind run
     with a hidden 12 % scale error and the first scale refit made to fail: it is refitted by an SMC
-    started from the base posterior (stop 19, the default), and scale is named with its value
+    started from the base posterior (the default rescue), and scale is named with its value
     recovered. The base absorbed part of the scale with a softer cover (E_cover ~477 against the
     true 636); the box rescue's first box (+-15 % of the prior width around it) stops short of 636.
     A fit truncated by that box leaves the scale biased low with a residual gain at the naming
@@ -326,7 +326,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
 
 @pytest.mark.slow
 def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base_run, monkeypatch):
-    """Stop 27, blind runs. A hidden 12 % scale error; the asymmetry entry can reproduce it (in
+    """Blind runs. A hidden 12 % scale error; the asymmetry entry can reproduce it (in
     phase, amplitude ratio 1.24), but its first refit is made to end as a sampler stuck near the
     base does (evidence set to 1 nat above the base: no rescue fires). The scale refit leads, so
     the asymmetry is refitted from the scale fit's material mode: the new fit sits in that mode
@@ -376,10 +376,10 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
 @pytest.mark.slow
 def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(base_run,
                                                                                                  monkeypatch):
-    """Stop 25, blind runs through the whole pipeline. The base fit is made to look as it does on
-    an irregular vibration (held-out seed-7 case 11): its runs scattered (further runs 3,000 and
+    """Blind runs through the whole pipeline. The base fit is made to look as it does on
+    an irregular vibration (concealed case 11 of seed 7): its runs scattered (further runs 3,000 and
     9,000 nats below the kept one, between-run error 5,000 nats) and a roughness of 10,000 nats.
-    A hidden 12 % scale error is then not named by the stop-19 rule (the gain is swamped, and the
+    A hidden 12 % scale error is then not named by the rule with the between-run error (the gain is swamped, and the
     local check counts the roughness), and is named by the best-of-base rule, with its material mode
     re-fitted with the base model first. The same fakery on a clean recording names nothing."""
     from vfcore.diagnose import pipeline, regularity

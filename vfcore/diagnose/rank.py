@@ -10,9 +10,9 @@ For the reference fit (log Z_0 +- s_0; normally the base fit, see below) and an 
    evidence already charges each extra parameter for its prior volume (Occam factor).
 2. **effect size**: its residual RMS is at least ``min_rms_gain`` (30 %) below the reference
    fit's: ``1 - rms_e / rms_0 >= min_rms_gain``. With hundreds of frames the evidence alone
-   calls a 1-10 % improvement "decisive" (measured: a scale case with 10 % and an asymmetry case
-   named leak with 4 %, docs/diagnose_history.md, stop 8); the issue asks every named effect to remove
-   >= 30 % of the residual RMS. Applied whenever ``rms`` is given (the pipeline always gives it).
+   calls a 1-10 % improvement "decisive" (measured on concealed-effect cases: a scale case with
+   10 % and an asymmetry case named leak with 4 %); the specification asks every named effect to
+   remove >= 30 % of the residual RMS. Applied whenever ``rms`` is given (the pipeline always gives it).
 3. **not at its null value**: an extended fit whose extension parameters all sit at their null
    value (``ExtParam.null``: the value at which the extension *is* the base model) within
    ``null_sd`` posterior standard deviations has not used the extension; its evidence gain comes
@@ -77,7 +77,7 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
     ``by_drop=True``: a parameter with a measured drop is judged by the drop alone (null-consistent
     when it is at most ``2 null_sd^2`` nats), whatever its mean and sd. The nested check's gate
     uses it: there the refit of the simpler entry, not this test, decides, and a parameter pinned
-    a few sd from its null can still cost less likelihood at the null (seed 8 case 11: a phase
+    a few sd from its null can still cost less likelihood at the null (concealed case 11 of seed 8: a phase
     difference 0.012 +- 0.004 cycles, 2.7 sd, whose null costs 2.2 nats) than its Occam factor
     (~ log(prior width / posterior width), 3 nats there) buys back."""
     from .extensions import get
@@ -286,8 +286,8 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
 def rank_best_of_base(base, candidates: dict, *, base_runs, mode_checks: dict | None = None,
                       base_rms: float | None = None, **kw) -> RankReport:
     """The naming rule of :func:`rank_extensions` against *every* base-model fit, with delta-method
-    errors only: the rule for an irregular base fit on which nothing was named (stop 25;
-    docs/diagnose.md section 3, "Best of all base fits").
+    errors only: the rule for an irregular base fit on which nothing was named (docs/diagnose.md
+    section 3, "Best of all base fits").
 
     When the base runs land far apart (between-run error ``tau`` of hundreds of nats) the shipped
     rule adds ``tau`` in quadrature to every fit's error, and on an irregular likelihood that error
@@ -323,8 +323,8 @@ def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: fl
     the refit and of the base refitted in its mode, and the likelihood's ``roughness`` at the base
     fit (:func:`.regularity.sensitivity`; 0 for a regular vibration), in quadrature. On an
     irregular likelihood there is no smooth local mode for the two fits to share, and how far the
-    log-likelihood jumps between neighbouring points is an error of their comparison (held-out
-    seed-4 case 06: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; docs/diagnose.md
+    log-likelihood jumps between neighbouring points is an error of their comparison (concealed
+    case 06 of seed 4: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; docs/diagnose.md
     section 4, "Regularity")."""
     se = math.hypot(float(se_refit), float(se_bound), float(roughness))
     ok = math.isfinite(d_local) and math.isfinite(se) and d_local > min_gain and d_local > k_se * se

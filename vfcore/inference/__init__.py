@@ -1,4 +1,4 @@
-"""Bayesian inference of vocal-fold parameters (Hadwin et al. 2019, Section 4; issue 3).
+"""Bayesian inference of vocal-fold parameters (Hadwin et al. 2019, Section 4).
 
 Free of Dask/FastAPI: parallelism is passed in as a ``map``-like callable.
 """

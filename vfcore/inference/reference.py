@@ -128,7 +128,7 @@ def reference_from_posterior(prior: Prior, post, *, inflate: float = 2.0, floor:
       the fitted mode;
     - *wide* (unless ``wide`` is None): independent, sd ``wide`` of each prior width (or the narrow
       one's, if larger); it reaches a mode shifted by a few tenths of the prior (an effect the base
-      fit absorbed by moving its material parameters), as the stop-16 box of +-0.15 did.
+      fit absorbed by moving its material parameters), as a box of +-0.15 about the base fit does.
 
     The two are mixed with equal weights, and ``eps`` of the prior (module docstring)."""
     g = len(post.names)
