@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from .config import SimConfig
-from .forward import BLOWUP, CLOSED_TOL, _params, _result, flow_coefficient, midline, setup
+from .forward import BLOWUP, CLOSED_TOL, _params, _result, contact_law, flow_coefficient, midline, setup
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .solver import _kernels as kern
@@ -64,7 +64,10 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     coefs = [kern.subglottal_coefficients(c.subglottal_modes, h) for c in configs]
     nmod = max(c.shape[0] for c in coefs)
     sub_coef = np.zeros((B, nmod, 3))            # zero rows: resonators that add exactly 0 Pa
+    kc = np.empty((B, m))
+    cc = np.empty((B, m))
     for b, p in enumerate(ps):
+        kc[b], cc[b] = contact_law(p, configs[b], system)
         # exactly the per-sample set-up of forward.simulate
         x_mid[b] = midline(p, configs[b])
         p_sub[b] = p.si()["p_sub"]
@@ -89,7 +92,7 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, system.Lp, system.Lj,
                    Lx, G, system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, sep,
                    x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-                   status, sub_coef, flow_coefficient(config), p_in, proj)
+                   status, sub_coef, flow_coefficient(config), p_in, proj, config.contact == "layer", kc, cc)
     t_each = (time.perf_counter() - t_wall) / B
     out = []
     for b, p in enumerate(ps):

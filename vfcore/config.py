@@ -4,8 +4,9 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-MESHES = ("coarse", "medium", "fine")  # ~172, ~205, ~263 triangles; "medium" is the paper's default
+MESHES = ("coarse", "medium", "fine", "xfine", "xxfine")  # ~172, ~205, ~263, ~1050, ~4190 triangles; "medium" is the paper's default
 ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
+CONTACTS = ("projection", "layer")
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,12 @@ class SimConfig:
     element : displacement element, one of ``ELEMENTS``: "p1" (the paper's linear triangle) or
         "anp" (P1 with nodally averaged volumetric part, locking-free as nu -> 1/2; docs/model.md,
         "Locking and mesh convergence").
+    contact : midline contact law, one of ``CONTACTS`` (docs/model.md, "Contact"): "projection" (the
+        paper's rigid midline: exact multipliers and an inelastic impact, whose peak pressures depend on
+        the time step and the mesh) or "layer" (a compliant Kelvin-Voigt contact layer of thickness
+        ``contact_layer_mm`` with the cover's modulus E_cover and viscosity eta: pressure
+        E_cover * overlap / h + eta * overlap rate / h, no adhesion).
+    contact_layer_mm : thickness h of the contact layer, mm, in (0, 1) (used by ``contact="layer"``).
     """
 
     mesh: str = "medium"
@@ -66,12 +73,19 @@ class SimConfig:
     epithelium_profile: tuple[float, ...] = ()
     subglottal_modes: tuple[tuple[float, float, float], ...] = ()
     element: str = "p1"
+    contact: str = "projection"
+    contact_layer_mm: float = 0.1
 
     def __post_init__(self) -> None:
         if self.mesh not in MESHES:
             raise ValueError(f"mesh must be one of {MESHES}, got {self.mesh!r}")
         if self.element not in ELEMENTS:
             raise ValueError(f"config element must be one of {ELEMENTS}, got {self.element!r}")
+        if self.contact not in CONTACTS:
+            raise ValueError(f"config contact must be one of {CONTACTS}, got {self.contact!r}")
+        hl = self.contact_layer_mm
+        if not (isinstance(hl, (int, float)) and math.isfinite(hl) and 0.0 < hl < 1.0):
+            raise ValueError(f"config contact_layer_mm must lie in (0, 1) mm, got {hl!r}")
         for name in ("dt", "duration", "fps", "length_mm", "sep_ratio"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):

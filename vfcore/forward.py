@@ -37,20 +37,46 @@ def midline(p: Params, config: SimConfig) -> float:
     return (p.x0 + config.half_gap_mm) * 1e-3
 
 
-def prestress(system: System, K_vals: np.ndarray, x_mid: float) -> tuple[np.ndarray, np.ndarray]:
+def contact_law(p: Params, config: SimConfig, system: System) -> tuple[np.ndarray, np.ndarray]:
+    """Per-node spring kc (N/m^2) and dashpot cc (N s/m^2) of the compliant contact layer.
+
+    A layer of thickness h with the cover's modulus and viscosity, compressed by the overlap d of a
+    node with the midline, pushes back with the pressure E_cover d / h + eta d' / h (uniaxial
+    Kelvin-Voigt); the node carries it over its edge share. Both scale with the material parameters,
+    so the model's exact common-scale symmetry (docs/inference.md, "The common scale") is kept.
+    Zeros for the rigid ``contact="projection"`` (then unused).
+    """
+    m = system.sdx.size
+    if config.contact != "layer":
+        return np.zeros(m), np.zeros(m)
+    si = p.si()
+    share = system.mesh.surface_weights()
+    hl = config.contact_layer_mm * 1e-3
+    return si["E_cover"] / hl * share, si["eta"] / hl * share
+
+
+def prestress(system: System, K_vals: np.ndarray, x_mid: float,
+              kc: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Static equilibrium with no surface node beyond the midline (medial compression).
 
-    Solves K u = E lambda with the active-set contact of :func:`_kernels.contact_correct`.
+    Solves K u = E lambda with the active-set contact of :func:`_kernels.contact_correct`, or, given
+    the layer springs ``kc`` (m,), with the static compliant layer of :func:`_kernels.contact_layer_ws`.
     Returns (u (n,), contact force per surface node (m,), N/m >= 0).
     """
     u = np.zeros(system.n)
-    lam = np.zeros(system.sdx.size)
+    m = system.sdx.size
+    lam = np.zeros(m)
     if np.all(system.sX <= x_mid):
         return u, lam
     Lk = system.factor(K_vals)
     G = system.contact_columns(Lk)
-    active = np.zeros(system.sdx.size, dtype=np.bool_)
-    it = kern.contact_correct(u, system.sdx, system.sX, x_mid, G, lam, active, 200)
+    active = np.zeros(m, dtype=np.bool_)
+    if kc is None:
+        it = kern.contact_correct(u, system.sdx, system.sX, x_mid, G, lam, active, 200)
+    else:
+        it = kern.contact_layer_ws(u, np.zeros(system.n), 1.0, 1.0, system.sdx, system.sX, x_mid, G, kc,
+                                   np.zeros(m), lam, active, 200, np.empty(system.n), np.empty((m, m)), np.empty(m),
+                                   np.empty(m, dtype=np.int64), np.empty(m), np.empty(m))
     if it < 0:
         raise RuntimeError("static contact (medial compression) did not converge")
     return u, -lam
@@ -132,7 +158,8 @@ def setup(p: Params, config: SimConfig, system: System):
         K_vals = K_vals + K_ep
         D_vals = D_vals + D_ep
     M_vals = si["rho"] * system.m_vals
-    u, _ = prestress(system, K_vals, midline(p, config))
+    kc, _ = contact_law(p, config, system)
+    u, _ = prestress(system, K_vals, midline(p, config), kc if config.contact == "layer" else None)
     cM, cD, cK = kern.effective_scales(config.dt, config.rho_inf)
     Lx = system.factor(cK * K_vals + cD * D_vals + cM * M_vals)
     return K_vals, D_vals, M_vals, u, Lx, system.contact_columns(Lx)
@@ -184,7 +211,8 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
         D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
         u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
         config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-        kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj)
+        kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj,
+        config.contact == "layer", *contact_law(p, config, system))
     return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,
                    p_in if config.has_subglottal else None, proj)
 

@@ -44,6 +44,22 @@ def test_batch_equals_scalar(scalar, batched):
             assert np.array_equal(getattr(s.cycles, f), getattr(b.cycles, f)), f
 
 
+def test_batch_equals_scalar_with_the_contact_layer(rows):
+    """The compliant contact layer (per-sample springs and dashpots) keeps the lock-step kernel equal
+    to the scalar one bit for bit, contact forces included."""
+    cfg = SimConfig(contact="layer", duration=0.2, discard=0.05)
+    scalar = [simulate(r, cfg) for r in rows]
+    batched = simulate_many(rows, cfg, block=6)
+    assert any(s.ok and s.contact_force.max() > 0 for s in scalar)      # some sample touches the layer
+    for s, b in zip(scalar, batched):
+        assert s.ok == b.ok and s.message == b.message
+        if s.ok:
+            for f in ("gaw", "flow", "contact_pressure", "contact_force"):
+                assert np.array_equal(getattr(s, f), getattr(b, f)), f
+            for f in ("contact_impulse", "contact_pressure_in_contact", "max_contact_pressure_unconverged"):
+                assert np.array_equal(getattr(s.cycles, f), getattr(b.cycles, f)), f
+
+
 def test_batch_reruns_bit_identical(rows, batched):
     again = simulate_many(rows, SimConfig(), block=4)    # different blocking, same numbers
     for a, b in zip(batched, again):

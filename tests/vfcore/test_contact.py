@@ -1,4 +1,7 @@
-"""Contact products: impulse per cycle, contact duration, pressure in contact (docs/model.md, "Contact")."""
+"""Contact: the rigid projection's and the compliant layer's laws, and the products built on them
+(impulse per cycle, contact duration, pressure in contact; docs/model.md, "Contact")."""
+import math
+
 import numpy as np
 import pytest
 
@@ -7,10 +10,11 @@ from vfcore import forward as fw
 from vfcore.solver import _kernels as kern
 
 
-def _free_masses(mass, v0, gap, h, n_steps):
+def _masses_series(mass, v0, gap, h, n_steps, kc=None, cc=None):
     """Two unconstrained point masses (no stiffness, damping or flow load) moving at v0 towards a
-    midline ``gap`` away, through the production time loop; returns (multiplier impulse, projection
-    impulse) per node, N s/m."""
+    midline ``gap`` away, through the production time loop: the rigid projection, or with ``kc``/``cc``
+    (N/m^2, N s/m^2) the compliant layer. Returns (per-step contact force (n_steps, 2), N/m, projection
+    impulses (n_steps, 2), N s/m, final u, final v)."""
     n, m = 4, 2
     indptr = np.arange(n + 1, dtype=np.int64)
     indices = np.arange(n, dtype=np.int64)
@@ -27,12 +31,20 @@ def _free_masses(mass, v0, gap, h, n_steps):
     u, a = np.zeros(n), np.zeros(n)
     v = np.array([v0, 0.0, v0, 0.0])
     lam, proj = np.zeros((n_steps, m)), np.zeros((n_steps, m))
+    layer = kc is not None
     st = kern.integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                                 sdx, sdz, sX, sZ, u, v, a, 0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 1.0,
                                 np.zeros(n_steps), np.zeros(n_steps), lam, 0, np.zeros((0, n)), np.zeros((0, n)),
-                                np.zeros((0, 3)), 0.0, np.zeros(0), proj)
+                                np.zeros((0, 3)), 0.0, np.zeros(0), proj, layer,
+                                np.full(m, kc if layer else 0.0), np.full(m, cc if layer else 0.0))
     assert st == 0
-    assert np.allclose(u[sdx], gap, rtol=0, atol=1e-15) and np.all(v[sdx] == 0.0)   # stopped at the midline
+    return lam, proj, u[sdx], v[sdx]
+
+
+def _free_masses(mass, v0, gap, h, n_steps):
+    """:func:`_masses_series` against the rigid midline: (multiplier impulse, projection impulse) per node."""
+    lam, proj, u, v = _masses_series(mass, v0, gap, h, n_steps)
+    assert np.allclose(u, gap, rtol=0, atol=1e-15) and np.all(v == 0.0)   # stopped at the midline
     return h * lam.sum(axis=0), proj.sum(axis=0)
 
 
@@ -106,3 +118,75 @@ def test_impulse_converges_in_dt():
     d_pk = [abs(pk[i + 1] - pk[i]) / pk[i + 1] for i in range(2)]
     assert d_imp[1] < d_imp[0]                      # the differences shrink
     assert d_imp[1] < 0.15 and d_imp[1] < d_pk[1]
+
+
+def _kelvin_voigt_impact(mass, v0, k, c):
+    """Exact impact of a mass on a no-tension spring-dashpot layer: m x'' + c x' + k x = 0, x(0) = 0,
+    x'(0) = v0 (underdamped), until the force k x + c x' returns to zero. Returns (impulse, peak force,
+    duration)."""
+    wn = math.sqrt(k / mass)
+    z = c / (2.0 * math.sqrt(k * mass))
+    wd = wn * math.sqrt(1.0 - z * z)
+    t = np.linspace(0.0, math.pi / wd, 400_001)
+    e = np.exp(-z * wn * t)
+    x = v0 / wd * e * np.sin(wd * t)
+    xd = v0 * e * (np.cos(wd * t) - z * wn / wd * np.sin(wd * t))
+    f = k * x + c * xd
+    end = np.nonzero(f[1:] <= 0.0)[0]
+    i = end[0] + 1 if end.size else t.size - 1
+    return mass * (v0 - xd[i]), f[:i].max(), t[i]
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.3])
+def test_layer_impact_matches_the_exact_kelvin_voigt_solution(zeta):
+    """A mass hitting the compliant layer: impulse, peak force and contact duration converge to the
+    exact spring-dashpot impact as the step shrinks (first order: the contact starts inside a step and
+    the dashpot uses the backward difference of the overlap). zeta = 0 is the elastic bounce, impulse
+    2 m v0."""
+    mass, v0, k = 0.02, 0.7, 2000.0                      # kg/m, m/s, N/m^2: contact of ~10 ms
+    c = 2.0 * zeta * math.sqrt(k * mass)
+    J, F, T = _kelvin_voigt_impact(mass, v0, k, c)
+    if zeta == 0.0:
+        assert J == pytest.approx(2.0 * mass * v0, rel=1e-9)
+    err = []
+    for h in (2e-4, 1e-4, 5e-5, 2.5e-5):
+        gap = 0.37 * h * v0 + 5 * h * v0                  # reached a fraction into a step
+        lam, proj, _, _ = _masses_series(mass, v0, gap, h, int(round(0.03 / h)), kc=k, cc=c)
+        assert np.all(proj == 0.0) and np.all(lam >= 0.0)   # no projection; never adhesive
+        f = lam[:, 0]
+        touching = np.nonzero(f > 0)[0]
+        assert np.all(np.diff(touching) == 1)            # one contact, then free flight
+        err.append((abs(h * f.sum() - J) / J, abs(f.max() - F) / F, abs(h * touching.size - T) / T))
+    err = np.array(err)
+    assert np.all(err[-1] < 0.02), err[-1]
+    # the errors shrink about in proportion to h over the last halvings
+    ratios = err[-3, :2] / err[-1, :2]
+    assert np.all(ratios > 2.5), ratios
+
+
+def test_layer_static_compression_is_the_spring_solution():
+    """The layer's static problem (medial compression, cc = 0): a spring column under a layer of
+    stiffness kc settles where the two springs share the imposed overlap, K u = -kc (u - g)."""
+    n, m = 2, 1
+    K = 3000.0
+    kc = 1000.0
+    g = 1e-4                                            # the midline is 0.1 mm inside the rest position
+    G = np.array([[1.0 / K], [0.0]])
+    u = np.zeros(n)
+    lam = np.zeros(m)
+    active = np.zeros(m, dtype=np.bool_)
+    sdx = np.array([0], dtype=np.int64)
+    it = kern.contact_layer_ws(u, np.zeros(n), 1.0, 1.0, sdx, np.array([g]), 0.0, G, np.array([kc]), np.zeros(m),
+                               lam, active, 20, np.empty(n), np.empty((m, m)), np.empty(m),
+                               np.empty(m, dtype=np.int64), np.empty(m), np.empty(m))
+    assert it >= 1
+    # equilibrium: K u = f, f = -kc (g + u): u = -kc g / (K + kc)
+    assert u[0] == pytest.approx(-kc * g / (K + kc), rel=1e-12)
+    assert lam[0] == pytest.approx(K * u[0], rel=1e-12)
+
+
+def test_layer_contact_is_an_option_of_the_config():
+    with pytest.raises(ValueError, match="contact must be one of"):
+        SimConfig(contact="penalty")
+    with pytest.raises(ValueError, match="contact_layer_mm"):
+        SimConfig(contact="layer", contact_layer_mm=0.0)

@@ -98,7 +98,11 @@ def _canonical(x):
 
 def config_key_dict(config: SimConfig) -> dict:
     """The part of ``config`` a reach ensemble depends on (everything but the camera rate and trajectories)."""
-    return {k: v for k, v in config.as_dict().items() if k not in _KEY_EXCLUDE}
+    d = {k: v for k, v in config.as_dict().items() if k not in _KEY_EXCLUDE}
+    if d["contact"] == "projection":
+        # the layer options do not enter the physics of the rigid projection: its key leaves them out
+        del d["contact"], d["contact_layer_mm"]
+    return d
 
 
 def reach_key(config: SimConfig, prior: Prior) -> str:

@@ -90,7 +90,7 @@ def make_fold_mesh(points_mm: np.ndarray, triangles: np.ndarray, layer: np.ndarr
 
 @lru_cache(maxsize=8)
 def load_mesh(name: str = "medium") -> FoldMesh:
-    """Load a shipped mesh: "coarse" (~172 triangles), "medium" (~205), "fine" (~263)."""
+    """Load a shipped mesh: "coarse" (~172 triangles), "medium" (~205), "fine" (~263), "xfine" (~1050), "xxfine" (~4190)."""
     path = DATA / f"{name}.npz"
     if not path.exists():
         raise ValueError(f"unknown mesh {name!r}; shipped: {sorted(p.stem for p in DATA.glob('*.npz'))}")

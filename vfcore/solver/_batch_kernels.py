@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import contact_correct_ws, projection_impulse, step_coefficients, subglottal_step, surface_loads
+from ._kernels import contact_correct_ws, contact_layer_ws, projection_impulse, step_coefficients, subglottal_step, surface_loads
 
 
 @njit(cache=True)
@@ -44,7 +44,7 @@ def chol_solve_many(Lp, Lj, Lx, r) -> None:
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                    sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                    width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out,
-                   proj_out):
+                   proj_out, layer, kc, cc):
     """Batched :func:`_kernels.integrate_coupled`.
 
     kval, mval, dval : (nnz, B); Lx : (nnz_L, B); G : (B, n, m); u, v, a : (n, B);
@@ -56,7 +56,8 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     state becomes non-finite or exceeds ``blowup`` at step k gets status k (-k when its contact
     active set did not settle, as in ``integrate``) and is frozen (its state zeroed) while the
     others continue. proj_out : (B, n_steps, m), the projection impulses of ``integrate_coupled``
-    (:func:`_kernels.projection_impulse` on the sample's column of mval).
+    (:func:`_kernels.projection_impulse` on the sample's column of mval). layer, kc (B, m), cc (B, m):
+    the contact law of ``integrate_coupled`` (compliant layer per sample; ignored when ``layer`` is False).
     """
     n, B = u.shape
     m = sdx.size
@@ -69,6 +70,9 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     ws_S = np.empty((m, m))
     ws_rhs = np.empty(m)
     ws_idx = np.empty(m, dtype=np.int64)
+    ws_keff = np.empty(m)
+    ws_bb = np.empty(m)
+    wl = 1.0 - af
     xs = np.empty(m)
     zs = np.empty(m)
     gap = np.empty(m)
@@ -136,8 +140,13 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
             if not live[b]:
                 continue
             # in place on the sample's (strided) column; returns at once when nothing penetrates
-            if contact_correct_ws(r[:, b], sdx, sX, x_mid[b], G[b], lam[b], active[b], 50, ws_u0, ws_S, ws_rhs,
-                                  ws_idx) < 0:
+            if layer:
+                settled = contact_layer_ws(r[:, b], u[:, b], h, wl, sdx, sX, x_mid[b], G[b], kc[b], cc[b], lam[b],
+                                           active[b], 50, ws_u0, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb)
+            else:
+                settled = contact_correct_ws(r[:, b], sdx, sX, x_mid[b], G[b], lam[b], active[b], 50, ws_u0, ws_S,
+                                             ws_rhs, ws_idx)
+            if settled < 0:
                 unsettled[b] = True     # contact did not settle: fails with status -k below
         for b in range(B):
             umax[b] = 0.0
@@ -168,7 +177,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
                 continue
             xm = x_mid[b]
             for j in range(m):
-                if active[b, j]:
+                if active[b, j] and not layer:
                     d = sdx[j]
                     proj_out[b, k - 1, j] = projection_impulse(indptr, mval[:, b], d, v[d, b], a[d, b], h, gamma)
                     v[sdx[j], b] = 0.0

@@ -144,6 +144,31 @@ def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_
 
 
 @njit(cache=True)
+def spd_solve_lower(S, rhs, k) -> None:
+    """Solve the leading k x k block of S x = rhs in place (S symmetric positive definite, its lower
+    triangle filled): Cholesky S = C C^T overwriting the lower triangle, then two triangular solves."""
+    for a in range(k):
+        for b in range(a + 1):
+            t = S[a, b]
+            for c in range(b):
+                t -= S[a, c] * S[b, c]
+            if b == a:
+                S[a, a] = np.sqrt(t)
+            else:
+                S[a, b] = t / S[b, b]
+    for a in range(k):
+        t = rhs[a]
+        for c in range(a):
+            t -= S[a, c] * rhs[c]
+        rhs[a] = t / S[a, a]
+    for a in range(k - 1, -1, -1):
+        t = rhs[a]
+        for c in range(a + 1, k):
+            t -= S[c, a] * rhs[c]
+        rhs[a] = t / S[a, a]
+
+
+@njit(cache=True)
 def contact_correct(u, sdx, sX, x_mid, G, lam, active, max_iter):
     """Enforce x <= x_mid on free-surface nodes with Lagrange multipliers.
 
@@ -190,26 +215,7 @@ def contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, u0, S, rhs, 
             rhs[a] = (x_mid - sX[ja]) - u0[sdx[ja]]
             for b in range(a + 1):
                 S[a, b] = G[sdx[ja], idx[b]]
-        # Cholesky S = C C^T (lower, in place) and two triangular solves
-        for a in range(k):
-            for b in range(a + 1):
-                t = S[a, b]
-                for c in range(b):
-                    t -= S[a, c] * S[b, c]
-                if b == a:
-                    S[a, a] = np.sqrt(t)
-                else:
-                    S[a, b] = t / S[b, b]
-        for a in range(k):
-            t = rhs[a]
-            for c in range(a):
-                t -= S[a, c] * rhs[c]
-            rhs[a] = t / S[a, a]
-        for a in range(k - 1, -1, -1):
-            t = rhs[a]
-            for c in range(a + 1, k):
-                t -= S[c, a] * rhs[c]
-            rhs[a] = t / S[a, a]
+        spd_solve_lower(S, rhs, k)
         for j in range(m):
             lam[j] = 0.0
         for a in range(k):
@@ -227,6 +233,84 @@ def contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, u0, S, rhs, 
                 active[j] = False
                 changed = True
             elif (not active[j]) and sX[j] + u[sdx[j]] > x_mid * (1.0 + 1e-12):
+                active[j] = True
+                changed = True
+        if not changed:
+            return it + 1
+    return -1
+
+
+@njit(cache=True)
+def contact_layer_ws(u, un, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, max_iter, u0, S, rhs, idx, keff, bb):
+    """Midline contact through a compliant layer (Kelvin-Voigt: spring ``kc`` and dashpot ``cc`` per node).
+
+    The force on surface node j (x, N/m) at t_{n+1} is f_j = -(kc_j d_j + cc_j (d_j - d_j^n) / h) while
+    that is compressive, else 0 (no adhesion); d = sX + u - x_mid is the node's overlap with the midline
+    and d^n = max(d(t_n), 0). The dashpot's rate is the backward difference of the overlap, not the
+    trapezoidal velocity: the trapezoidal rule leaves a dashpot much stiffer than 1/h undamped (its
+    velocity flips sign every step), which pushes nodes out of contact and back; the backward difference
+    is monotone, and a compressive force then implies d_j > 0, so the active set is that of a linear
+    complementarity problem with a positive definite matrix. So f_j = -(keff_j u_j + bb_j) with
+    keff = kc + cc / h, and the multiplier of the alpha-weighted equation is lam_j = wl f_j
+    (wl = 1 - alpha_f). For the active set A, (S_AA + diag(1 / (wl keff_A))) lam_A = -(u0_A + bb_A / keff_A),
+    S_ab = G[sdx[a], b], symmetric positive definite like the rigid case (:func:`contact_correct_ws`),
+    which it approaches as kc -> inf. ``cc = 0`` with ``wl = 1`` is the static problem (medial
+    compression) on a spring layer.
+
+    u : (n,) unconstrained u_{n+1} (corrected in place); un (n,) displacement at t_n; lam (m,) written;
+    keff, bb (m,) work. Returns the number of active-set iterations, or -1 if it did not settle.
+    """
+    m = sdx.size
+    n = u.size
+    any_pen = False
+    for j in range(m):
+        lam[j] = 0.0
+        active[j] = False
+        d = sdx[j]
+        if d < 0:
+            continue
+        ch = cc[j] / h
+        keff[j] = kc[j] + ch
+        dn = sX[j] + un[d] - x_mid
+        bb[j] = keff[j] * (sX[j] - x_mid) - ch * (dn if dn > 0.0 else 0.0)
+        if keff[j] * u[d] + bb[j] > 0.0:
+            active[j] = True
+            any_pen = True
+    if not any_pen:
+        return 0
+    for i in range(n):
+        u0[i] = u[i]
+    for it in range(max_iter):
+        k = 0
+        for j in range(m):
+            if active[j]:
+                idx[k] = j
+                k += 1
+        for a in range(k):
+            ja = idx[a]
+            rhs[a] = -(u0[sdx[ja]] + bb[ja] / keff[ja])
+            for b in range(a + 1):
+                S[a, b] = G[sdx[ja], idx[b]]
+            S[a, a] += 1.0 / (wl * keff[ja])
+        spd_solve_lower(S, rhs, k)
+        for j in range(m):
+            lam[j] = 0.0
+        for a in range(k):
+            lam[idx[a]] = rhs[a]
+        for i in range(n):
+            t = u0[i]
+            for a in range(k):
+                t += G[i, idx[a]] * rhs[a]
+            u[i] = t
+        changed = False
+        for j in range(m):
+            d = sdx[j]
+            if d < 0:
+                continue
+            if active[j] and lam[j] > 0.0:       # tensile: release
+                active[j] = False
+                changed = True
+            elif (not active[j]) and keff[j] * u[d] + bb[j] > 0.0:
                 active[j] = True
                 changed = True
         if not changed:
@@ -346,14 +430,15 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
     return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                              sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                              width, gsep_out, lam_out, traj_every, traj_u, traj_v,
-                             np.zeros((0, 3)), 0.0, np.zeros(0), np.zeros((0, sdx.size)))
+                             np.zeros((0, 3)), 0.0, np.zeros(0), np.zeros((0, sdx.size)),
+                             False, np.zeros(sdx.size), np.zeros(sdx.size))
 
 
 @njit(cache=True)
 def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
                       u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                       width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
-                      proj_out):
+                      proj_out, layer, kc, cc):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
 
     Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
@@ -374,6 +459,10 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
 
     ``proj_out`` (n_steps, m) or (0, m) = not recorded: the lateral momentum per unit length (N s/m)
     the inelastic projection takes from each surface node at step k, :func:`projection_impulse`.
+
+    ``layer`` False: the paper's rigid midline (exact multipliers, then the inelastic projection);
+    True: the compliant contact layer of :func:`contact_layer_ws` with per-node spring ``kc`` (m,), N/m^2,
+    and dashpot ``cc`` (m,), N s/m^2; no projection (``proj_out`` stays zero). docs/model.md, "Contact".
     """
     n = u.size
     m = sdx.size
@@ -393,6 +482,9 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     ws_S = np.empty((m, m))
     ws_rhs = np.empty(m)
     ws_idx = np.empty(m, dtype=np.int64)
+    ws_keff = np.empty(m)
+    ws_bb = np.empty(m)
+    wl = 1.0 - af
     ntr = 0
     nmod = sub_coef.shape[0]
     sub_p1 = np.zeros(nmod)
@@ -427,7 +519,12 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
         chol_solve(Lp, Lj, Lx, r)
         for i in range(n):
             r[i] += u[i]          # r is now u_{n+1} before contact
-        if contact_correct_ws(r, sdx, sX, x_mid, G, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx) < 0:
+        if layer:
+            settled = contact_layer_ws(r, u, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, 50, ws_u0, ws_S, ws_rhs,
+                                       ws_idx, ws_keff, ws_bb)
+        else:
+            settled = contact_correct_ws(r, sdx, sX, x_mid, G, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx)
+        if settled < 0:
             return -k          # contact active set did not settle: a failure, never silent penetration
         bad = False
         for i in range(n):
@@ -444,7 +541,7 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
         # acceleration (the trapezoidal rule would otherwise bounce it back every step)
         rec = proj_out.shape[0] > 0
         for j in range(m):
-            if active[j]:
+            if active[j] and not layer:
                 if rec:
                     proj_out[k - 1, j] = projection_impulse(indptr, mval, sdx[j], v[sdx[j]], a[sdx[j]], h, gamma)
                 v[sdx[j]] = 0.0
