@@ -37,7 +37,7 @@ def gaw(video: Annotated[Path, typer.Argument(help="video file, frame folder, mu
     try:
         ex = extract_gaw(video, fps=fps, px_per_mm=px_per_mm, segment_s=segment_s, fmax=fmax)
     except ValueError as exc:
-        raise fail(str(exc)) from None
+        raise fail(str(exc) if str(video) in str(exc) else f"{video}: {exc}") from None
     # both files appear together or not at all
     tmps = []
     try:

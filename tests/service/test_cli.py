@@ -34,8 +34,13 @@ def test_submit_status_fetch(service, tmp_path):
     r = CliRunner().invoke(app, ["fetch", job_id, "--out", str(tmp_path / "out")], env=env)
     assert r.exit_code == 0, r.output
     assert "E_cover" in r.output and "% of est." in r.output
-    for f in ("posterior.json", "samples.csv", "gaw_fit.png", "corner.png", "contact_pressure.png"):
+    for f in ("posterior.json", "samples.csv", "samples.json", "posterior.nc", "gaw_fit.png", "corner.png",
+              "contact_pressure.png", "index.html"):
         assert (tmp_path / "out" / f).stat().st_size > 0
+    page = (tmp_path / "out" / "index.html").read_text()
+    for f in ("gaw_fit.png", "corner.png", "contact_pressure.png", "samples.csv", "posterior.nc"):
+        assert f"'{f}'" in page                              # linked relatively: the folder reads offline
+    assert "http://" not in page and "https://" not in page
     r = CliRunner().invoke(app, ["status", job_id], env={**env, "VFINFER_TOKEN": TOKENS["alice"]})
     assert r.exit_code == 2 and "404" in r.output
 
