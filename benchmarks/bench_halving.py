@@ -7,10 +7,12 @@ but the last only the better half of the starts go on). Prints each one's whole-
 log-likelihood, its simulations and its wall time, and the log-likelihood each start reached
 without halving, so a lost winner shows as a start that was behind early and ahead at the end.
 
-Only suites already scored are development data (docs/diagnose_history.md); the search reads
-the public recordings and ``cases.json``, never the truth.
+Run it only on suites already scored (development data; docs/diagnose.md section 5): a suite
+that still measures the code must not inform a setting. The search reads the public recordings
+and ``cases.json``, never the truth. The suite of seed 8 (regenerated with
+``python -m benchmarks.concealed.generate --out runs/concealedS8 --seed 8``):
 
-    python benchmarks/bench_halving.py --cases benchmarks/results/heldout_seed8/suite \
+    python benchmarks/bench_halving.py --cases runs/concealedS8 \
         --runs 00:frame_rate,06:leak,05:base [--seed 1] [--n-keep 4]
 """
 from __future__ import annotations

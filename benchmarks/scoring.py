@@ -3,33 +3,32 @@
 A *suite* is a generator output directory (``cases.json``, ``truth.json``; benchmarks/concealed)
 and the directory of diagnosis reports run on it (``case_XX.json``). :func:`load_suite` joins the
 two into one record per reported case; :func:`summarise` counts over any list of records, so
-several held-out suites pool by concatenating their records.
+several suites pool by concatenating their records.
 
-Besides the issue's figures (effect cases named right, false alarms in controls, RMS and
+Besides the benchmark's acceptance figures (effect cases named right, false alarms in controls, RMS and
 log-evidence of every named effect, cost), the summary splits the detection rate by
 
 - the truth's effect (per-effect recall),
 - the effect's strength: the generator's unabsorbed RMS over the noise sd (the part of the effect
   the best base-model fit cannot absorb; ``WEAK_SD`` separates weak from strong),
-- the base fit's regularity (``report["base"]["regularity"]``, written since stop 19; older
-  reports count as unknown),
+- the base fit's regularity (``report["base"]["regularity"]``; a report without it counts as
+  unknown),
 
 each with its 95 % Wilson interval (``scipy.stats.binomtest``), and counts the rescue refits
 (fired, kept, by method) from the reports' notes.
 
-Two presence checks beside the generator's own (stop 21):
+Two presence checks beside the generator's own:
 
 - the **presence audit** (``audit.json`` of ``generate.py --audit``, written before or without
   any diagnosis): the rate over the effects still present under its stronger absorption search;
 - the **reference floor** of a case, ``1 - sigma / rms_ref``: the largest residual-RMS gain any
   extension could reach against the diagnosis' own reference fit (no fit goes below the noise).
-  Below the issue's 30 % the diagnosis' base model has absorbed the effect to within the noise,
+  Below 30 % the diagnosis' base model has absorbed the effect to within the noise,
   whatever the generator's search found; misses are split by it. It reads the diagnosis'
   reports, so it explains misses and is never used to decide which cases count.
 
-Suites whose reports were not kept (held-out seeds 1-3) are scored from the per-case table that
-``--score`` printed at the time (kept under ``benchmarks/results/heldout_seedS/score_table.txt``)
-and the regenerated suite: :func:`load_table`, used when ``--out`` names a file. Each row's truth
+A suite whose reports were not kept is scored from the per-case table that ``--score`` printed
+(a text file) and the regenerated suite: :func:`load_table`, used when ``--out`` names a file. Each row's truth
 label must match the regenerated suite (another suite is refused); a row whose effect
 log-likelihood no longer matches is scored as tabled, without the audit, and listed.
 
@@ -81,7 +80,7 @@ class CaseRecord:
     audit_present: bool | None = None             # presence under audit.json, None without one
     floor_gain: float = math.nan                  # 1 - sigma / RMS of the diagnosis' reference fit
     regenerated: bool = True                      # load_table: the row's recording regenerated
-    wall_by_stage: dict = field(default_factory=dict)   # report "cost" (since stop 31): stage -> seconds
+    wall_by_stage: dict = field(default_factory=dict)   # report "cost" (absent from older reports): stage -> seconds
 
 
 def _truth_table(cases_dir: Path) -> dict:
@@ -113,7 +112,8 @@ def _rescues(notes) -> list:
 
 
 def _rivals(d: dict) -> list:
-    """Rival physics of a report: stored since stop 14, rebuilt from the ranking rows before."""
+    """Rival physics of a report: its stored ``rivals``, or rebuilt from the ranking rows of a report
+    without them."""
     if "rivals" in d:
         return [r["physics"] for r in d["rivals"]]
     if not d.get("winner"):
