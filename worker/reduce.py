@@ -1,4 +1,4 @@
-"""Reducer: log-likelihoods in the store -> vfcore Posterior -> summaries, CSV and figures in the store.
+"""Reducer: log-likelihoods in the store -> vfcore Posterior -> summaries, CSV, NetCDF and figures in the store.
 
 All statistics are vfcore.inference's (``reduce_importance``, ``Posterior``); this module only
 moves arrays between the store and those functions and renders figures.  It runs as a Dask task
@@ -249,7 +249,10 @@ def publish_posterior(store_path: str, post) -> dict:
         st.write_blob(root, "posterior_nc", netcdf_bytes(post))
     except Exception as exc:  # noqa: BLE001 - an export must not fail the job; recorded
         summary["export_errors"] = {"posterior_nc": f"{type(exc).__name__}: {exc}"}
-    for name, fn in (("gaw_fit", fig_gaw_fit), ("corner", fig_corner), ("contact_pressure", fig_contact)):
+    from .figures import fig_contact, fig_corner, fig_gaw_fit
+    noise_sd = None if nc is None else (nc["sigma_e"] if nc["noise"] == "fixed" else nc["residual_rms"]["q50"])
+    for name, fn in (("gaw_fit", lambda p, b: fig_gaw_fit(p, b, noise_sd)), ("corner", fig_corner),
+                     ("contact_pressure", fig_contact)):
         try:
             st.write_blob(root, name, fn(post, bands))
         except Exception as exc:  # noqa: BLE001 - a figure must not fail the job; recorded
@@ -296,91 +299,6 @@ def netcdf_bytes(post) -> bytes:
         return Path(tmp).read_bytes()
     finally:
         os.unlink(tmp)
-
-
-# ---------------------------------------------------------------------------------------- figures
-def _png(fig) -> bytes:
-    import matplotlib.pyplot as plt
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def fig_gaw_fit(post, bands) -> bytes:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 3.5))
-    if post.obs_gaw is not None:
-        obs = np.asarray(post.obs_gaw, dtype=float)
-        fps = float(post.fps or 1.0)
-        t = np.arange(obs.size) / fps * 1e3
-        if bands is not None:
-            n = min(obs.size, bands.shape[1])
-            ax.fill_between(t[:n], bands[0, :n], bands[2, :n], color="C1", alpha=0.35, label="90% predictive band")
-            ax.plot(t[:n], bands[1, :n], color="C1", lw=1.2, label="posterior predictive median")
-        ax.plot(t, obs, "k.", ms=2.5, label="observed GAW")
-        ax.set_xlabel("time (ms)")
-    ax.set_ylabel("glottal area (mm$^2$)")
-    ax.set_title(f"GAW fit ({post.method}, ESS={post.ess:.0f})")
-    ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    return _png(fig)
-
-
-def fig_corner(post, bands=None) -> bytes:
-    plt = _plt()
-    x = post.resampled_samples
-    d = x.shape[1]
-    fig, axes = plt.subplots(d, d, figsize=(1.7 * d + 1, 1.7 * d + 1), squeeze=False)
-    for i in range(d):
-        for j in range(d):
-            ax = axes[i, j]
-            if j > i:
-                ax.axis("off")
-                continue
-            if i == j:
-                ax.hist(x[:, i], bins=30, color="C0")
-                ax.set_yticks([])
-            else:
-                ax.hist2d(x[:, j], x[:, i], bins=25, cmap="Blues")
-            if i == d - 1:
-                ax.set_xlabel(f"{post.names[j]} ({PARAM_UNITS[post.names[j]]})", fontsize=7)
-            else:
-                ax.set_xticklabels([])
-            if j == 0 and i > 0:
-                ax.set_ylabel(f"{post.names[i]}", fontsize=7)
-            elif j > 0:
-                ax.set_yticklabels([])
-            ax.tick_params(labelsize=6)
-    fig.suptitle("posterior (resampled ensemble)")
-    return _png(fig)
-
-
-def fig_contact(post, bands=None) -> bytes:
-    plt = _plt()
-    pred = post.resampled_predictive()
-    fig, axes = plt.subplots(1, len(SUMMARY_QUANTITIES), figsize=(3.4 * len(SUMMARY_QUANTITIES), 3))
-    for ax, (name, unit) in zip(axes, SUMMARY_QUANTITIES.items()):
-        a = None if pred is None else getattr(pred, name)
-        if a is not None:
-            a = np.asarray(a, dtype=float)
-            a = a[np.isfinite(a)]
-        if a is not None and a.size:
-            ax.hist(a, bins=30, color="C2")
-        else:
-            ax.text(0.5, 0.5, "not available", ha="center", transform=ax.transAxes)
-        ax.set_xlabel(f"{name} ({unit}{', not converged' if name in UNCONVERGED else ''})", fontsize=8)
-    axes[0].set_ylabel("posterior count")
-    fig.suptitle("posterior contact pressure and flow rate")
-    fig.tight_layout()
-    return _png(fig)
 
 
 # ---------------------------------------------------------------------------------------- compare
