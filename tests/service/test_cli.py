@@ -85,7 +85,8 @@ def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, mon
     monkeypatch.setattr(cli, "run_local", fake_run_local)
     gaw = _gaw_file(tmp_path)
     args = [a for a in TOY if a not in ("--sampler", "is")]
-    r = CliRunner().invoke(app, ["infer", str(gaw), *args, "--measure", "p_sub=1000:50"], env={"COLUMNS": "250"})
+    r = CliRunner().invoke(app, ["infer", str(gaw), *args, "--measure", "p_sub=1000:50", "-o", str(tmp_path / "o")],
+                           env={"COLUMNS": "250"})
     assert r.exit_code == 0, r.output
     spec = seen["spec"]
     assert spec.sampler.kind == "smc" and spec.measurements == {"p_sub": (1000.0, 50.0)}
