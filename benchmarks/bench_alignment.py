@@ -6,14 +6,13 @@ frame lag (docs/diagnose.md, "Integrated parameters"), so alignment is most of t
 beyond the simulation. Printed:
 
 1. ms per alignment score vector, for the library's FFT form (``vfcore.observe._profile_scores``)
-   and for the form it replaced in stop 31 (one ``np.correlate`` per sub-frame residue, kept here
-   as the baseline), at the benchmark suite's window (400 frames, 200 lags, 10 fine steps a
+   and for one ``np.correlate`` per sub-frame residue (the baseline, kept here), at the benchmark suite's window (400 frames, 200 lags, 10 fine steps a
    frame), with the largest difference between the two (relative to the scores);
 2. seconds per simulation spent integrating the leak's two parameters out (24 x 6 cells and
    their refinement) on a synthetic oscillating record, and the number of alignments that took;
 3. ms per zipper observation (24 delayed strips of a 6,000-sample record): the fused kernel
-   (``vfcore.diagnose._kernels.strip_sum``, stop 31) against shifting and adding each strip with
-   numpy (``vfcore.diagnose.fit._delayed``, the form before), with their largest difference.
+   (``vfcore.diagnose._kernels.strip_sum``) against shifting and adding each strip with
+   numpy (``vfcore.diagnose.fit._delayed``, the baseline), with their largest difference.
 
 Usage: python benchmarks/bench_alignment.py [--repeats 300]
 """
@@ -30,7 +29,7 @@ import numpy as np  # noqa: E402
 
 
 def correlate_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.ndarray:
-    """The stop-11 to stop-30 form: per residue r, one ``np.correlate`` of ``hr[r::q]`` with the
+    """The baseline: per residue r, one ``np.correlate`` of ``hr[r::q]`` with the
     template and a running sum of its squares (the baseline)."""
     n = tmpl.size
     cs = np.empty(j_max + 1)

@@ -10,12 +10,10 @@ GAW files while fitting; ``truth.json`` is opened afterwards, for scoring only (
 
 Defaults (docs/diagnose.md, section 5): the simulated window of the suite's public forward-model
 settings (``cases.json`` "model": 0.55 s simulated with 0.25 s discarded, the paper's and
-``SimConfig``'s default; runs before stop 13 used 0.35 / 0.15 s), 2 base SMC runs of
-40 particles (larger evidence kept), every catalogue entry refitted with 24 particles (until
-stop 13 only observation-level entries screened above 3 nats), a refit that ended far below the
-base rescued around the base's material mode (forward-level entries since stop 15, every entry and
-without the between-run error in the trigger since stop 17), naming rule with
-min_rms_gain 0.30. The particle counts are ``vfcore.diagnose.defaults``, which the CLI and the
+``SimConfig``'s default), 2 base SMC runs of 40 particles (larger evidence kept), every catalogue
+entry refitted with 24 particles, a refit that ended far below the base rescued from the base's
+material mode (every entry, without the between-run error in the trigger), the window-continuation
+search, naming rule with min_rms_gain 0.30. The particle counts are ``vfcore.diagnose.defaults``, which the CLI and the
 service default to as well.
 
 Per case it writes ``<out>/case_XX.json`` (the diagnosis report; existing reports are kept, so an
@@ -189,7 +187,7 @@ def main(argv=None) -> int:
                     help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
-                    help="phase-alignment lag range (Problem.lag_search); 'periods' is the pre-stop-25 rule")
+                    help="phase-alignment lag range (Problem.lag_search); 'periods': 1.5 periods only")
     ap.add_argument("--halving", action="store_true",
                     help="continuation search with successive halving of its starts (off by default; "
                          "docs/diagnose.md section 4)")

@@ -7,8 +7,8 @@ same simulations run directly with vfcore on the same Dask cluster.
 
 ``--status-load``: 20 toy jobs (240 simulations of 4 ms each) submitted at once from three tokens,
 then every job's status read in a loop until all are done; prints the p50 / p95 / max latency of
-the status reads against the target p95 < 250 ms (moved here from the test suite in stop 17: a
-timed assertion flaked on a loaded machine; the test keeps a load-independent bound).
+the status reads against the target p95 < 250 ms (checked here, not in the test suite: a timed
+assertion flakes on a loaded machine; the test keeps a load-independent bound).
 
 "direct" = ``vfcore.inference.importance_sample(..., map=<dask map>)`` on the same LocalCluster
 (draw, evaluate in chunks, reduce in the driver; no store, no HTTP).  "service" = POST /jobs,

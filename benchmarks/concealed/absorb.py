@@ -3,9 +3,9 @@
 The presence rule of the concealed-effect benchmark (``config.PRESENCE_SIGMA``) asks how much of
 an effect survives the best base-model fit of the clean waveform. Three searches live here:
 
-- :func:`unabsorbed_rms`, the generator's own rule (stop 10) and, with :data:`AUDIT_SEARCH`, the
-  stop-12 design audit;
-- :func:`continued_unabsorbed_rms`, window continuation (stop 21);
+- :func:`unabsorbed_rms`, the generator's own rule and, with :data:`AUDIT_SEARCH`, the design
+  audit;
+- :func:`continued_unabsorbed_rms`, window continuation;
 - :func:`audit_presence`, which re-tests a written suite with either or both.
 
 :func:`unabsorbed_rms` answers with a scrambled-Sobol design and a Nelder–Mead polish on the whole 400-frame window.
@@ -13,8 +13,8 @@ That objective is a thin ridge in f0: a draw whose f0 is 1 % off drifts a fifth 
 the ~20 compared cycles and scores like an unrelated waveform, so a design point is almost never
 near the ridge and a polish from the truth stays on the truth's side of it. The base model can
 absorb a time stretch (frame rate) or an amplitude change (scale) by moving *along* the ridge to
-another material mode, which that search does not reach (docs/diagnose.md section 5: held-out
-seed-5 cases 04, 09, 11 and 12 were fitted by the diagnosis' base model to within 2–30 % of the
+another material mode, which that search does not reach (docs/diagnose.md section 5: concealed
+cases 04, 09, 11 and 12 of seed 5 were fitted by the diagnosis' base model to within 2–30 % of the
 noise floor where the generator had measured 1.6–9.3 sigma unabsorbed).
 
 Continuation in the window length (the usual remedy for fitting oscillators by least squares,
@@ -237,7 +237,7 @@ def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list
 
 
 #: Absorption search of :func:`audit_presence`: a denser design and more polished starts than the
-#: generator's (64 points, the truth polished). Stop 12: in the seed-0 suite the diagnosis's own
+#: generator's (64 points, the truth polished). Why: in the seed-0 suite the diagnosis's own
 #: base fit of case 07 (frame rate 1.039) reached a residual of 0.650 mm^2 against sigma 0.555,
 #: i.e. an unabsorbed part of ~0.34 mm^2 = 0.61 sigma, where the generator had measured 2.08 mm^2
 #: (3.7 sigma) from the truth: the base model absorbs a time stretch in another material mode,
@@ -291,8 +291,8 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
     """Re-test the presence rule of an existing suite with a stronger absorption search and
     write ``audit.json`` beside ``truth.json``. ``method``: ``"continuation"``
     (:func:`.absorb.continued_unabsorbed_rms` with :data:`.absorb.CONTINUATION_SEARCH`),
-    ``"design"`` (stop 12; :func:`unabsorbed_rms` with :data:`AUDIT_SEARCH`) or ``"both"``
-    (default since stop 21: the continuation, then the design search wherever the continuation
+    ``"design"`` (:func:`unabsorbed_rms` with :data:`AUDIT_SEARCH`) or ``"both"``
+    (default: the continuation, then the design search wherever the continuation
     left the effect present; the smaller RMS; ``search`` then has one dict per method, and a
     key the method does not take is refused before anything is simulated). The truth and
     the generator's absorbing fit are starts too, and a result above the generator's own is

@@ -22,12 +22,12 @@ N_Y = 20
 #: the other parameters are at TABLE3. Copied here so the generator does not depend on the
 #: inference package (values: Hadwin et al. 2019, Table 2).
 TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)}
-#: Presence rule (stop 10): an effect counts as *present* in a case only when the best base-model
+#: Presence rule: an effect counts as *present* in a case only when the best base-model
 #: fit of its clean waveform (material parameters free in TRUTH_BOUNDS, any sub-frame lag; see
 #: :func:`unabsorbed_rms`) leaves an RMS of at least ``PRESENCE_SIGMA * sigma``. The factor is the
-#: smallest for which the issue's effect-size criterion can be met at all: if the base absorbs all
+#: smallest for which the benchmark's effect-size criterion (30 %) can be met at all: if the base absorbs all
 #: but ``e`` of the effect and an extension removes the rest, the residual RMS falls from
 #: ``sqrt(sigma^2 + e^2)`` to ``sigma``, a 30 % gain exactly when ``e = sigma * sqrt(1/0.7^2 - 1)``.
-#: Below it the effect is absorbed by the material parameters to within the noise (the stop-9
-#: scale and frame-rate cases: base residual 0.52-0.74 mm^2 against sigma 0.52-0.69).
+#: Below it the effect is absorbed by the material parameters to within the noise (seed-0 scale
+#: and frame-rate cases drawn without the rule: base residual 0.52-0.74 mm^2 against sigma 0.52-0.69).
 PRESENCE_SIGMA = math.sqrt(1.0 / 0.7 ** 2 - 1.0)

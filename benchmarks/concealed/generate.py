@@ -64,8 +64,8 @@ MIN_PEAK_MM2 = 2.0
 #: Phonation criterion of a usable recording: the clean waveform's robust peak-to-trough amplitude
 #: (95th minus 5th percentile) must reach this many mm^2 AND ``MIN_AMPLITUDE_SIGMA`` noise standard
 #: deviations, and the noisy recording must still show a periodic oscillation (finite
-#: autocorrelation f0, >= 2 cycles). Seed 0, old generator: case 08 (epithelium) kept a glottis
-#: open at ~8.5 mm^2 with a 0.9 mm^2 ripple, and its noisy recording (sigma 0.31) had no f0.
+#: autocorrelation f0, >= 2 cycles). Without it, seed 0's case 08 (epithelium) keeps a glottis
+#: open at ~8.5 mm^2 with a 0.9 mm^2 ripple, and its noisy recording (sigma 0.31) has no f0.
 MIN_AMPLITUDE_MM2 = 2.0
 MIN_AMPLITUDE_SIGMA = 4.0
 #: Detectability floor: an effect draw whose clean waveform differs from the control at the same
@@ -414,12 +414,12 @@ def main(argv=None) -> int:
                     help="re-test an existing suite's presence rule with a stronger absorption search "
                          "(writes SUITE/audit.json; the recordings are unchanged)")
     ap.add_argument("--audit-method", choices=("both", "continuation", "design"), default="both",
-                    help="absorption search of --audit: window continuation, the stop-12 design, or both "
+                    help="absorption search of --audit: window continuation, a dense design, or both "
                          "(default; the design only where the continuation left the effect present)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes (same cases for any number)")
     ap.add_argument("--no-presence", action="store_true",
-                    help="skip the presence rule (stop-9 suites: effects may be absorbed by the base model)")
+                    help="skip the presence rule (effects may then be absorbed by the base model)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     if a.audit:

@@ -133,10 +133,10 @@ def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre
     ``t_R = tR0 + (t - tL0 - lag/f0_L) f0_L/f0_R``, so one left period ``1/f0_L`` spans one right
     period ``1/f0_R``; width ``max(W_L/2 + W_R(t_R)/2, 0)``.
 
-    (Stops 7-9 had the ratio inverted, ``f0_R/f0_L``: the right fold then ran at ``f0_R^2/f0_L``,
-    a two-frequency beating waveform rather than an entrained pair; found in stop 10 when the
-    fitted two-fold model could not approach the generated asymmetry cases even at the true
-    right fold. ``test_asymmetry_is_entrained`` checks the combined f0.)"""
+    (With the ratio inverted, ``f0_R/f0_L``, the right fold would run at ``f0_R^2/f0_L``, a
+    two-frequency beating waveform rather than an entrained pair, which the fitted two-fold model
+    cannot approach even at the true right fold. ``test_asymmetry_is_entrained`` checks the
+    combined f0.)"""
     L = left.config.length_mm
     t_hr = hr_times(left)
     wl = sample_hr(np.asarray(left.gaw_hr) / L, t_hr, t_eval)
@@ -154,7 +154,7 @@ def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre
 
 # ------------------------------------------------------------------ forward-model extensions
 def forward_extensions_available() -> dict[str, bool]:
-    """Whether this vfcore's SimConfig has the epithelium / subglottal fields (issue 5 forward work)."""
+    """Whether this vfcore's SimConfig has the epithelium / subglottal fields (the forward-model extensions)."""
     names = {f.name for f in dataclasses.fields(SimConfig)}
     return {"epithelium": {"epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile"} <= names,
             "subglottal": "subglottal_modes" in names}
