@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from .config import SimConfig
-from .forward import BLOWUP, CLOSED_TOL, _params, _result, contact_law, flow_coefficient, midline, setup
+from .forward import BLOWUP, CLOSED_TOL, _params, _result, contact_law, flow_coefficient, midline, setup, stop_settings
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .solver import _kernels as kern
@@ -89,16 +89,18 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     tv = np.zeros((B, n_traj, n))
     status = np.zeros(B, dtype=np.int64)
     proj = np.zeros((B, n_steps, m))
+    stop = np.zeros(B, dtype=np.int64)
     integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, system.Lp, system.Lj,
                    Lx, G, system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, sep,
                    x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-                   status, sub_coef, flow_coefficient(config), p_in, proj, config.contact == "layer", kc, cc)
+                   status, sub_coef, flow_coefficient(config), p_in, proj, config.contact == "layer", kc, cc,
+                   *stop_settings(config), stop)
     t_each = (time.perf_counter() - t_wall) / B
     out = []
     for b, p in enumerate(ps):
         t0 = time.perf_counter() - t_each   # wall_time: this sample's share of the block
         out.append(_result(p, configs[b], system, int(status[b]), width[b], gsep[b], lam[b], traj_every, tu[b], t0,
-                           p_in[b] if configs[b].has_subglottal else None, proj[b]))
+                           p_in[b] if configs[b].has_subglottal else None, proj[b], int(stop[b])))
     return out
 
 

@@ -22,6 +22,20 @@ RHO_AIR = 1.14          # kg/m^3 (issue / paper)
 CLOSED_TOL = 1e-9       # m: a surface node within 1 nm of the midline closes the glottis
 MIN_CYCLE_AMPLITUDE = 0.05  # mm^2
 BLOWUP = 1e-2           # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
+# Settled-response stop (SimConfig.early_stop; docs/model.md, "Stopping settled simulations"): windows of
+# 50 ms (longer than any period the model produces), quiet when the width moved by at most 10 nm
+# (1.7e-4 mm^2 of area) and no node moved faster than 1 mm/s (a phonating fold: ~0.1-0.5 m/s), nor faster
+# than in the window before.
+STOP_WINDOW_S = 0.05
+STOP_WIDTH = 1e-8       # m
+STOP_VEL = 1e-3         # m/s
+
+
+def stop_settings(config: SimConfig) -> tuple[int, float, float]:
+    """(stop_window steps, stop_width m, stop_vel m/s) for the kernels; window 0 = off."""
+    if not config.early_stop:
+        return 0, 0.0, 0.0
+    return max(1, int(round(STOP_WINDOW_S / config.dt))), STOP_WIDTH, STOP_VEL
 
 
 def _params(params) -> Params:
@@ -204,6 +218,7 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     tv = np.zeros((n_traj, system.n))
     am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
     proj = np.zeros((n_steps, m))
+    stop = np.zeros(1, dtype=np.int64)
     # no resonator rows: exactly kern.integrate (the inlet pressure stays p_sub)
     p_in = np.full(n_steps, si["p_sub"]) if config.has_subglottal else np.zeros(0)
     status = kern.integrate_coupled(
@@ -212,19 +227,20 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
         u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
         config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
         kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj,
-        config.contact == "layer", *contact_law(p, config, system))
+        config.contact == "layer", *contact_law(p, config, system), *stop_settings(config), stop)
     return _result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,
-                   p_in if config.has_subglottal else None, proj)
+                   p_in if config.has_subglottal else None, proj, int(stop[0]))
 
 
 def _result(p: Params, config: SimConfig, system: System, status: int, width: np.ndarray, gsep: np.ndarray,
             lam: np.ndarray, traj_every: int, tu: np.ndarray, t_wall: float,
-            p_in: np.ndarray | None = None, proj: np.ndarray | None = None) -> SimResult:
+            p_in: np.ndarray | None = None, proj: np.ndarray | None = None, stop_step: int = 0) -> SimResult:
     """SimResult from the per-step arrays of one integration (status 0 = ok, else failing step).
 
     ``p_in`` (n_steps,): glottal inlet pressure after each step (subglottal coupling), or None
     (then it is ``p_sub`` throughout and ``SimResult.p_in`` stays empty). ``proj`` (n_steps, m): the
     projection impulses of the kernel (N s/m), or None (then the contact impulse is the multipliers' alone).
+    ``stop_step``: the step at which a settled response stopped (0 = ran to the end).
     """
     si = p.si()
     h = config.dt
@@ -269,7 +285,7 @@ def _result(p: Params, config: SimConfig, system: System, status: int, width: np
     return SimResult(ok=True, message="ok", params=p, config=config, fps=config.fps, t=tc, gaw=gaw, width=wd,
                      flow=q, contact_pressure=cp, contact_force=cf, surface_z=system.sZ * 1e3, cycles=cyc,
                      trajectories=traj, wall_time=time.perf_counter() - t_wall, gaw_hr=gaw_hr,
-                     p_in=p_in_cam)
+                     p_in=p_in_cam, settled_at=stop_step * h)
 
 
 def _simulate_rows(args):

@@ -89,6 +89,8 @@ class SimResult:
         (:func:`vfcore.observe.align`).
     p_in : (n,) glottal inlet pressure, Pa, p_sub minus the subglottal resonator pressures, when
         ``SimConfig.subglottal_modes`` is set; empty otherwise (the inlet pressure is then p_sub).
+    settled_at : s from the start, the time at which a settled response stopped the simulation
+        (``SimConfig.early_stop``; every later step repeats the last state); 0 = it ran to the end.
     """
 
     ok: bool
@@ -108,6 +110,7 @@ class SimResult:
     wall_time: float = 0.0
     gaw_hr: np.ndarray = field(default_factory=lambda: np.empty(0))
     p_in: np.ndarray = field(default_factory=lambda: np.empty(0))
+    settled_at: float = 0.0
 
     @property
     def f0(self) -> float:

@@ -19,9 +19,10 @@ from ._kernels import contact_correct_ws, contact_layer_ws, projection_impulse, 
 
 
 @njit(cache=True)
-def chol_solve_many(Lp, Lj, Lx, r) -> None:
-    """Solve (L_b L_b^T) x_b = r[:, b] in place for every sample b (Lx (nnz_L, B))."""
-    n, B = r.shape
+def chol_solve_many(Lp, Lj, Lx, r, nb=-1) -> None:
+    """Solve (L_b L_b^T) x_b = r[:, b] in place for the first ``nb`` samples b (all when nb < 0; Lx (nnz_L, B))."""
+    n = r.shape[0]
+    B = r.shape[1] if nb < 0 else nb
     for i in range(n):
         end = Lp[i + 1] - 1
         for q in range(Lp[i], end):
@@ -41,10 +42,16 @@ def chol_solve_many(Lp, Lj, Lx, r) -> None:
 
 
 @njit(cache=True)
+def _move_column(x, src, dst) -> None:
+    for i in range(x.shape[0]):
+        x[i, dst] = x[i, src]
+
+
+@njit(cache=True)
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                    sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                    width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out,
-                   proj_out, layer, kc, cc):
+                   proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out):
     """Batched :func:`_kernels.integrate_coupled`.
 
     kval, mval, dval : (nnz, B); Lx : (nnz_L, B); G : (B, n, m); u, v, a : (n, B);
@@ -54,10 +61,17 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     exactly 0 Pa); p_in_out : (B, n_steps) inlet pressure (written only when n_modes > 0).
     status : (B,) int64, in/out: a sample entering with status != 0 is skipped; one whose
     state becomes non-finite or exceeds ``blowup`` at step k gets status k (-k when its contact
-    active set did not settle, as in ``integrate``) and is frozen (its state zeroed) while the
-    others continue. proj_out : (B, n_steps, m), the projection impulses of ``integrate_coupled``
+    active set did not settle, as in ``integrate``) and leaves the block while the others continue.
+    proj_out : (B, n_steps, m), the projection impulses of ``integrate_coupled``
     (:func:`_kernels.projection_impulse` on the sample's column of mval). layer, kc (B, m), cc (B, m):
     the contact law of ``integrate_coupled`` (compliant layer per sample; ignored when ``layer`` is False).
+    stop_window, stop_width, stop_vel, stop_out (B,): the settled-response stop of ``integrate_coupled``,
+    per sample (stop_out[b] = the step it stopped at, 0 = ran to the end).
+
+    A sample that fails or stops leaves the block: the columns of the last active sample move into its
+    slot (``kval``, ``mval``, ``dval``, ``Lx``, ``u``, ``v``, ``a`` are permuted in place and hold no
+    meaning afterwards), so the vectorised loops run over the active samples only. Each sample's
+    arithmetic is unchanged by the moves (the loops over samples are independent).
     """
     n, B = u.shape
     m = sdx.size
@@ -81,7 +95,6 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     pres = np.empty(m)
     lam = np.zeros((B, m))
     active = np.zeros((B, m), dtype=np.bool_)
-    live = np.zeros(B, dtype=np.bool_)
     unsettled = np.zeros(B, dtype=np.bool_)
     umax = np.zeros(B)
     sub_p1 = np.zeros((B, nmod))
@@ -89,106 +102,116 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
     q1 = np.zeros(B)
     q2 = np.zeros(B)
     p_in = p_sub.copy()
+    # settled-response detection, per sample (see _kernels.integrate_coupled)
+    win_v = np.zeros(B)
+    win_hi = np.full(B, -np.inf)
+    win_lo = np.full(B, np.inf)
+    prev_v = np.full(B, np.inf)
+    prev_quiet = np.zeros(B, dtype=np.bool_)
+    vmax = np.zeros(B)
+    leave = np.zeros(B, dtype=np.bool_)
+    ntr_of = np.zeros(B, dtype=np.int64)
+    # slot s holds sample orig[s]; slots 0 .. nb - 1 are active
+    orig = np.empty(B, dtype=np.int64)
+    nb = 0
     for b in range(B):
-        live[b] = status[b] == 0
-        if not live[b]:
-            for i in range(n):
-                u[i, b] = 0.0
-                v[i, b] = 0.0
-                a[i, b] = 0.0
+        if status[b] == 0:
+            orig[nb] = b
+            if nb != b:
+                _move_column(kval, b, nb)
+                _move_column(mval, b, nb)
+                _move_column(dval, b, nb)
+                _move_column(Lx, b, nb)
+                _move_column(u, b, nb)
+                _move_column(v, b, nb)
+                _move_column(a, b, nb)
+            nb += 1
     ntr = 0
     for k in range(1, n_steps + 1):
+        if nb == 0:
+            break
         # flow loads, per sample
-        for b in range(B):
-            if not live[b]:
-                continue
+        for s in range(nb):
+            b = orig[s]
             xm = x_mid[b]
             for j in range(m):
                 if sdx[j] >= 0:
-                    xs[j] = sX[j] + u[sdx[j], b]
-                    zs[j] = sZ[j] + u[sdz[j], b]
+                    xs[j] = sX[j] + u[sdx[j], s]
+                    zs[j] = sZ[j] + u[sdz[j], s]
                 else:
                     xs[j] = sX[j]
                     zs[j] = sZ[j]
                 g = xm - xs[j]
                 gap[j] = g if g > 0.0 else 0.0
-            surface_loads(xs, zs, sX, sZ, gap, p_in[b], p_sup, sep_ratio[b], closed_tol, g_reg, fx[b], fz[b],
+            surface_loads(xs, zs, sX, sZ, gap, p_in[b], p_sup, sep_ratio[b], closed_tol, g_reg, fx[s], fz[s],
                           pres)
         for i in range(n):
-            for b in range(B):
-                y1[i, b] = m_v * v[i, b] + m_a * a[i, b]
-                y2[i, b] = d_v * v[i, b] + d_a * a[i, b]
+            for s in range(nb):
+                y1[i, s] = m_v * v[i, s] + m_a * a[i, s]
+                y2[i, s] = d_v * v[i, s] + d_a * a[i, s]
         for i in range(n):
-            for b in range(B):
-                r[i, b] = 0.0
+            for s in range(nb):
+                r[i, s] = 0.0
             for p in range(indptr[i], indptr[i + 1]):
                 j = indices[p]
-                for b in range(B):
-                    r[i, b] += mval[p, b] * y1[j, b] + dval[p, b] * y2[j, b] - kval[p, b] * u[j, b]
-        for b in range(B):
-            if not live[b]:
-                continue
+                for s in range(nb):
+                    r[i, s] += mval[p, s] * y1[j, s] + dval[p, s] * y2[j, s] - kval[p, s] * u[j, s]
+        for s in range(nb):
             for j in range(m):
                 if sdx[j] >= 0:
-                    r[sdx[j], b] += fx[b, j]
-                    r[sdz[j], b] += fz[b, j]
-        chol_solve_many(Lp, Lj, Lx, r)
+                    r[sdx[j], s] += fx[s, j]
+                    r[sdz[j], s] += fz[s, j]
+        chol_solve_many(Lp, Lj, Lx, r, nb)
         for i in range(n):
-            for b in range(B):
-                r[i, b] += u[i, b]          # r is now u_{n+1} before contact
-        for b in range(B):
-            if not live[b]:
-                continue
+            for s in range(nb):
+                r[i, s] += u[i, s]          # r is now u_{n+1} before contact
+        for s in range(nb):
+            b = orig[s]
             # in place on the sample's (strided) column; returns at once when nothing penetrates
             if layer:
-                settled = contact_layer_ws(r[:, b], u[:, b], h, wl, sdx, sX, x_mid[b], G[b], kc[b], cc[b], lam[b],
-                                           active[b], 50, ws_u0, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb)
+                settled = contact_layer_ws(r[:, s], u[:, s], h, wl, sdx, sX, x_mid[b], G[b], kc[b], cc[b], lam[s],
+                                           active[s], 50, ws_u0, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb)
             else:
-                settled = contact_correct_ws(r[:, b], sdx, sX, x_mid[b], G[b], lam[b], active[b], 50, ws_u0, ws_S,
+                settled = contact_correct_ws(r[:, s], sdx, sX, x_mid[b], G[b], lam[s], active[s], 50, ws_u0, ws_S,
                                              ws_rhs, ws_idx)
-            if settled < 0:
-                unsettled[b] = True     # contact did not settle: fails with status -k below
-        for b in range(B):
-            umax[b] = 0.0
+            unsettled[s] = settled < 0      # contact did not settle: fails with status -k below
+        for s in range(nb):
+            umax[s] = 0.0
+            vmax[s] = 0.0
         for i in range(n):
-            for b in range(B):
-                du = r[i, b] - u[i, b]
-                an = c0 * du - c2 * v[i, b] - c3 * a[i, b]
-                v[i, b] = v[i, b] + h * ((1.0 - gamma) * a[i, b] + gamma * an)
-                a[i, b] = an
-                u[i, b] = r[i, b]
+            for s in range(nb):
+                du = r[i, s] - u[i, s]
+                an = c0 * du - c2 * v[i, s] - c3 * a[i, s]
+                v[i, s] = v[i, s] + h * ((1.0 - gamma) * a[i, s] + gamma * an)
+                a[i, s] = an
+                u[i, s] = r[i, s]
                 # NaN-propagating running max of |u| (a NaN makes the test below fail)
-                au = abs(r[i, b])
-                umax[b] = au if not (au <= umax[b]) else umax[b]
-        for b in range(B):
-            if not live[b]:
-                continue
-            bad = not (umax[b] < blowup)
-            if unsettled[b] or bad:
-                status[b] = -k if unsettled[b] else k
-                live[b] = False
-                for i in range(n):
-                    u[i, b] = 0.0
-                    v[i, b] = 0.0
-                    a[i, b] = 0.0
-                for j in range(m):
-                    fx[b, j] = 0.0
-                    fz[b, j] = 0.0
+                au = abs(r[i, s])
+                umax[s] = au if not (au <= umax[s]) else umax[s]
+        n_leave = 0
+        for s in range(nb):
+            b = orig[s]
+            leave[s] = False
+            bad = not (umax[s] < blowup)
+            if unsettled[s] or bad:
+                status[b] = -k if unsettled[s] else k
+                leave[s] = True
+                n_leave += 1
                 continue
             xm = x_mid[b]
             for j in range(m):
-                if active[b, j] and not layer:
+                if active[s, j] and not layer:
                     d = sdx[j]
-                    proj_out[b, k - 1, j] = projection_impulse(indptr, mval[:, b], d, v[d, b], a[d, b], h, gamma)
-                    v[sdx[j], b] = 0.0
-                    a[sdx[j], b] = 0.0
+                    proj_out[b, k - 1, j] = projection_impulse(indptr, mval[:, s], d, v[d, s], a[d, s], h, gamma)
+                    v[sdx[j], s] = 0.0
+                    a[sdx[j], s] = 0.0
             gmin = 1e300
             for j in range(m):
-                xj = sX[j] + (u[sdx[j], b] if sdx[j] >= 0 else 0.0)
+                xj = sX[j] + (u[sdx[j], s] if sdx[j] >= 0 else 0.0)
                 g = xm - xj
                 if g < gmin:
                     gmin = g
-                lam_out[b, k - 1, j] = -lam[b, j] * lam_scale
+                lam_out[b, k - 1, j] = -lam[s, j] * lam_scale
             width[b, k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
             gsep_out[b, k - 1] = sep_ratio[b] * gmin if gmin > closed_tol else 0.0
             if nmod > 0:
@@ -199,10 +222,72 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
                 q1[b] = q
                 p_in_out[b, k - 1] = p_in[b]
         if traj_every > 0 and k % traj_every == 0 and ntr < traj_u.shape[1]:
-            for b in range(B):
-                if live[b]:
+            for s in range(nb):
+                if not leave[s]:
+                    b = orig[s]
                     for i in range(n):
-                        traj_u[b, ntr, i] = u[i, b]
-                        traj_v[b, ntr, i] = v[i, b]
+                        traj_u[b, ntr, i] = u[i, s]
+                        traj_v[b, ntr, i] = v[i, s]
+                    ntr_of[b] = ntr + 1
             ntr += 1
+        if stop_window > 0:
+            for i in range(n):
+                for s in range(nb):
+                    av = abs(v[i, s])
+                    vmax[s] = av if av > vmax[s] else vmax[s]
+            for s in range(nb):
+                if leave[s]:
+                    continue
+                b = orig[s]
+                if vmax[s] > win_v[b]:
+                    win_v[b] = vmax[s]
+                wk = width[b, k - 1]
+                if wk > win_hi[b]:
+                    win_hi[b] = wk
+                if wk < win_lo[b]:
+                    win_lo[b] = wk
+                if k % stop_window == 0:
+                    quiet = win_hi[b] - win_lo[b] <= stop_width and win_v[b] <= stop_vel and win_v[b] <= prev_v[b]
+                    if quiet and prev_quiet[b]:
+                        stop_out[b] = k
+                        leave[s] = True
+                        n_leave += 1
+                        for kk in range(k, n_steps):
+                            width[b, kk] = width[b, k - 1]
+                            gsep_out[b, kk] = gsep_out[b, k - 1]
+                            for j in range(m):
+                                lam_out[b, kk, j] = lam_out[b, k - 1, j]
+                                proj_out[b, kk, j] = proj_out[b, k - 1, j]
+                            if nmod > 0:
+                                p_in_out[b, kk] = p_in_out[b, k - 1]
+                        if traj_every > 0:
+                            for t in range(ntr_of[b], traj_u.shape[1]):
+                                for i in range(n):
+                                    traj_u[b, t, i] = u[i, s]
+                                    traj_v[b, t, i] = v[i, s]
+                        continue
+                    prev_quiet[b] = quiet
+                    prev_v[b] = win_v[b]
+                    win_v[b] = 0.0
+                    win_hi[b] = -np.inf
+                    win_lo[b] = np.inf
+        if n_leave > 0:
+            # compact: the last active slots move into the leaving ones (slot order is irrelevant)
+            s = 0
+            while s < nb:
+                if leave[s]:
+                    last = nb - 1
+                    if last != s:
+                        _move_column(kval, last, s)
+                        _move_column(mval, last, s)
+                        _move_column(dval, last, s)
+                        _move_column(Lx, last, s)
+                        _move_column(u, last, s)
+                        _move_column(v, last, s)
+                        _move_column(a, last, s)
+                        orig[s] = orig[last]
+                        leave[s] = leave[last]
+                    nb -= 1
+                else:
+                    s += 1
     return 0

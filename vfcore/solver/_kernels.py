@@ -431,14 +431,14 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
                              sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                              width, gsep_out, lam_out, traj_every, traj_u, traj_v,
                              np.zeros((0, 3)), 0.0, np.zeros(0), np.zeros((0, sdx.size)),
-                             False, np.zeros(sdx.size), np.zeros(sdx.size))
+                             False, np.zeros(sdx.size), np.zeros(sdx.size), 0, 0.0, 0.0, np.zeros(1, dtype=np.int64))
 
 
 @njit(cache=True)
 def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
                       u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                       width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
-                      proj_out, layer, kc, cc):
+                      proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
 
     Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
@@ -463,6 +463,13 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     ``layer`` False: the paper's rigid midline (exact multipliers, then the inelastic projection);
     True: the compliant contact layer of :func:`contact_layer_ws` with per-node spring ``kc`` (m,), N/m^2,
     and dashpot ``cc`` (m,), N s/m^2; no projection (``proj_out`` stays zero). docs/model.md, "Contact".
+
+    Settled-response stop (``stop_window`` steps, 0 = off): the steps are cut into windows of
+    ``stop_window``; a window is quiet when the glottal width varied by at most ``stop_width`` (m) over it,
+    the largest nodal speed in it is at most ``stop_vel`` (m/s) and no larger than in the window before.
+    After two quiet windows in a row the response has settled: the run stops, every per-step output of
+    the remaining steps repeats the last step's (trajectories the last state), and ``stop_out[0]`` gets
+    the step (0 = ran to the end). docs/model.md, "Stopping settled simulations".
     """
     n = u.size
     m = sdx.size
@@ -492,6 +499,11 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     q1 = 0.0
     q2 = 0.0
     p_in = p_sub
+    win_v = 0.0
+    win_hi = -np.inf
+    win_lo = np.inf
+    prev_v = np.inf
+    prev_quiet = False
     for k in range(1, n_steps + 1):
         for j in range(m):
             if sdx[j] >= 0:
@@ -566,4 +578,38 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
             traj_u[ntr, :] = u
             traj_v[ntr, :] = v
             ntr += 1
+        if stop_window > 0:
+            vm = 0.0
+            for i in range(n):
+                av = abs(v[i])
+                vm = av if av > vm else vm
+            if vm > win_v:
+                win_v = vm
+            wk = width[k - 1]
+            if wk > win_hi:
+                win_hi = wk
+            if wk < win_lo:
+                win_lo = wk
+            if k % stop_window == 0:
+                quiet = win_hi - win_lo <= stop_width and win_v <= stop_vel and win_v <= prev_v
+                if quiet and prev_quiet:
+                    stop_out[0] = k
+                    for kk in range(k, n_steps):
+                        width[kk] = width[k - 1]
+                        gsep_out[kk] = gsep_out[k - 1]
+                        lam_out[kk, :] = lam_out[k - 1, :]
+                        if rec:
+                            proj_out[kk, :] = proj_out[k - 1, :]
+                        if nmod > 0:
+                            p_in_out[kk] = p_in_out[k - 1]
+                    if traj_every > 0:
+                        for t in range(ntr, traj_u.shape[0]):
+                            traj_u[t, :] = u
+                            traj_v[t, :] = v
+                    return 0
+                prev_quiet = quiet
+                prev_v = win_v
+                win_v = 0.0
+                win_hi = -np.inf
+                win_lo = np.inf
     return 0
