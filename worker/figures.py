@@ -128,7 +128,11 @@ def fig_corner(post, bands=None, truth: dict | None = None) -> bytes:
         ax.set_xlabel(_label(names[0]))
         return _png(fig)
     fig, axes = plt.subplots(d, d, figsize=(size, size), squeeze=False)
-    axes = az.plot_pair(data, var_names=names, kind=["scatter", "kde"], marginals=True, point_estimate="mean",
+    # a degenerate ensemble (a few distinct draws, or a parameter without spread) has no density to
+    # smooth: scatter and histograms only
+    smooth = np.unique(x, axis=0).shape[0] >= 5 and bool(np.all(np.ptp(x, axis=0) > 0))
+    axes = az.plot_pair(data, var_names=names, kind=["scatter", "kde"] if smooth else "scatter", marginals=True,
+                        point_estimate="mean", marginal_kwargs=None if smooth else {"kind": "hist"},
                         ax=axes, reference_values=truth if truth and set(truth) >= set(names) else None, textsize=9,
                         scatter_kwargs={"color": "0.55", "alpha": 0.35, "s": 5},
                         kde_kwargs={"fill_last": False, "contour_kwargs": {"colors": "C0", "linewidths": 1},
