@@ -32,7 +32,7 @@ class SimConfig:
         between open-glottis Bernoulli and closed-glottis pressures; default 0.02). Below this minimum half
         gap the two distributions are blended smoothly; see docs/model.md.
 
-    Model extensions (off by default; docs/model.md, "Model extensions (issue 5)"):
+    Model extensions (off by default; docs/model.md, "Model extensions"):
 
     epithelium_E_kpa : Young's modulus of a thin epithelium membrane along the free surface, kPa
         (0 = off). Each free-surface edge of reference length l_e becomes a 2-node bar of axial
@@ -78,7 +78,7 @@ class SimConfig:
     element: str = "p1"
     contact: str = "projection"
     contact_layer_mm: float = 0.1
-    early_stop: bool = False
+    early_stop: bool = True
 
     def __post_init__(self) -> None:
         if self.mesh not in MESHES:
