@@ -164,3 +164,45 @@ def test_all_failed_raises(prior2):
         importance_sample(lambda th: np.full(th.shape[0], -np.inf), prior2, n=50, seed=0)
     with pytest.raises(RuntimeError, match="every initial"):
         smc(lambda th: np.full(th.shape[0], -np.inf), prior2, n_particles=20, seed=0)
+
+
+def test_delayed_acceptance_keeps_the_exact_posterior(prior3):
+    """Two-stage moves screened by a cheap, deliberately wrong log-likelihood (flattened and tilted):
+    the posterior moments are still the exact ones (the second stage corrects the first), and the
+    screen saves full evaluations."""
+    from vfcore.inference.importance import batch_function
+    from vfcore.inference.problem import Evaluation
+    toy = LinearGaussianToy(prior3, n_obs=6, noise=0.05, seed=0)
+    full = batch_function(toy)
+    tilt = np.array([0.3, 0.002, 0.4]) / np.asarray(prior3.width)
+
+    def cheap(th):
+        th = np.atleast_2d(th)
+        return 0.6 * Evaluation.coerce(full(th)).loglik + th @ tilt
+
+    R = 8
+    means, variances, sims, screened = [], [], [], []
+    for s in range(R):
+        post = smc(toy, prior3, n_particles=300, seed=200 + s, screen=cheap)
+        means.append(post.mean)
+        variances.append(post.sd ** 2)
+        sims.append(post.n_simulations)
+        screened.append(post.info["n_screened"])
+        assert post.info["delayed_acceptance"] and post.info["n_screen_rejected"] > 0
+    means, variances = np.asarray(means), np.asarray(variances)
+    t = stats.t.ppf(1 - 1e-4, R - 1)
+    for arr, exact in ((means, toy.mean), (variances, np.diag(toy.cov))):
+        se = arr.std(axis=0, ddof=1) / math.sqrt(R)
+        assert np.all(np.abs(arr.mean(axis=0) - exact) < t * se + 2e-3 * np.abs(exact)), (arr.mean(0), exact, se)
+    plain = [smc(toy, prior3, n_particles=300, seed=200 + s).n_simulations for s in range(2)]
+    assert np.mean(sims) < 0.8 * np.mean(plain), (sims, plain)
+    assert np.all(np.asarray(screened) > np.asarray(sims))
+
+
+def test_delayed_acceptance_is_deterministic_and_validated(prior3):
+    toy = LinearGaussianToy(prior3, n_obs=6, noise=0.05, seed=0)
+    a = smc(toy, prior3, n_particles=60, seed=5, screen=toy)
+    b = smc(toy, prior3, n_particles=60, seed=5, screen=toy)
+    assert np.array_equal(a.samples, b.samples) and a.n_simulations == b.n_simulations
+    with pytest.raises(ValueError, match="delayed acceptance"):
+        SMCSampler(prior3, 60, delayed=True, kernel="independent")

@@ -25,6 +25,15 @@ reweighting uses ``log p + log L - log q`` in place of ``log L`` and the Metropo
 ``(1 - phi) (log q' - log q)``; ``log Z`` is still the evidence ``∫ p L`` (``q`` is normalised).
 A ``q`` near the posterior starts the sampler in its mode instead of making it find the mode.
 
+With ``delayed=True`` each Metropolis move is a two-stage delayed-acceptance move (Christen & Fox 2005):
+a proposal is first screened with a cheap log-likelihood ``l~`` (``SMCSampler.stage == "screen"``; a
+coarser mesh, a larger step), accepted there with probability ``min(1, exp(phi (l~' - l~)))``, and only
+the survivors are simulated with the full model and accepted with
+``min(1, exp(phi ((l' - l) - (l~' - l~))))``. The product of the two stages satisfies detailed balance for
+``pi_phi`` exactly, so the sampler's target, its reweighting and its evidence are the full model's; the
+cheap model only decides which proposals are worth a full simulation (a proposal the cheap model rejects
+costs a cheap simulation instead of a full one). The initial population is evaluated with both.
+
 The sampler is an ask/tell state machine (``SMCSampler.ask() -> thetas or None``,
 ``SMCSampler.tell(evaluation)``) so a distributed worker evaluates each batch itself; all
 randomness comes from ``SeedSequence(seed, spawn_key=(generation, step, stream))``, so the run
@@ -79,7 +88,8 @@ class SMCSampler:
                  ess_fraction: float = 0.5, target_acceptance: float = 0.3, p_move: float = 0.8,
                  min_moves: int = 2, max_moves: int = 4,
                  max_generations: int = 200, init_scale: float | None = None, kernel: str = "rw",
-                 independent_inflation: float = 1.5, init_factor: int = 1, reference=None):
+                 independent_inflation: float = 1.5, init_factor: int = 1, reference=None,
+                 delayed: bool = False):
         if not isinstance(prior, Prior):
             raise ValueError("prior must be a Prior")
         if int(n_particles) < 10:
@@ -98,6 +108,9 @@ class SMCSampler:
         if reference is not None and getattr(reference, "prior", prior).ndim != prior.ndim:
             raise ValueError("the reference's prior has another number of dimensions than the sampler's")
         self.reference = reference
+        self.delayed = bool(delayed)
+        if self.delayed and (reference is not None or kernel != "rw"):
+            raise ValueError("delayed acceptance is implemented for the random-walk kernel without a reference")
         if kernel not in ("rw", "independent", "mixture"):
             raise ValueError(f"kernel must be 'rw', 'independent' or 'mixture', got {kernel!r}")
         self.kernel = kernel
@@ -133,6 +146,14 @@ class SMCSampler:
         self._n_moves = self.max_moves
         self._gen_acc: list[float] = []
         self._gen_sims = 0
+        # delayed acceptance: cheap log-likelihoods of the particles, the screening stage's state
+        self.stage = "screen" if self.delayed else "full"
+        self.ll_cheap: np.ndarray | None = None
+        self._cheap_pending: np.ndarray | None = None
+        self._screen_idx: np.ndarray | None = None
+        self._screen_props: np.ndarray | None = None
+        self.n_screened = 0
+        self.n_screen_rejected = 0
 
     # ------------------------------------------------------------------ randomness
     def _rng(self, stream: int, step: int = 0) -> np.random.Generator:
@@ -164,6 +185,8 @@ class SMCSampler:
                     if self._phase == "done":
                         return None
                     self._propose()
+                if self.delayed:
+                    self.stage = "screen"
         return self._pending
 
     def tell(self, evaluation) -> None:
@@ -173,16 +196,25 @@ class SMCSampler:
         ev = Evaluation.coerce(evaluation)
         if len(ev) != self._pending.shape[0]:
             raise ValueError(f"expected {self._pending.shape[0]} evaluations, got {len(ev)}")
+        if self.stage == "screen":
+            self._tell_screen(np.asarray(ev.loglik, dtype=float))
+            return
         self.n_simulations += len(ev)
         self._gen_sims += len(ev)
         self.n_failed += ev.n_failed
         if self._phase == "init":
             self.theta = self._pending
             self.ev = ev
+            if self.delayed:
+                self.ll_cheap = self._cheap_pending
+                self.stage = "screen"
             self._pending = self._pending_idx = None
             if not np.any(np.isfinite(ev.loglik)):
                 raise RuntimeError("every initial simulation failed or had zero likelihood")
             self._advance()
+            return
+        if self.delayed:
+            self._tell_full_delayed(ev)
             return
         # Metropolis accept/reject; uniform prior => ratio is the tempered likelihood ratio
         idx = self._pending_idx
@@ -206,6 +238,58 @@ class SMCSampler:
         self.theta = th
         self.ev = self.ev.scatter(idx[acc], ev.take(np.flatnonzero(acc)))
         self._pending = self._pending_idx = None
+        self._finish_move(accepted)
+
+    # ------------------------------------------------------------------ delayed acceptance
+    def _tell_screen(self, ll_cheap: np.ndarray) -> None:
+        """Stage 1: the cheap log-likelihoods of the pending batch (the initial population, or proposals)."""
+        self.n_screened += ll_cheap.size
+        if self._phase == "init":
+            # the initial population's cheap values; the same draws then go to the full model
+            self._cheap_pending = ll_cheap
+            self.stage = "full"
+            return
+        idx, props = self._pending_idx, self._pending
+        with np.errstate(invalid="ignore"):
+            log_a1 = np.where(np.isfinite(ll_cheap), self.phi * (ll_cheap - self.ll_cheap[idx]), -np.inf)
+        log_a1 = np.where(np.isnan(log_a1), np.inf, log_a1)       # current cheap -inf, proposal finite
+        u = self._rng(_ACCEPT, 2 * self._step + 1).random(idx.size)
+        keep = np.log(u) < log_a1
+        self.n_screen_rejected += int(idx.size - keep.sum())
+        self._screen_idx = idx[keep]
+        self._screen_props = props[keep]
+        self._screen_cheap = ll_cheap[keep]
+        if not np.any(keep):
+            self._pending = self._pending_idx = None
+            self.stage = "screen"
+            self._finish_move(np.zeros(self.n, bool))
+            return
+        self._pending = props[keep]
+        self._pending_idx = idx[keep]
+        self.stage = "full"
+
+    def _tell_full_delayed(self, ev) -> None:
+        """Stage 2: the full model decides with the ratio corrected by the cheap one (exact target)."""
+        idx, props, lc_new = self._pending_idx, self._pending, self._screen_cheap
+        ll_old = self.ev.loglik[idx]
+        ll_new = ev.loglik
+        with np.errstate(invalid="ignore"):
+            log_a2 = np.where(np.isfinite(ll_new),
+                              self.phi * ((ll_new - ll_old) - (lc_new - self.ll_cheap[idx])), -np.inf)
+        log_a2 = np.where(np.isnan(log_a2), np.inf, log_a2)
+        u = self._rng(_ACCEPT, 2 * self._step + 2).random(idx.size)
+        acc = np.log(u) < log_a2
+        accepted = np.zeros(self.n, bool)
+        accepted[idx[acc]] = True
+        th = self.theta.copy()
+        th[idx[acc]] = props[acc]
+        self.theta = th
+        lc = self.ll_cheap.copy()
+        lc[idx[acc]] = lc_new[acc]
+        self.ll_cheap = lc
+        self.ev = self.ev.scatter(idx[acc], ev.take(np.flatnonzero(acc)))
+        self._pending = self._pending_idx = None
+        self.stage = "screen"
         self._finish_move(accepted)
 
     # ------------------------------------------------------------------ internals
@@ -242,6 +326,8 @@ class SMCSampler:
         idx = systematic_resample(w, self.n, self._rng(_RESAMPLE))
         self.theta = self.theta[idx]
         self.ev = self.ev.take(idx)
+        if self.delayed:
+            self.ll_cheap = self.ll_cheap[idx]
         self._mu = mu
         self.history.append({"generation": self.generation, "phi": phi_new, "ess": self.last_ess,
                              "log_evidence_increment": inc, "n_unique_after_resample": int(np.unique(idx).size)})
@@ -338,20 +424,28 @@ class SMCSampler:
         post.info.update({"generations": self.history, "n_generations": self.generation,
                           "n_particles": self.n, "temperatures": [h["phi"] for h in self.history],
                           "reference": self.reference is not None})
+        if self.delayed:
+            post.info.update({"delayed_acceptance": True, "n_screened": self.n_screened,
+                              "n_screen_rejected": self.n_screen_rejected})
         return post
 
 
 def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *, map: Callable = map,
-        chunk_size: int = 32, **options) -> Posterior:
+        chunk_size: int = 32, screen=None, **options) -> Posterior:
     """Run likelihood-tempered SMC to completion.
 
     ``target``: a ``Problem`` or a callable ``thetas (k, d) -> loglik (k,)`` (then ``prior`` is
-    required). Options go to ``SMCSampler``. Returns a Posterior with ``n_simulations`` counted
-    and ``log_evidence`` (its ``log_evidence_se`` is the delta-method error summed over
-    generations, ignoring the particle dependence: a rough lower bound).
+    required). ``screen``: a cheaper target of the same kind (e.g. the Problem on a coarser mesh or
+    step) for delayed-acceptance moves (``SMCSampler(delayed=True)``); the posterior remains the
+    full target's. Options go to ``SMCSampler``. Returns a Posterior with ``n_simulations`` counted
+    (full-model simulations; ``info["n_screened"]`` counts the cheap ones) and ``log_evidence`` (its
+    ``log_evidence_se`` is the delta-method error summed over generations, ignoring the particle
+    dependence: a rough lower bound).
     """
     prior, obs, fps, fn = resolve_target(target, prior)
-    sampler = SMCSampler(prior, n_particles, seed, **options)
+    cheap = resolve_target(screen, prior)[3] if screen is not None else None
+    sampler = SMCSampler(prior, n_particles, seed, delayed=cheap is not None, **options)
     while (th := sampler.ask()) is not None:
-        sampler.tell(map_evaluate(fn, th, map=map, chunk_size=chunk_size))
+        f = cheap if sampler.stage == "screen" else fn
+        sampler.tell(map_evaluate(f, th, map=map, chunk_size=chunk_size))
     return sampler.result(obs_gaw=obs, fps=fps)
