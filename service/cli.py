@@ -19,8 +19,8 @@ from rich.console import Console
 
 from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
 from .cli_options import (Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise, Out,
-                          Overwrite, Particles, Prior, Sampler, Seed, SigmaE, Workers, parse_fixed,
-                          parse_measurements, parse_priors)
+                          Overwrite, Particles, Prior, Sampler, Screen, Seed, SigmaE, Workers, parse_fixed,
+                          parse_measurements, parse_priors, parse_screen)
 from .cli_tables import print_identifiability, print_table  # noqa: F401  (re-exported for callers)
 
 app = typer.Typer(cls=VfinferGroup, add_completion=False, no_args_is_help=True,
@@ -76,7 +76,8 @@ def reach_gate(spec, force_reach: bool) -> None:
 def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
-               measure: list[str] | None = None, force_reach: bool = False, warnings: list[str] | None = None):
+               measure: list[str] | None = None, force_reach: bool = False, warnings: list[str] | None = None,
+               screen: str | None = None):
     """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2. Warnings about
     the input (clipped samples) are appended to ``warnings`` for the caller to print once all is checked."""
     from pydantic import ValidationError
@@ -96,7 +97,12 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     if g.fps * dt > 1.0:
         raise fail(f"--dt {dt:g} s simulates {1 / dt:.0f} steps/s, fewer than the recording's {g.fps:g} frames/s; "
                    f"use --dt <= {1 / g.fps:.3g}")
+    scr = parse_screen(screen)
+    if scr is not None and sampler != "smc":
+        raise fail("--screen needs --sampler smc (it screens the SMC moves)")
     smp = {"kind": "is", "n_samples": n} if sampler == "is" else {"kind": "smc", "n_particles": particles}
+    if scr is not None:
+        smp["screen"] = scr
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
             "priors": priors or None, "fixed": fixed, "sampler": smp, "mesh": mesh, "dt": dt,
             "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
@@ -169,13 +175,15 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
           mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25,
           sigma_e: SigmaE = 1.0, seed: Seed = 0, prior: Prior = None, fix: Fix = None, workers: Workers = 2,
           out: Out = Path("vfinfer_output"), overwrite: Overwrite = False, model: Model = "fe",
-          noise: Noise = "fixed", measure: Measure = None, force_reach: ForceReach = False) -> None:
+          noise: Noise = "fixed", measure: Measure = None, force_reach: ForceReach = False,
+          screen: Screen = None) -> None:
     """Run an inference on this machine (in-process Dask LocalCluster); write the posterior, samples, figures and
     an HTML report (OUT/index.html); print the posterior table and what the data determined. The recording is
     first checked against the model's reach ('vfinfer reach')."""
     warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings)
+                      model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
+                      screen=screen)
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
     for w in warnings:

@@ -48,6 +48,10 @@ ForceReach = Annotated[bool, typer.Option(
 Measure = Annotated[Optional[list[str]], typer.Option(
     "--measure", help="NAME=MEAN:SD (paper units), repeatable: a Gaussian measurement of an estimated parameter, "
                       "e.g. p_sub=1000:50; anchors the common scale a GAW cannot determine")]
+Screen = Annotated[Optional[str], typer.Option(
+    "--screen", metavar="MESH[:DT]", help="--sampler smc: delayed acceptance; each proposal is first scored by the "
+                                          "model on MESH with time step DT s (default 1e-4) and only the survivors "
+                                          "are simulated with the full model, e.g. coarse:1e-4")]
 Workers = Annotated[int, typer.Option(min=1, help="local worker processes")]
 Out = Annotated[Path, typer.Option("--out", "-o", help="output folder (written whole at the end, or not at all)")]
 Overwrite = Annotated[bool, typer.Option("--overwrite", help="replace an existing output folder of an earlier run")]
@@ -124,4 +128,21 @@ def parse_measurements(items: list[str] | None) -> dict[str, list[float]]:
         validate_measurements(out)
     except ValueError as exc:
         raise fail(f"--measure: {exc}") from None
+    return out
+
+
+def parse_screen(text: str | None) -> dict | None:
+    """``MESH[:DT]`` -> the job spec's ``sampler.screen`` (None when not given)."""
+    if text is None:
+        return None
+    mesh, _, dt = text.partition(":")
+    mesh = mesh.strip()
+    if mesh not in ("coarse", "medium", "fine"):
+        raise fail(f"--screen {text!r}: mesh must be coarse, medium or fine")
+    out = {"mesh": mesh}
+    if dt.strip():
+        x = _number(dt, f"--screen {text!r}")
+        if not 0 < x <= 1e-3:
+            raise fail(f"--screen {text!r}: the time step must lie in (0, 1e-3] s")
+        out["dt"] = x
     return out

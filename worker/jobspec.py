@@ -60,6 +60,13 @@ class ISSettings(_Strict):
     n_samples: int = Field(ge=1, le=MAX_SIMULATIONS, description="number of prior draws (= simulations)")
 
 
+class ScreenSettings(_Strict):
+    """The cheap model of delayed-acceptance moves: the job's model on another mesh and time step."""
+
+    mesh: Literal["coarse", "medium", "fine"] = Field(default="coarse", description="mesh of the screening model")
+    dt: FiniteFloat = Field(default=1e-4, gt=0, le=1e-3, description="time step of the screening model, s")
+
+
 class SMCSettings(_Strict):
     """Adaptive sequential Monte Carlo (tempered), run generation by generation."""
 
@@ -70,6 +77,10 @@ class SMCSettings(_Strict):
                                       description="target relative ESS per tempering step")
     min_moves: int = Field(default=2, ge=1, le=50, description="fewest Metropolis moves per generation")
     max_moves: int = Field(default=8, ge=1, le=50, description="most Metropolis moves per generation")
+    screen: ScreenSettings | None = Field(
+        default=None, description="delayed acceptance (Christen & Fox 2005): each proposal is first scored by this "
+                                  "cheaper model and only the survivors are simulated with the job's model; the "
+                                  "posterior stays the job's model's")
 
     @model_validator(mode="after")
     def _moves(self) -> "SMCSettings":

@@ -248,14 +248,22 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
     elif isinstance(spec.sampler, SMCSettings):
         from vfcore.inference.smc import SMCSampler
         s = spec.sampler
-        sampler = SMCSampler(problem.prior, s.n_particles, spec.seed, **s.sampler_options())
+        screen = None
+        if s.screen is not None:
+            # the same problem on the screening model's mesh and step (same observation and compared window)
+            import dataclasses
+            cheap = dataclasses.replace(problem, config=problem.config.replace(mesh=s.screen.mesh, dt=s.screen.dt))
+            screen = evaluator_for(spec, cheap)
+        sampler = SMCSampler(problem.prior, s.n_particles, spec.seed, delayed=screen is not None,
+                             **s.sampler_options())
         b = 0
         while (th := sampler.ask()) is not None:
             if control.cancelled.is_set():
                 raise JobCancelled()
             prog.n_total += th.shape[0]
             prog.generation = sampler.generation
-            ev = _run_batch(client, root, sp, job_id, b, th, evaluator, prog, report, control)
+            fn = screen if sampler.stage == "screen" else evaluator
+            ev = _run_batch(client, root, sp, job_id, b, th, fn, prog, report, control)
             sampler.tell(ev)
             prog.ess = float(sampler.last_ess)
             b += 1

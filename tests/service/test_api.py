@@ -101,6 +101,30 @@ def test_smc_generation_by_generation_matches_direct(service):
     assert post["method"] == "smc" and post["n_simulations"] == direct.n_simulations == st["progress"]["simulations_done"]
 
 
+def test_smc_with_delayed_acceptance_matches_direct(service):
+    """sampler.screen: the service alternates screening and full batches in the job's store exactly as
+    vfcore's smc(..., screen=...) does in one process."""
+    import dataclasses
+
+    from vfcore.inference.smc import smc
+    http = service.http
+    spec = toy_spec(seed=6, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3,
+                                     "screen": {"mesh": "coarse", "dt": 1e-4}})
+    job_id = http.post("/jobs", json=spec, headers=auth("bob")).json()["id"]
+    st = wait_done(http, job_id, "bob")
+    assert st["state"] == "done", st
+    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("bob")).json()
+    s = JobSpec.model_validate(spec)
+    pb = s.to_problem()
+    cheap = dataclasses.replace(pb, config=pb.config.replace(mesh="coarse", dt=1e-4))
+    direct = smc(ToyEvaluator(pb), pb.prior, 60, s.seed, screen=ToyEvaluator(cheap), **s.sampler.sampler_options())
+    np.testing.assert_array_equal(np.array(js["samples"]), direct.samples)
+    post = http.get(f"/jobs/{job_id}/posterior", headers=auth("bob")).json()
+    assert post["n_simulations"] == direct.n_simulations
+    # every batch, screening ones included, went through the store
+    assert st["progress"]["simulations_done"] == direct.n_simulations + direct.info["n_screened"]
+
+
 def test_cancel_frees_cluster(service):
     import time
     http = service.http

@@ -113,7 +113,10 @@ def _fit_options(cmd: str) -> list[tuple]:
             ("prior-text", ["--prior", "E_body=a:9"], "not a number"),
             ("prior-unknown", ["--prior", "colour=1:2"], "unknown parameter"),
             ("prior-and-fix", ["--prior", "x0=8:9"], "both"), ("measure", ["--measure", "p_sub=1000:0"], "measure"),
-            ("model", ["--model", "cfd"], "model")]
+            ("model", ["--model", "cfd"], "model"), ("screen-mesh", ["--screen", "huge"], "--screen"),
+            ("screen-dt", ["--screen", "coarse:abc"], "not a number"),
+            ("screen-dt-range", ["--screen", "coarse:0.01"], "time step"),
+            ("screen-with-is", ["--sampler", "is", "--screen", "coarse"], "--sampler smc")]
     cases = [(n, [*base, *a], nd) for n, a, nd in opts]
     cases += [(f"gaw-{n}", [cmd, f, *TOY], nd) for n, f, nd in GAW_FILES]
     cases += [("gaw-constant", [cmd, "{d}/constant.csv", *TOY], "gaw")]
