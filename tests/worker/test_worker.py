@@ -81,6 +81,10 @@ def test_chunk_size_is_a_function_of_the_spec():
     fe = JobSpec.model_validate({**toy_spec(n=50_000), "model": "fe", "toy": None, "mesh": "coarse"})
     assert 1 <= chunk_size_for(fe) <= 50_000 // 16
     assert chunk_size_for(JobSpec.model_validate(toy_spec(n=100, chunk_size=7))) == 7
+    # an FE SMC batch (200 particles) is cut into whole lock-step blocks, not 16 narrow chunks
+    smc = JobSpec.model_validate({**toy_spec(), "model": "fe", "toy": None, "mesh": "medium",
+                                  "sampler": {"kind": "smc", "n_particles": 200}})
+    assert chunk_size_for(smc) == 32
 
 
 def test_recomputed_chunk_writes_identical_bytes(tmp_path):
