@@ -115,6 +115,20 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
         raise fail("invalid job: " + "; ".join(msgs)) from None
 
 
+def print_expected_cost(spec, workers: int) -> None:
+    """The run's expected cost, before it starts: simulations (exact for IS, the measured range for SMC) and
+    minutes on this machine from a short timed probe of the job's own model."""
+    from worker.run import expected_simulations, probe_seconds_per_sim
+    lo, hi = expected_simulations(spec)
+    t = probe_seconds_per_sim(spec)
+    span = f"{lo:,}" if lo == hi else f"{lo:,}-{hi:,}"
+    m_lo, m_hi = lo * t / workers / 60.0, hi * t / workers / 60.0
+    mins = f"{m_lo:.1f}" if lo == hi else f"{m_lo:.1f}-{m_hi:.1f}"
+    per = "" if lo == hi else " (the range of SMC fits of 2 to 6 free parameters)"
+    console.print(f"expected cost: {span} simulations{per} at {t * 1e3:.0f} ms each on this machine: about "
+                  f"{mins} min on {workers} worker{'s' if workers > 1 else ''}", highlight=False)
+
+
 def note_is(sampler: str) -> None:
     if sampler == "is":
         console.print("note: importance sampling from the prior is the paper's method; beyond one or two free "
@@ -189,6 +203,7 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     for w in warnings:
         warn(w)
     note_is(sampler)
+    print_expected_cost(spec, workers)
     with staged_output(out) as stage:
         summary = run_local(spec, stage, workers)
     print_table(summary, title=f"Posterior for {gaw.name}")

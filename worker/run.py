@@ -92,6 +92,35 @@ def estimated_seconds_per_sim(spec: JobSpec) -> float:
 LOCKSTEP_BLOCK = 32
 
 
+#: SMC simulations per particle over a whole run (initial population, every move of every generation),
+#: the range measured on FE fits of 2 to 6 free parameters (docs/inference.md, "Cost before a run").
+SMC_SIMS_PER_PARTICLE = (20, 90)
+
+
+def probe_seconds_per_sim(spec: JobSpec, n: int = 8, seconds: float = 0.05) -> float:
+    """Seconds per simulation of this job's model on this machine: ``n`` prior draws simulated for
+    ``seconds`` of model time in one lock-step block, scaled to the job's duration (a settled draw that
+    stops early costs less; one that fails costs less still)."""
+    if spec.model != "fe":
+        return estimated_seconds_per_sim(spec)
+    from vfcore.batch import simulate_many
+    problem_prior = spec.to_prior()
+    rows = problem_prior.full_array(draw_prior(problem_prior, n, spec.seed))
+    cfg = spec.sim_config().replace(duration=min(seconds, spec.duration), discard=0.0, early_stop=False)
+    simulate_many(rows[:1], cfg.replace(duration=cfg.dt * 4), block=1)        # load the compiled kernels
+    t = time.perf_counter()
+    simulate_many(rows, cfg, block=n)
+    return (time.perf_counter() - t) / n * spec.duration / cfg.duration
+
+
+def expected_simulations(spec: JobSpec) -> tuple[int, int]:
+    """(low, high) number of simulations of the run: exact for IS, the measured range for SMC."""
+    if isinstance(spec.sampler, ISSettings):
+        return spec.sampler.n_samples, spec.sampler.n_samples
+    lo, hi = SMC_SIMS_PER_PARTICLE
+    return lo * spec.sampler.n_particles, hi * spec.sampler.n_particles
+
+
 def chunk_size_for(spec: JobSpec) -> int:
     """Simulations per task; a function of the spec only (it fixes the store's chunking). At least one
     lock-step block of the FE model unless the batch is smaller: a narrower chunk costs more per

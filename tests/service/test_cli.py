@@ -93,6 +93,9 @@ def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, mon
     for text in ("What the data determined", "sd / prior sd", "E_cover/p_sub", "common scale of E_cover, p_sub",
                  "measured p_sub = 1000 +- 50 Pa"):
         assert text in r.output, r.output
+    # the cost is announced before the run: the measured SMC range for this many particles
+    n = spec.sampler.n_particles
+    assert f"expected cost: {20 * n:,}-{90 * n:,} simulations" in r.output, r.output
 
 
 def test_job_ids_are_valid_cli_arguments():

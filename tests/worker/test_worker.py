@@ -155,3 +155,17 @@ def test_a_measured_job_scores_and_summarises_through_the_worker(tmp_path, clien
     assert s1["identifiability"]["scale"]["measured"] == ["p_sub"]
     assert any(a.startswith("measured p_sub = 1000") for a in s1["identifiability"]["anchors"])
     assert s0["identifiability"]["scale"]["measured"] == []
+
+
+def test_expected_cost_is_measured_on_the_jobs_own_model():
+    """The probe times the job's FE model here (positive, finite, and longer for a longer simulation);
+    IS knows its count exactly, SMC gives the measured range per particle."""
+    from worker.run import expected_simulations, probe_seconds_per_sim
+    base = {**toy_spec(n=300), "model": "fe", "toy": None, "mesh": "coarse", "dt": 1e-4}
+    short = JobSpec.model_validate({**base, "duration": 0.3, "discard": 0.1})
+    long = JobSpec.model_validate({**base, "duration": 1.2, "discard": 0.1})
+    t_short, t_long = probe_seconds_per_sim(short), probe_seconds_per_sim(long)
+    assert 0 < t_short < t_long < 60
+    assert expected_simulations(short) == (300, 300)
+    smc = JobSpec.model_validate({**base, "sampler": {"kind": "smc", "n_particles": 50}})
+    assert expected_simulations(smc) == (1000, 4500)
