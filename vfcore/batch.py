@@ -17,9 +17,10 @@ import time
 import numpy as np
 
 from .config import SimConfig
-from .forward import BLOWUP, CLOSED_TOL, _params, _result, contact_law, flow_coefficient, midline, setup, stop_settings
 from .params import PARAM_NAMES, Params
 from .result import SimResult
+from .simcore import (BLOWUP, CLOSED_TOL, as_params, assemble_result, contact_law, flow_coefficient, midline, setup,
+                      stop_settings)
 from .solver import _kernels as kern
 from .solver._batch_kernels import integrate_many
 from .solver.system import get_system
@@ -34,7 +35,7 @@ def _as_rows(params) -> np.ndarray:
         if arr.shape[1] != len(PARAM_NAMES):
             raise ValueError(f"params must have shape (n, {len(PARAM_NAMES)}), got {arr.shape}")
         return arr
-    return np.array([_params(x).as_array() for x in params]).reshape(-1, len(PARAM_NAMES))
+    return np.array([as_params(x).as_array() for x in params]).reshape(-1, len(PARAM_NAMES))
 
 
 def block_key(config: SimConfig) -> SimConfig:
@@ -68,7 +69,7 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     cc = np.empty((B, m))
     for b, p in enumerate(ps):
         kc[b], cc[b] = contact_law(p, configs[b], system)
-        # exactly the per-sample set-up of forward.simulate
+        # exactly the per-sample set-up of forward.simulate (both call vfcore.simcore)
         x_mid[b] = midline(p, configs[b])
         p_sub[b] = p.si()["p_sub"]
         sep[b] = configs[b].sep_ratio
@@ -99,8 +100,8 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     out = []
     for b, p in enumerate(ps):
         t0 = time.perf_counter() - t_each   # wall_time: this sample's share of the block
-        out.append(_result(p, configs[b], system, int(status[b]), width[b], gsep[b], lam[b], traj_every, tu[b], t0,
-                           p_in[b] if configs[b].has_subglottal else None, proj[b], int(stop[b])))
+        out.append(assemble_result(p, configs[b], system, int(status[b]), width[b], gsep[b], lam[b], traj_every,
+                                   tu[b], t0, p_in[b] if configs[b].has_subglottal else None, proj[b], int(stop[b])))
     return out
 
 

@@ -61,7 +61,7 @@ def test_rigid_stop_impulse_is_m_v(h):
 
 
 def test_cycle_products_from_per_step_series():
-    """_cycles: impulse = h sum f + sum projection over each cycle's steps, duration = h * steps in
+    """cycle_summary: impulse = h sum f + sum projection over each cycle's steps, duration = h * steps in
     contact, pressure in contact = impulse / (h * sum of the contact lengths), for a synthetic record."""
     h = 1e-4
     t = h * np.arange(1, 2001)
@@ -72,7 +72,7 @@ def test_cycle_products_from_per_step_series():
     force[:, 1] *= rng.random(t.size) > 0.5           # node 1 touches on some steps only
     proj = np.where(closed[:, None], 1e-6 * rng.random((t.size, 3)), 0.0)
     share = np.array([1e-4, 2e-4, 3e-4])
-    cyc = fw._cycles(t, gaw, gaw * 0.0, force.max(axis=1), force, share, h, proj)
+    cyc = fw.cycle_summary(t, gaw, gaw * 0.0, force.max(axis=1), force, share, h, proj)
     assert cyc.period.size >= 3
     np.testing.assert_allclose(cyc.period, 0.02, rtol=1e-9)
     level = 5.0
