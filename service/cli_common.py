@@ -131,12 +131,12 @@ def noise_sd(area) -> float:
 
 
 def load_gaw(path: Path, fps: float | None, warnings: list[str]):
-    """Read a GAW file (vfvideo.io.read_gaw) for a command: any unreadable input is a user error; negative
+    """Read a GAW file (vfcore.gawio.read_gaw) for a command: any unreadable input is a user error; negative
     samples within ``NEGATIVE_NOISE_SDS`` noise sds of zero are clipped (a warning with their count goes to
     ``warnings``), deeper ones are refused. Returns the ``GawData``."""
     import numpy as np
 
-    from vfvideo.io import read_gaw
+    from vfcore.gawio import read_gaw
     if path.is_dir():
         raise fail(f"GAW file {path} is a folder, not a file")
     try:

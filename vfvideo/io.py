@@ -1,36 +1,21 @@
-"""Reading videos / image stacks and reading and writing GAW files.
+"""Reading videos and image stacks.
 
 Videos: any container imageio/ffmpeg reads (mp4, avi, mov, mkv, ...). Stacks: a
 folder of PNG/TIFF/JPEG/BMP frames (natural sort of the file names), a multi-page
 TIFF, or a ``.npy`` array of shape (n, h, w) or (n, h, w, 3).
 
-GAW files
----------
-CSV written by :func:`write_gaw_csv`::
-
-    # vfinfer GAW v1
-    # fps: 2000
-    # time_unit: s
-    # area_unit: mm^2
-    time_s,area_mm2
-    0.0000000,1.234567
-    ...
-
-:func:`read_gaw` also accepts other CSVs (a header with a time column and an area
-column, or a single area column), ``.npy`` (1D area, or (n, 2) time and area) and
-``.npz`` (keys ``area`` and ``t`` or ``fps``). Units come from the file (``# area_unit:``
-comments, or column names such as ``area_mm2``, ``area_px``, ``time_ms``) or from
-arguments, which take precedence.
+GAW files (read_gaw, write_gaw_csv, GawData, GawFileError) are :mod:`vfcore.gawio`'s, re-exported here.
 """
 from __future__ import annotations
 
 import math
-import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from vfcore.gawio import GawData, GawFileError, read_gaw, write_gaw_csv
 
 __all__ = ["VideoError", "GawFileError", "Frames", "GawData", "read_frames", "read_gaw", "write_gaw_csv",
            "IMAGE_EXTENSIONS"]
@@ -41,10 +26,6 @@ _LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
 class VideoError(ValueError):
     """A video or image stack cannot be turned into a GAW (with the reason)."""
-
-
-class GawFileError(ValueError):
-    """A GAW file cannot be read (with the reason)."""
 
 
 @dataclass
@@ -182,243 +163,3 @@ def read_frames(source, max_frames: int | None = None) -> Frames:
     if data.shape[0] == 1 and path.suffix.lower() in IMAGE_EXTENSIONS:
         raise VideoError(f"{src}: a single image, not a video; pass a folder of frames or a multi-page TIFF")
     return Frames(data=data, source=src, meta_fps=meta_fps, color=color)
-
-
-# ----------------------------------------------------------------------------- GAW files
-
-_AREA_TO_MM2 = {"mm^2": 1.0, "mm2": 1.0, "cm^2": 100.0, "cm2": 100.0, "m^2": 1e6, "m2": 1e6}
-_TIME_TO_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
-
-
-@dataclass
-class GawData:
-    """A GAW read from a file: times (s), area (mm^2), frame rate (Hz), header metadata."""
-    t: np.ndarray
-    area: np.ndarray
-    fps: float
-    meta: dict = field(default_factory=dict)
-
-
-def _norm_unit(u: str) -> str:
-    return u.strip().lower().replace("²", "^2").replace(" ", "")
-
-
-def _area_factor(unit: str, px_per_mm: float | None) -> float:
-    u = _norm_unit(unit)
-    if u in ("px", "pixel", "pixels", "px^2"):
-        if not px_per_mm or px_per_mm <= 0:
-            raise GawFileError("area is in pixels: give px_per_mm to convert it to mm^2")
-        return 1.0 / px_per_mm ** 2
-    if u not in _AREA_TO_MM2:
-        raise GawFileError(f"unknown area unit '{unit}' (use mm^2, cm^2, m^2 or px)")
-    return _AREA_TO_MM2[u]
-
-
-def _time_factor(unit: str) -> float:
-    u = _norm_unit(unit)
-    if u not in _TIME_TO_S:
-        raise GawFileError(f"unknown time unit '{unit}' (use s or ms)")
-    return _TIME_TO_S[u]
-
-
-def _col_unit(name: str, kind: str) -> str | None:
-    n = name.strip().lower()
-    m = re.match(rf"^{kind}[ _\[(]+([a-z0-9^²]+)[\])]*$", n)
-    if m:
-        return {"mm2": "mm^2", "cm2": "cm^2", "m2": "m^2", "px2": "px"}.get(m.group(1), m.group(1))
-    return None
-
-
-def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_unit: str | None = None,
-             px_per_mm: float | None = None, allow_negative: bool = False) -> GawData:
-    """Read a GAW file (CSV, NPY, NPZ) into times (s) and areas (mm^2).
-
-    Parameters
-    ----------
-    path : str or Path
-    fps : float, optional
-        Frame rate (Hz); needed when the file has no time column and no ``# fps:``.
-    area_unit, time_unit : str, optional
-        Override the units found in the file (defaults mm^2 and s).
-    px_per_mm : float, optional
-        Calibration for areas given in pixels.
-    allow_negative : bool
-        Return negative areas instead of refusing them (for a caller that decides which negative
-        samples are noise around zero, e.g. the command line's clipping rule).
-
-    Raises
-    ------
-    GawFileError
-        Unreadable or empty file, no area column, non-uniform or missing sampling,
-        negative or non-finite areas, fps <= 0.
-    """
-    p = Path(path)
-    if not p.is_file():
-        raise GawFileError(f"cannot read GAW '{p}': no such file")
-    meta: dict = {}
-    t = None
-    if p.suffix.lower() in (".npy", ".npz"):
-        try:
-            obj = np.load(p, allow_pickle=False)
-        except Exception as e:  # noqa: BLE001
-            raise GawFileError(f"cannot read GAW '{p}': {e}") from e
-        if isinstance(obj, np.lib.npyio.NpzFile):
-            keys = set(obj.files)
-            akey = next((k for k in ("area", "area_mm2", "gaw") if k in keys), None)
-            if akey is None:
-                raise GawFileError(f"{p}: npz needs an 'area' array (found {sorted(keys)})")
-            area = np.asarray(obj[akey], dtype=float)
-            if "t" in keys:
-                t = np.asarray(obj["t"], dtype=float)
-            if "fps" in keys and fps is None:
-                fps = float(obj["fps"])
-            for k in ("area_unit", "time_unit"):
-                if k in keys:
-                    meta[k] = str(obj[k])
-        else:
-            arr = np.asarray(obj, dtype=float)
-            if arr.ndim == 1:
-                area = arr
-            elif arr.ndim == 2 and arr.shape[1] == 2:
-                t, area = arr[:, 0], arr[:, 1]
-            else:
-                raise GawFileError(f"{p}: expected a 1D area array or (n, 2) time/area, got shape {arr.shape}")
-    else:
-        try:
-            text = p.read_text()
-        except Exception as e:  # noqa: BLE001
-            raise GawFileError(f"cannot read GAW '{p}': {e}") from e
-        header = None
-        rows = []
-        for line in text.splitlines():
-            s = line.strip()
-            if not s:
-                continue
-            if s.startswith("#"):
-                m = re.match(r"#\s*([A-Za-z_]+)\s*[:=]\s*(.+)$", s)
-                if m:
-                    meta[m.group(1).strip().lower()] = m.group(2).strip()
-                continue
-            parts = [q.strip() for q in re.split(r"[,;\t]", s) if q.strip() != ""] if re.search(r"[,;\t]", s) \
-                else s.split()
-            try:
-                rows.append([float(q) for q in parts])
-            except ValueError:
-                if header is None and not rows:
-                    header = parts
-                    continue
-                raise GawFileError(f"{p}: non-numeric value in line '{s[:60]}'") from None
-        if not rows:
-            raise GawFileError(f"{p}: no data rows")
-        ncol = len(rows[0])
-        if any(len(r) != ncol for r in rows):
-            raise GawFileError(f"{p}: rows have different numbers of columns")
-        arr = np.asarray(rows, dtype=float)
-        names = [h.lower() for h in header] if header else None
-        if names is not None and len(names) == ncol:
-            ti = next((i for i, nm in enumerate(names) if nm.startswith("t")), None)
-            ai = next((i for i, nm in enumerate(names) if nm.startswith("area") or nm.startswith("gaw")), None)
-            if ai is None:
-                ai = ncol - 1 if ncol <= 2 else None
-            if ai is None:
-                raise GawFileError(f"{p}: no area column among {header}")
-            area = arr[:, ai]
-            if ti is not None and ti != ai:
-                t = arr[:, ti]
-                u = _col_unit(names[ti], "time") or _col_unit(names[ti], "t")
-                if u and "time_unit" not in meta:
-                    meta["time_unit"] = u
-            u = _col_unit(names[ai], "area") or _col_unit(names[ai], "gaw")
-            if u and "area_unit" not in meta:
-                meta["area_unit"] = u
-        elif ncol == 1:
-            area = arr[:, 0]
-        elif ncol == 2:
-            t, area = arr[:, 0], arr[:, 1]
-        else:
-            raise GawFileError(f"{p}: {ncol} columns without a header; expected (time, area) or (area)")
-
-    area_u = area_unit or meta.get("area_unit", "mm^2")
-    time_u = time_unit or meta.get("time_unit", "s")
-    if px_per_mm is None and "px_per_mm" in meta:
-        try:
-            px_per_mm = float(meta["px_per_mm"])
-        except ValueError:
-            pass
-    area = np.asarray(area, dtype=float) * _area_factor(area_u, px_per_mm)
-    if area.size < 2:
-        raise GawFileError(f"{p}: fewer than two samples")
-    if not np.all(np.isfinite(area)):
-        raise GawFileError(f"{p}: area contains NaN or infinite values")
-    if not allow_negative and np.any(area < 0):
-        raise GawFileError(f"{p}: negative areas")
-    if fps is None and "fps" in meta:
-        try:
-            fps = float(meta["fps"])
-        except ValueError:
-            raise GawFileError(f"{p}: bad fps '{meta['fps']}' in header") from None
-    if t is not None:
-        t = np.asarray(t, dtype=float) * _time_factor(time_u)
-        dt = np.diff(t)
-        if np.any(dt <= 0):
-            raise GawFileError(f"{p}: time column is not increasing")
-        med = float(np.median(dt))
-        if np.max(np.abs(dt - med)) > 1e-3 * med + 1e-9:
-            raise GawFileError(f"{p}: non-uniform sampling (time steps {dt.min():.3g} .. {dt.max():.3g} s)")
-        fps_t = 1.0 / med
-        if fps is None:
-            fps = fps_t
-        elif abs(fps - fps_t) > 1e-3 * fps:
-            raise GawFileError(f"{p}: fps {fps:g} disagrees with the time column ({fps_t:g} Hz)")
-    if fps is None:
-        raise GawFileError(f"{p}: no time column and no fps; give the frame rate")
-    if not (math.isfinite(fps) and fps > 0):
-        raise GawFileError(f"{p}: frame rate must be > 0, got {fps}")
-    if t is None:
-        t = np.arange(area.size) / fps
-    meta["area_unit_in_file"] = area_u
-    return GawData(t=t, area=area, fps=float(fps), meta=meta)
-
-
-def write_gaw_csv(path, t, area, fps: float, meta: dict | None = None, extra: dict | None = None) -> Path:
-    """Write a GAW as CSV (``time_s,area_mm2`` plus optional extra columns).
-
-    Parameters
-    ----------
-    path : str or Path
-    t : array_like
-        Times in s.
-    area : array_like
-        Areas in mm^2.
-    fps : float
-        Frame rate (Hz), written into the header.
-    meta : dict, optional
-        Extra ``# key: value`` header lines (e.g. source, px_per_mm, segment).
-    extra : dict of name -> array, optional
-        Extra numeric columns after the two main ones.
-    """
-    t = np.asarray(t, dtype=float)
-    area = np.asarray(area, dtype=float)
-    if t.shape != area.shape or t.ndim != 1:
-        raise ValueError("t and area must be 1D arrays of the same length")
-    if not (fps > 0):
-        raise ValueError(f"fps must be > 0, got {fps}")
-    p = Path(path)
-    if p.parent and not p.parent.exists():
-        os.makedirs(p.parent, exist_ok=True)
-    cols = [t, area]
-    names = ["time_s", "area_mm2"]
-    for k, v in (extra or {}).items():
-        v = np.asarray(v, dtype=float)
-        if v.shape != t.shape:
-            raise ValueError(f"extra column '{k}' has the wrong length")
-        names.append(k)
-        cols.append(v)
-    lines = ["# vfinfer GAW v1", f"# fps: {fps:.10g}", "# time_unit: s", "# area_unit: mm^2"]
-    for k, v in (meta or {}).items():
-        lines.append(f"# {k}: {str(v).replace(chr(10), ' ')}")
-    lines.append(",".join(names))
-    data = np.column_stack(cols)
-    body = "\n".join(",".join(f"{x:.9g}" for x in row) for row in data)
-    p.write_text("\n".join(lines) + "\n" + body + "\n")
-    return p

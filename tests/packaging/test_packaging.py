@@ -72,12 +72,13 @@ def test_the_lock_is_what_make_lock_writes():
 
 def test_the_core_library_imports_without_the_service_and_video_stacks(tmp_path):
     """`pip install vfinfer` (no extras) must give a working vfcore: importing it and running a
-    forward model must not touch dask, zarr, fastapi, imageio or scikit-image. The check blocks
-    those packages at import time in a fresh interpreter, so it holds in the full dev install too."""
+    forward model or reading a GAW file must not touch dask, zarr, fastapi, imageio, scikit-image or the
+    video package. The check blocks those packages at import time in a fresh interpreter, so it holds in
+    the full dev install too."""
     code = r"""
 import sys, importlib.abc
 BLOCKED = {"dask", "distributed", "zarr", "fastapi", "starlette", "uvicorn", "imageio", "imageio_ffmpeg",
-           "skimage", "typer", "rich", "httpx"}
+           "skimage", "typer", "rich", "httpx", "vfvideo"}
 class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
         if name.split(".")[0] in BLOCKED:
@@ -85,7 +86,8 @@ class Block(importlib.abc.MetaPathFinder):
         return None
 sys.meta_path.insert(0, Block())
 import vfcore
-import vfcore.batch, vfcore.inference, vfcore.diagnose, vfcore.measures, vfcore.data
+import vfcore.batch, vfcore.inference, vfcore.diagnose, vfcore.measures, vfcore.data, vfcore.gawio
+assert len(vfcore.data.demo_spec_dict()["gaw"]["areas"]) > 0
 from vfcore import SimConfig, TABLE3, simulate
 r = simulate(TABLE3, SimConfig(mesh="coarse", dt=1e-4, duration=0.12, discard=0.02))
 assert r.gaw.size > 0

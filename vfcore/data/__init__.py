@@ -33,7 +33,7 @@ def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
     from vfcore.config import SimConfig
     from vfcore.params import TABLE3
     from vfcore.forward import simulate
-    from vfvideo.io import write_gaw_csv
+    from vfcore.gawio import write_gaw_csv
 
     d = DEMO_TRUTH
     r = simulate(TABLE3, SimConfig(mesh=d["mesh"], dt=d["dt"], duration=d["duration"], discard=d["discard"],
@@ -57,7 +57,7 @@ def demo_spec_dict(n: int = 240, path: Path = DEMO_GAW, sampler: dict | None = N
     ``sampler``: a JobSpec sampler body; default IS with ``n`` prior draws (the tests use it,
     with a cheaper mesh in ``overrides``); ``make demo`` passes ``DEMO_SMC``.
     """
-    from vfvideo.io import read_gaw
+    from vfcore.gawio import read_gaw
 
     g = read_gaw(path)
     spec = {"model": "fe", "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
