@@ -33,8 +33,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, MAX_REFITS, REFIT_PARTICLES
 from worker.jobspec import JobSpec
 
+from ..access import done_job, own_job
 from ..deps import JobIdDep, ManagerDep, UserDep
-from .jobs import _done, _own
 
 log = logging.getLogger("vfinfer.diagnose")
 
@@ -213,7 +213,7 @@ def _cancelled_path(manager, job_id: str) -> Path:
 
 
 def _paths(manager, job_id: str) -> tuple[Path, Path, Path]:
-    # job_id comes from the table row (see _own), never from request text
+    # job_id comes from the table row (see own_job), never from request text
     base = _stores_dir(manager)
     return (base / f"{job_id}.diagnosis.json", base / f"{job_id}.diagnosis.png",
             base / f"{job_id}.diagnosis.error")
@@ -384,7 +384,7 @@ def on_shutdown(app) -> None:
              summary="Start a diagnosis of a finished job: which physics is the model missing?")
 def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request,
                     req: DiagnoseRequest | None = Body(default=None)) -> DiagnoseStarted:
-    rec = _done(manager, job_id, user)
+    rec = done_job(manager, job_id, user)
     spec = JobSpec.from_json(rec["spec"])
     if spec.model != "fe":
         raise HTTPException(422, [{"loc": ["path", "job_id"], "type": "value_error",
@@ -406,7 +406,7 @@ def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reques
 @router.get("/jobs/{job_id}/diagnosis", response_model=DiagnosisStatus,
             summary="A diagnosis's state, current stage and, when done, its report")
 def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> DiagnosisStatus:
-    rec = _own(manager, job_id, user)
+    rec = own_job(manager, job_id, user)
     jid = rec["id"]
     reg = _registry(request)
     with reg.lock:
@@ -427,7 +427,7 @@ def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reque
     """Cancel a running diagnosis: it stops within a quarter of a second of waiting on the cluster
     (its batch's unstarted simulations are cancelled; :func:`dask_map`), its stored simulations
     are deleted and its state becomes "cancelled"."""
-    rec = _own(manager, job_id, user)
+    rec = own_job(manager, job_id, user)
     jid = rec["id"]
     reg = _registry(request)
     with reg.lock:
@@ -440,7 +440,7 @@ def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, reque
 @router.get("/jobs/{job_id}/diagnosis/figure", responses={200: {"content": {"image/png": {}}}},
             summary="A finished diagnosis's figure (PNG): base fit, located mismatch, named extension")
 def get_diagnosis_figure(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> Response:
-    rec = _own(manager, job_id, user)
+    rec = own_job(manager, job_id, user)
     jid = rec["id"]
     reg = _registry(request)
     with reg.lock:

@@ -15,6 +15,7 @@ from worker import store as st
 from worker.jobspec import JobSpec
 from worker.reduce import compare_posteriors
 
+from ..access import done_job, own_job
 from ..db import ACTIVE
 from ..deps import JOB_ID_RE, JobIdDep, ManagerDep, SettingsDep, UserDep
 
@@ -49,13 +50,6 @@ class JobStatus(BaseModel):
 
 class CompareRequest(BaseModel):
     job_ids: list[str] = Field(min_length=2, max_length=10)
-
-
-def _own(manager, job_id: str, user: str) -> dict:
-    rec = manager.db.get(job_id, owner=user)
-    if rec is None:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
-    return rec
 
 
 def _status(manager, rec: dict) -> JobStatus:
@@ -116,20 +110,13 @@ def list_jobs(user: UserDep, manager: ManagerDep) -> list[JobStatus]:
 @router.get("/jobs/{job_id}", response_model=JobStatus,
             summary="A job's state, progress (simulations done), ESS, times (epoch s) and warnings")
 def get_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> JobStatus:
-    return _status(manager, _own(manager, job_id, user))
-
-
-def _done(manager, job_id: str, user: str) -> dict:
-    rec = _own(manager, job_id, user)
-    if rec["state"] != "done":
-        raise HTTPException(status.HTTP_409_CONFLICT, f"job is {rec['state']}, not done")
-    return rec
+    return _status(manager, own_job(manager, job_id, user))
 
 
 @router.get("/jobs/{job_id}/posterior",
             summary="A finished job's posterior summary: table (paper units), predictive, diagnostics, warnings")
 def get_posterior(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
-    rec = _done(manager, job_id, user)
+    rec = done_job(manager, job_id, user)
     summary = st.read_summary(manager.store_path(rec["id"]))
     if summary is None:
         raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "posterior missing from the store")
@@ -150,7 +137,7 @@ def get_samples(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
                                 "n_resampled); meta: the CSV's metadata (names, units, diagnostics); netcdf: ArviZ "
                                 "InferenceData with the observed GAW and the posterior predictive; json: arrays")
                 ] = "csv") -> Response:
-    rec = _done(manager, job_id, user)
+    rec = done_job(manager, job_id, user)
     path = manager.store_path(rec["id"])
     if format in SAMPLE_FORMATS:
         product, media, suffix = SAMPLE_FORMATS[format]
@@ -171,7 +158,7 @@ def get_samples(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
 @router.get("/jobs/{job_id}/figures/{name}", responses={200: {"content": {"image/png": {}}}},
             summary="A finished job's figure (PNG): GAW fit with predictive bands, pair plot, flow and contact")
 def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDep) -> Response:
-    rec = _done(manager, job_id, user)
+    rec = done_job(manager, job_id, user)
     blob = st.read_blob(manager.store_path(rec["id"]), name.value)
     if blob is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, "figure not available")
@@ -182,7 +169,7 @@ def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDe
             summary="A finished job's report as one self-contained HTML page (figures embedded)")
 def get_report(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> HTMLResponse:
     from ..report import FIGURES, data_uri, render_report
-    rec = _done(manager, job_id, user)
+    rec = done_job(manager, job_id, user)
     path = manager.store_path(rec["id"])
     summary = st.read_summary(path)
     if summary is None:
@@ -195,7 +182,7 @@ def get_report(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> HTMLResp
 
 @router.delete("/jobs/{job_id}", summary="Cancel a queued or running job (a finished job keeps its state)")
 def cancel_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
-    rec = _own(manager, job_id, user)
+    rec = own_job(manager, job_id, user)
     if rec["state"] in ACTIVE:
         manager.cancel(rec["id"])
     return {"id": rec["id"], "state": manager.db.get(rec["id"])["state"]}
@@ -211,7 +198,7 @@ def compare(req: CompareRequest, user: UserDep, manager: ManagerDep) -> dict:
     for jid in ids:
         if not JOB_ID_RE.match(jid):
             raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
-        rec = _done(manager, jid, user)
+        rec = done_job(manager, jid, user)
         paths[rec["id"]] = manager.store_path(rec["id"])
     return compare_posteriors(paths)
 
