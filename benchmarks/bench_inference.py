@@ -147,7 +147,7 @@ def main(argv=None) -> int:
 
 def toy_comparison(a) -> int:
     """IS (a.draws) vs SMC (a.particles) on a 7-D linear-Gaussian problem with a closed form."""
-    from vfcore.inference import LinearGaussianToy
+    from vfcore.inference.toy import LinearGaussianToy
     prior = Prior.default()
     toy = LinearGaussianToy(prior, n_obs=12, noise=0.3, seed=0)
     t0 = time.perf_counter()

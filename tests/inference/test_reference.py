@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vfcore.inference import LinearGaussianToy, Prior, smc
+from vfcore.inference import Prior, smc
 from vfcore.inference.reference import GaussianReference, reference_from_posterior
+from vfcore.inference.toy import LinearGaussianToy
 
 
 @pytest.fixture(scope="module")

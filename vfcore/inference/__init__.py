@@ -1,6 +1,7 @@
 """Bayesian inference of vocal-fold parameters (Hadwin et al. 2019, Section 4).
 
-Free of Dask/FastAPI: parallelism is passed in as a ``map``-like callable.
+Free of Dask/FastAPI: parallelism is passed in as a ``map``-like callable. The linear-Gaussian test
+problem (``vfcore.inference.toy``) is imported by the sampler checks that use it, not from here.
 """
 from .diagnostics import (PARETO_K_THRESHOLD, DegenerateEnsembleWarning, ess, log_evidence_is,
                           normalize_log_weights, pareto_k, systematic_resample, weighted_quantiles)
@@ -15,7 +16,6 @@ from .problem import (NOISE_MODELS, Evaluation, Problem, ProblemEvaluator, evalu
 from .products import compare, flow_contact_table, plot_marginals, plot_predictive, predictive_bands
 from .sensitivity import dt_mesh_configs, ensemble_size_study, numerics_study, write_table
 from .smc import DEFAULT_PARTICLES, SMCSampler, next_temperature, smc
-from .toy import LinearGaussianToy
 from .twin import Twin, make_twin
 
 __all__ = [
@@ -32,5 +32,5 @@ __all__ = [
     "compare", "flow_contact_table", "plot_marginals", "plot_predictive", "predictive_bands",
     "dt_mesh_configs", "ensemble_size_study", "numerics_study", "write_table",
     "DEFAULT_PARTICLES", "SMCSampler", "next_temperature", "smc",
-    "LinearGaussianToy", "Twin", "make_twin",
+    "Twin", "make_twin",
 ]
