@@ -19,7 +19,7 @@ from rich.console import Console
 
 from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
 from .cli_options import (Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise, Out,
-                          Overwrite, Particles, Prior, Sampler, Screen, Seed, SigmaE, Workers, parse_fixed,
+                          Overwrite, Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Workers, parse_fixed,
                           parse_measurements, parse_priors, parse_screen)
 from .cli_tables import print_identifiability, print_table  # noqa: F401  (re-exported for callers)
 
@@ -77,7 +77,7 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
                measure: list[str] | None = None, force_reach: bool = False, warnings: list[str] | None = None,
-               screen: str | None = None):
+               screen: str | None = None, prior_set: str = "paper"):
     """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2. Warnings about
     the input (clipped samples) are appended to ``warnings`` for the caller to print once all is checked."""
     from pydantic import ValidationError
@@ -104,7 +104,7 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     if scr is not None:
         smp["screen"] = scr
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
-            "priors": priors or None, "fixed": fixed, "sampler": smp, "mesh": mesh, "dt": dt,
+            "priors": priors or None, "fixed": fixed, "prior_set": prior_set, "sampler": smp, "mesh": mesh, "dt": dt,
             "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
             "chunk_size": chunk_size, "measurements": measurements, "force_reach": bool(force_reach)}
     try:
@@ -190,14 +190,14 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
           sigma_e: SigmaE = 1.0, seed: Seed = 0, prior: Prior = None, fix: Fix = None, workers: Workers = 2,
           out: Out = Path("vfinfer_output"), overwrite: Overwrite = False, model: Model = "fe",
           noise: Noise = "fixed", measure: Measure = None, force_reach: ForceReach = False,
-          screen: Screen = None) -> None:
+          screen: Screen = None, prior_set: PriorSet = "paper") -> None:
     """Run an inference on this machine (in-process Dask LocalCluster); write the posterior, samples, figures and
     an HTML report (OUT/index.html); print the posterior table and what the data determined. The recording is
     first checked against the model's reach ('vfinfer reach')."""
     warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
-                      screen=screen)
+                      screen=screen, prior_set=prior_set)
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
     for w in warnings:
@@ -301,7 +301,7 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
 
 @app.command()
 def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25,
-          prior: Prior = None, fix: Fix = None,
+          prior: Prior = None, fix: Fix = None, prior_set: PriorSet = "paper",
           n: Annotated[int, typer.Option("--n", min=1, help="prior draws to simulate")] = 2000,
           seed: Annotated[int, typer.Option(min=0, help="random seed of the draws")] = 20190613,
           check: Annotated[Optional[Path], typer.Option(help="a GAW file to check against the reach")] = None,
@@ -312,10 +312,10 @@ def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, disca
     service (folder: $VFINFER_CACHE_DIR/reach, else the user cache). With --check, compare a recording."""
     from vfcore.config import SimConfig
     from vfcore.inference import reach as rc
-    from vfcore.inference.prior import TABLE2_BOUNDS
+    from vfcore.inference.prior import PRIOR_SETS
     from vfcore.inference.prior import Prior as PriorBox
 
-    bounds = {k: tuple(v) for k, v in TABLE2_BOUNDS.items()}
+    bounds = {k: tuple(v) for k, v in PRIOR_SETS[prior_set].items()}
     bounds.update({k: tuple(v) for k, v in parse_priors(prior).items()})
     fixed = parse_fixed(fix)
     for k in fixed:

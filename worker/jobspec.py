@@ -114,6 +114,9 @@ class JobSpec(_Strict):
         default=None, description="{name: [lo, hi]} in paper units; omitted names keep the default "
                                   "(Table 2) bounds unless fixed")
     fixed: dict[str, FiniteFloat] = Field(default_factory=dict, description="{name: value}, paper units")
+    prior_set: Literal["paper", "human"] = Field(
+        default="paper", description='the default bounds of parameters not in "priors": "paper" (Table 2, a '
+                                     'silicone fold) or "human" (human tissue; docs/inference.md, "Prior sets")')
     sampler: SamplerSettings
     mesh: Literal["coarse", "medium", "fine"] = "medium"
     dt: FiniteFloat = Field(default=5e-5, gt=0, le=1e-3, description="time step, s")
@@ -229,9 +232,9 @@ class JobSpec(_Strict):
         return np.asarray(self.gaw.areas, dtype=float)
 
     def to_prior(self):
-        """The ``vfcore.inference`` Prior: Table 2 bounds, overridden by ``priors``, minus ``fixed``."""
-        from vfcore.inference.prior import TABLE2_BOUNDS, Prior
-        bounds = {k: tuple(v) for k, v in TABLE2_BOUNDS.items()}
+        """The ``vfcore.inference`` Prior: the prior set's bounds, overridden by ``priors``, minus ``fixed``."""
+        from vfcore.inference.prior import PRIOR_SETS, Prior
+        bounds = {k: tuple(v) for k, v in PRIOR_SETS[self.prior_set].items()}
         bounds.update({k: (float(lo), float(hi)) for k, (lo, hi) in (self.priors or {}).items()})
         for k in self.fixed:
             bounds.pop(k, None)

@@ -25,6 +25,28 @@ TABLE2_BOUNDS: dict[str, tuple[float, float]] = {
     "x0": (7.4, 8.4),            # mm
 }
 
+#: Priors for human vocal folds (docs/inference.md, "Prior sets"). The 2D section has no longitudinal tension, the
+#: main control of f0 in a human larynx, so its in-plane moduli are effective ones that stand for it too. Cover:
+#: the lamina propria's transverse Young's modulus, about 1 kPa at low strain and 10-15 times that at high strain
+#: (Alipour & Vigmostad 2012, J Voice 26(6):816.e21), here up to 10 kPa, softer than the body; body: the range
+#: the prior predictive needs to span human f0 (85-255 Hz) on the M5 section; ligament between them; p_sub:
+#: phonation from threshold to loud voice, 0.5-2.5 kPa (Titze 1994, Principles of Voice Production); density of
+#: soft tissue; viscosity as in Table 2; x0: at most 0.4 mm of medial compression, since with tissue this stiff
+#: more compression holds the glottis shut against any phonatory pressure (measured: no draw with x0 < 8.1 mm
+#: phonated out of 2,000 from a first, wider box with Table 2's x0 range).
+HUMAN_BOUNDS: dict[str, tuple[float, float]] = {
+    "E_body": (10.0, 200.0),     # kPa
+    "E_cover": (1000.0, 10000.0),  # Pa
+    "E_lig": (5.0, 40.0),        # kPa
+    "p_sub": (500.0, 2500.0),    # Pa
+    "rho": (1000.0, 1100.0),     # kg/m^3
+    "eta": (1.0, 7.0),           # Poise
+    "x0": (8.0, 8.4),            # mm
+}
+
+#: Named prior sets (``Prior.default(prior_set=...)``, ``vfinfer infer --prior-set``).
+PRIOR_SETS: dict[str, dict[str, tuple[float, float]]] = {"paper": TABLE2_BOUNDS, "human": HUMAN_BOUNDS}
+
 _POSITIVE = ("E_body", "E_cover", "E_lig", "rho", "eta")
 
 
@@ -97,12 +119,15 @@ class Prior:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def default(cls, fixed: Mapping[str, float] | None = None) -> "Prior":
-        """Table 2 priors; names in ``fixed`` are held at the given values instead."""
+    def default(cls, fixed: Mapping[str, float] | None = None, prior_set: str = "paper") -> "Prior":
+        """The priors of ``prior_set`` (``PRIOR_SETS``: "paper" = Table 2, "human"); names in ``fixed`` are
+        held at the given values instead."""
+        if prior_set not in PRIOR_SETS:
+            raise ValueError(f"unknown prior set {prior_set!r}; known: {sorted(PRIOR_SETS)}")
         fixed = dict(fixed or {})
         for name in fixed:
             _check_name(name)
-        return cls({n: b for n, b in TABLE2_BOUNDS.items() if n not in fixed}, fixed)
+        return cls({n: b for n, b in PRIOR_SETS[prior_set].items() if n not in fixed}, fixed)
 
     # ------------------------------------------------------------------ properties
     @property

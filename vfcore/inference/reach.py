@@ -449,7 +449,8 @@ def _hints(outs: dict[str, str], prior: Mapping | None) -> list[str]:
     hints = []
     f0 = outs.get("f0_hz")
     if f0 == "high":
-        hints.append(("the Table 2 priors describe a soft synthetic (silicone-like) fold; " if soft else "")
+        hints.append(("the Table 2 priors describe a soft synthetic (silicone-like) fold; for a human voice use "
+                      "--prior-set human (human tissue), or " if soft else "")
                      + "raise the stiffness and pressure bounds (--prior E_body=LO:HI --prior E_cover=LO:HI "
                        "--prior E_lig=LO:HI --prior p_sub=LO:HI) or lower rho, and check the frame rate (--fps)")
     elif f0 == "low":
@@ -558,13 +559,17 @@ def reach_for(gaw, fps: float, config: SimConfig, prior: Prior) -> ReachVerdict:
 
 def build_hint(config: SimConfig, prior: Prior) -> str:
     """The ``vfinfer reach`` command that builds the ensemble for ``config`` and ``prior``."""
-    from .prior import TABLE2_BOUNDS
+    from .prior import PRIOR_SETS
     args = [f"--mesh {config.mesh}", f"--dt {config.dt:g}", f"--duration {config.duration:g}",
             f"--discard {config.discard:g}"]
     if config.element != "p1":
         args.append(f"--element {config.element}")
+    # the named set the prior differs least from, then the bounds that differ from it
+    name_set = min(PRIOR_SETS, key=lambda k: sum(PRIOR_SETS[k].get(n) != b for n, b in prior.bounds.items()))
+    if name_set != "paper":
+        args.append(f"--prior-set {name_set}")
     for name, (lo, hi) in prior.bounds.items():
-        if TABLE2_BOUNDS.get(name) != (lo, hi):
+        if PRIOR_SETS[name_set].get(name) != (lo, hi):
             args.append(f"--prior {name}={lo:g}:{hi:g}")
     for name, v in prior.fixed.items():
         args.append(f"--fix {name}={v:g}")
