@@ -34,8 +34,8 @@ Prior = Annotated[Optional[list[str]], typer.Option(
                     "rho kg/m^3, eta Poise, x0 mm), repeatable; default: the paper's Table 2")]
 PriorSet = Annotated[str, typer.Option(
     "--prior-set", parser=choice("paper", "human"), metavar="[paper|human]",
-    help="default prior bounds: 'paper' (Table 2, a silicone fold, f0 about 57-73 Hz) or 'human' (human tissue, "
-         "f0 about 85-255 Hz; docs/inference.md, 'Prior sets'); --prior overrides single parameters")]
+    help="default prior bounds: 'paper' (Table 2, a silicone fold; 90 % of its phonating draws at 57-73 Hz) or "
+         "'human' (human tissue; 99-232 Hz; docs/inference.md, 'Prior sets'); --prior overrides single parameters")]
 Fix = Annotated[Optional[list[str]], typer.Option(
     "--fix", help="NAME=VALUE in paper units (as for --prior), repeatable: held fixed, not estimated")]
 Url = Annotated[str, typer.Option(envvar="VFINFER_URL", help="service URL, http(s)://host:port")]
