@@ -45,7 +45,7 @@ def test_the_human_set_reaches_human_f0_where_the_papers_cannot():
 @pytest.mark.slow
 def test_a_human_range_twin_is_recovered_with_the_human_prior_set():
     """A twin at f0 ~ 176 Hz (E_body, E_cover and p_sub free in the human box, the rest fixed at the truth):
-    every truth lies within 3 posterior sds of the mean, the estimates within 2 % of the truths. Measured
+    every truth lies within 3 posterior sds of the mean, the estimates within 5 % of the truths. Measured
     coverage of the 90 % intervals is reported in docs/inference.md, "Prior sets"."""
     truth = Params(E_body=100.0, E_cover=5000.0, E_lig=15.0, p_sub=1500.0, rho=1050.0, eta=3.0, x0=8.4)
     cfg = SimConfig(mesh="coarse", dt=5e-5, duration=0.3, discard=0.1)
@@ -57,7 +57,7 @@ def test_a_human_range_twin_is_recovered_with_the_human_prior_set():
     t = np.array([getattr(truth, n) for n in prior.names])
     z = (t - post.mean) / post.sd
     assert np.all(np.abs(z) < 3.0), z
-    assert np.all(np.abs(post.mean / t - 1.0) < 0.02), post.mean
+    assert np.all(np.abs(post.mean / t - 1.0) < 0.05), post.mean
 
 
 def test_a_human_recording_is_outside_the_papers_reach_and_inside_the_human_sets():
