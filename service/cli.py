@@ -1,6 +1,6 @@
 """``vfinfer`` command line: local inference, forward simulation, the model's reach, the service and the demo.
 
-The client commands (submit, list, status, cancel, fetch, diagnosis) are in ``cli_client``, video -> GAW in
+The client commands (submit, list, status, cancel, fetch, diagnosis, report) are in ``cli_client``, video -> GAW in
 ``cli_gaw``, the diagnosis in ``cli_diagnose``. Every user error is one ``error:`` line on stderr and exit 2
 (``cli_common``)."""
 from __future__ import annotations
@@ -419,6 +419,7 @@ app.command("status")(cli_client.status)
 app.command("cancel")(cli_client.cancel)
 app.command("fetch")(cli_client.fetch)
 app.command("diagnosis")(cli_client.diagnosis)
+app.command("report")(cli_client.report)
 
 
 def main() -> None:  # console-script entry point

@@ -1,4 +1,4 @@
-"""``vfinfer`` as a client of a running service: submit, list, status, cancel, fetch and diagnosis.
+"""``vfinfer`` as a client of a running service: submit, list, status, cancel, fetch, diagnosis and report links.
 
 A refused request (HTTP 4xx: unknown job, bad token, invalid job) is a user error: one ``error:`` line
 with the service's own message, exit 2. A service that cannot be reached is one too; a server error
@@ -277,3 +277,22 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
             console.print(f"wrote {out / 'diagnosis.json'}" + (" and diagnosis.png" if r.status_code == 200 else ""))
     if d["state"] == "failed":
         raise typer.Exit(1)
+
+
+def report(job_id: Annotated[Optional[str], typer.Argument(
+               help="a finished job's id (32 characters); without one, the link opens your jobs page")] = None,
+           url: Url = "http://127.0.0.1:8000", token: Token = None,
+           open_: Annotated[bool, typer.Option("--open", help="also open the link in the web browser")] = False
+           ) -> None:
+    """Print a short-lived signed link to a finished job's HTML report (or to your jobs page) that a browser
+    opens without the token; it stays valid for a few minutes."""
+    import webbrowser
+    if job_id is not None:
+        check_job_id(job_id)
+    with Service(url, token) as svc:
+        d = svc.json("POST", f"/jobs/{job_id}/report-link" if job_id is not None else "/page-link")
+        link = svc.url + d["url"]
+    typer.echo(link)
+    typer.echo(f"valid until {human_time(d['expires'])}", err=True)     # stdout holds only the link
+    if open_ and not webbrowser.open(link):
+        warn("no web browser could be started here; open the link above yourself")

@@ -12,8 +12,9 @@ from . import errors
 from .db import JobDB
 from .limits import BodySizeLimit
 from .manager import JobManager
-from .routers import diagnose, gaw, health, jobs
+from .routers import diagnose, gaw, health, jobs, pages
 from .settings import Settings
+from .signing import Signer
 
 
 def create_app(settings: Settings | None = None, client=None) -> FastAPI:
@@ -27,6 +28,7 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
         db = JobDB(s.db_path)
         manager = JobManager(s, db, cl)
         app.state.settings, app.state.manager = s, manager
+        app.state.signer = Signer.from_settings(s)   # keys the signed links of the HTML pages
         manager.start()
         diagnose.on_startup(app, manager)          # interrupted diagnoses go on
         try:
@@ -42,6 +44,7 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
     app = FastAPIOffline(title="vfinfer", version="0.1.0", lifespan=lifespan,
                          description="Distributed Bayesian inference of vocal-fold properties from GAWs")
     errors.install(app)
+    app.include_router(pages.router)
     app.include_router(health.router)
     app.include_router(jobs.router)
     app.include_router(gaw.router)

@@ -38,7 +38,19 @@ th{text-align:left;background:#f6f6f6}td.n{text-align:right;font-variant-numeric
 .ok{background:#eef8ee;border-left:4px solid #3a3;padding:.4em .8em;margin:.4em 0}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #eee}figcaption{font-size:.9em;color:#555}
 .muted{color:#666;font-size:.9em}
+code{background:#f3f3f3;padding:0 .25em}pre{background:#f3f3f3;padding:.6em;overflow-x:auto}
 """
+
+#: Headers of every HTML page the service serves: the page may load nothing from anywhere (its images are
+#: data URIs, its style inline) and run no script; a signed link in the address bar is never sent on as a
+#: referrer nor kept in a cache.
+PAGE_HEADERS = {
+    "Content-Security-Policy": "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; "
+                               "form-action 'none'; frame-ancestors 'none'",
+    "Referrer-Policy": "no-referrer",
+    "Cache-Control": "no-store",
+    "X-Content-Type-Options": "nosniff",
+}
 
 
 def _f(x, fmt: str = ".4g") -> str:
@@ -82,15 +94,24 @@ def _table(head: list[str], rows: list[list[str]], numeric_from: int = 1) -> str
     return f"<table><tr>{h}</tr>{body}</table>"
 
 
+def _head(title: str) -> str:
+    return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{escape(title)}</title>"
+            f"<meta name='viewport' content='width=device-width, initial-scale=1'><style>{_CSS}</style></head><body>")
+
+
+def html_page(title: str, body: str) -> str:
+    """A page in the report's style: ``title`` (escaped here) as its heading, then ``body`` (HTML, escaped by
+    the caller)."""
+    return f"{_head(title)}\n<h1>{escape(title)}</h1>\n{body}\n</body></html>"
+
+
 def render_report(summary: dict, images: dict[str, str], title: str, links: dict[str, str] | None = None,
                   timings: dict | None = None) -> str:
     """The report page. ``images``: figure name -> ``src`` (a relative file name or a data URI); ``links``:
     data file name -> ``href``; ``timings``: the run's cost (``timings.json`` of a local run, or the job's
     status timings)."""
     s = summary
-    parts = [f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{escape(title)}</title>"
-             f"<meta name='viewport' content='width=device-width, initial-scale=1'><style>{_CSS}</style></head><body>",
-             f"<h1>{escape(title)}</h1>",
+    parts = [_head(title), f"<h1>{escape(title)}</h1>",
              f"<p class='muted'>{escape(str(s.get('method', '?')).upper())} posterior from "
              f"{s.get('n_simulations', '?')} simulations ({s.get('n_failed', 0)} failed); "
              f"{s.get('n_samples', '?')} weighted draws, {s.get('n_resampled', '?')} resampled.</p>"]

@@ -7,7 +7,7 @@ from enum import Enum
 from typing import Annotated, Literal
 
 import numpy as np
-from fastapi import APIRouter, HTTPException, Query, Response, status
+from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from fastapi.responses import HTMLResponse, JSONResponse
 from pydantic import BaseModel, Field
 
@@ -18,6 +18,7 @@ from worker.reduce import compare_posteriors
 from ..access import done_job, own_job
 from ..db import ACTIVE
 from ..deps import JOB_ID_RE, JobIdDep, ManagerDep, SettingsDep, UserDep
+from ..signing import Exp, LinkError, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, link_refused, report_scope
 
 router = APIRouter(tags=["jobs"])
 
@@ -166,9 +167,27 @@ def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDe
 
 
 @router.get("/jobs/{job_id}/report", response_class=HTMLResponse,
-            summary="A finished job's report as one self-contained HTML page (figures embedded)")
-def get_report(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> HTMLResponse:
-    from ..report import FIGURES, data_uri, render_report
+            summary="A finished job's report as one self-contained HTML page (figures embedded); opens with the "
+                    "bearer token or with a signed link from POST /jobs/{id}/report-link",
+            responses={401: {"description": "neither a bearer token nor a signed link"},
+                       403: {"description": "a signed link that is expired, altered or made for another page"}})
+def get_report(job_id: JobIdDep, manager: ManagerDep, signer: SignerDep, user: OptionalUserDep,
+               exp: Exp = None, sig: Sig = None) -> HTMLResponse:
+    from ..report import FIGURES, PAGE_HEADERS, data_uri, render_report
+    if user is None:
+        if exp is None and sig is None:
+            raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing bearer token or signed link (POST "
+                                "/jobs/{id}/report-link, or 'vfinfer report ID', makes a link a browser can open)",
+                                headers={"WWW-Authenticate": "Bearer"})
+        try:
+            signer.verify(report_scope(job_id), exp, sig)
+        except LinkError as exc:
+            raise link_refused(exc) from None
+        # the signature names this job, and only its owner was given one: read the page as the owner
+        row = manager.db.get(job_id)
+        if row is None:
+            raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
+        user = row["owner"]
     rec = done_job(manager, job_id, user)
     path = manager.store_path(rec["id"])
     summary = st.read_summary(path)
@@ -177,7 +196,17 @@ def get_report(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> HTMLResp
     images = {n: data_uri(b) for n in FIGURES if (b := st.read_blob(path, n)) is not None}
     timings = {"queued_s": (rec["started"] or rec["created"]) - rec["created"],
                "running_s": ((rec["finished"] or time.time()) - rec["started"]) if rec["started"] else None}
-    return HTMLResponse(render_report(summary, images, f"vfinfer job {rec['id']}", timings=timings))
+    return HTMLResponse(render_report(summary, images, f"vfinfer job {rec['id']}", timings=timings),
+                        headers=PAGE_HEADERS)
+
+
+@router.post("/jobs/{job_id}/report-link", response_model=LinkOut,
+             summary="A short-lived signed link to a finished job's HTML report that a browser opens without "
+                     "the bearer token")
+def report_link(job_id: JobIdDep, user: UserDep, manager: ManagerDep, signer: SignerDep,
+                request: Request) -> LinkOut:
+    rec = done_job(manager, job_id, user)
+    return link_out(request, signer.sign(report_scope(rec["id"]), f"/jobs/{rec['id']}/report"))
 
 
 @router.delete("/jobs/{job_id}", summary="Cancel a queued or running job (a finished job keeps its state)")

@@ -231,10 +231,16 @@ DIAGNOSIS = _client(["diagnosis"], job=True) + [(n, ["diagnosis", JOB, *a], nd) 
     ("refit-few", ["--start", "--refit-particles", "1"], "--refit-particles"),
     ("max-refits-neg", ["--start", "--max-refits", "-1"], "--max-refits"),
     ("seed-neg", ["--start", "--seed", "-5"], "--seed"), ("out-is-file", ["--out", "{d}/afile.txt"], "not a folder")]]
+# JOB_ID is optional here (without one the link is to the jobs page), so no "missing-id" case
+REPORT = [c for c in _client(["report"], job=True) if c[0] != "missing-id"] + [
+    ("open-value", ["report", JOB, "--open=yes"], "does not take a value"),
+    ("two-ids", ["report", JOB, JOB], "unexpected"),
+    ("no-id-unreachable", ["report"], "cannot reach"), ("no-id-ftp-url", ["report", "--url", "ftp://host"], "--url"),
+    ("no-id-blank-token", ["report", "--token", " "], "token")]
 
 TABLES = {"infer": INFER, "submit": SUBMIT, "simulate": SIMULATE, "gaw": GAW_CMD, "diagnose": DIAGNOSE,
           "reach": REACH, "serve": SERVE, "demo": DEMO, "status": STATUS, "list": LIST, "cancel": CANCEL,
-          "fetch": FETCH, "diagnosis": DIAGNOSIS}
+          "fetch": FETCH, "diagnosis": DIAGNOSIS, "report": REPORT}
 CASES = [pytest.param(cmd, args, needle, id=f"{cmd}-{name}") for cmd, table in TABLES.items()
          for name, args, needle in table]
 
