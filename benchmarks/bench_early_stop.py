@@ -7,6 +7,10 @@ time of both runs, draws stopped that phonate in the full run (must be 0; phonat
 ensembles measure it, vfcore.inference.reach.draw_measures), the largest GAW difference of a stopped draw
 (mm^2), and the largest change of the log-likelihood of any draw against a Table 3 twin recording
 (vfcore.inference.problem.score_results, sigma_e = 1 mm^2, the default alignment).
+Then the posterior of a fixed twin and seed with early_stop off and on: a Table 3 twin (coarse mesh, the
+same config), E_body, E_cover and p_sub free in their Table 2 ranges (the rest at Table 3), SMC with 100
+particles and seed 1: simulations, wall time, and the largest change of a posterior mean and sd in units
+of the posterior sd.
 Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_early_stop.py [n_draws]
 """
 from __future__ import annotations
@@ -22,7 +26,7 @@ import numpy as np  # noqa: E402
 from vfcore import TABLE3, SimConfig, simulate  # noqa: E402
 from vfcore.batch import simulate_many  # noqa: E402
 from vfcore.data import DATA_DIR  # noqa: E402
-from vfcore.inference import Problem  # noqa: E402
+from vfcore.inference import TABLE2_BOUNDS, Prior, Problem, smc  # noqa: E402
 from vfcore.inference.problem import score_results  # noqa: E402
 from vfcore.inference.reach import ReachEnsemble, draw_measures  # noqa: E402
 
@@ -67,6 +71,25 @@ def main(n: int) -> None:
     print(f"| largest GAW change of a stopped draw | {dg:.2e} mm^2 |")
     print(f"| largest log-likelihood change (twin at Table 3) | {dll.max():.2e} nats "
           f"(over {fin.sum()} draws with finite log-likelihood) |")
+    print()
+    free = ("E_body", "E_cover", "p_sub")
+    prior = Prior({k: TABLE2_BOUNDS[k] for k in free}, {k: v for k, v in TABLE3.as_dict().items() if k not in free})
+    post = {}
+    for flag in (False, True):
+        prob = Problem(obs_gaw=twin.gaw, fps=twin.fps, prior=prior, sigma_e=1.0, config=base.replace(early_stop=flag))
+        t = time.perf_counter()
+        p = smc(prob, n_particles=100, seed=1)
+        post[flag] = (p, time.perf_counter() - t)
+    (a, ta), (b, tb) = post[False], post[True]
+    sa, sb = a.samples, b.samples
+    dm = np.max(np.abs(sb.mean(axis=0) - sa.mean(axis=0)) / sa.std(axis=0))
+    ds = np.max(np.abs(sb.std(axis=0) / sa.std(axis=0) - 1.0))
+    print("| twin SMC (3 free, 100 particles, seed 1) | off | on |\n|---|---|---|")
+    print(f"| simulations | {a.n_simulations} | {b.n_simulations} |")
+    print(f"| wall time | {ta:.1f} s | {tb:.1f} s |")
+    print(f"| posterior means | {np.round(sa.mean(axis=0), 3).tolist()} | {np.round(sb.mean(axis=0), 3).tolist()} |")
+    print(f"| largest change of a mean / an sd | {dm:.2e} sd / {ds:.2e} |")
+    print(f"| identical samples | {np.array_equal(sa, sb)} |")
 
 
 if __name__ == "__main__":
