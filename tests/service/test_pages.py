@@ -155,7 +155,7 @@ def test_only_the_owner_of_a_finished_job_gets_a_link(svc):
     assert svc.http.post(f"/jobs/{svc.jobs['alice']}/report-link").status_code == 401
     r = svc.http.post(f"/jobs/{svc.failed}/report-link", headers=auth("alice"))
     assert r.status_code == 409 and "failed" in r.json()["detail"]
-    assert svc.http.post("/jobs/../report-link", headers=auth("alice")).status_code == 404
+    assert svc.http.post("/jobs/%2E%2E/report-link", headers=auth("alice")).status_code == 404
 
 
 # ------------------------------------------------------------------------------------ the jobs page
