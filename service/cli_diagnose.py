@@ -189,7 +189,7 @@ def print_report(d: dict) -> None:
 
 def diagnose_cmd(
         gaw: Annotated[Path, typer.Argument(help="GAW file (CSV as written by 'vfinfer simulate'/'gaw', NPY, NPZ)")],
-        out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png)")],
+        out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png, index.html)")],
         fps: Annotated[Optional[float], typer.Option(parser=POSITIVE, help="camera frame rate, frames/s, if the "
                                                                                 "file does not say")] = None,
         estimate: Annotated[str, typer.Option(help="comma-separated parameters to estimate")] = "E_body,E_cover,p_sub",
@@ -269,9 +269,20 @@ def diagnose_cmd(
     out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis.json").write_text(json.dumps(d, indent=1))
     plot_diagnosis(report, problem, out / "diagnosis.png")
+    page = write_page(out, d, gaw, problem, sigma_e, noise, mesh)
     if resume:
         import shutil
         shutil.rmtree(store, ignore_errors=True)
     print_report(d)
     console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
                   f"({time.perf_counter() - t0:.1f} s)")
+    console.print(f"report: {page.resolve()}", highlight=False, soft_wrap=True)
+
+
+def write_page(out: Path, d: dict, gaw: Path, problem, sigma_e: float, noise: str, mesh: str) -> Path:
+    """``out/index.html``: the diagnosis report, with the recording and the settings it was run with."""
+    from .report_diagnose import write_diagnosis_report
+    source = {"recording": gaw.name, "camera frame rate": f"{problem.fps:g} frames/s",
+              "estimated": ", ".join(problem.prior.names), "mesh": mesh,
+              "noise": f"{noise}" + (f", sigma_e = {sigma_e:g} mm²" if noise == "fixed" else "")}
+    return write_diagnosis_report(out, d, title=f"vfinfer diagnosis of {gaw.name}", source=source)

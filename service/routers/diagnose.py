@@ -1,7 +1,8 @@
 """Model diagnosis of a finished job: ``POST /jobs/{id}/diagnose`` starts
 :func:`vfcore.diagnose.pipeline.diagnose` on the job's problem in a background thread (its
 simulations run on the service's Dask cluster); ``GET /jobs/{id}/diagnosis`` and
-``GET /jobs/{id}/diagnosis/figure`` read the result.
+``GET /jobs/{id}/diagnosis/figure`` read the result; ``GET /jobs/{id}/diagnosis/report`` shows it as an HTML
+page (bearer token, or a signed link from ``POST /jobs/{id}/diagnosis/report-link``).
 
 Ownership rules are those of the other job endpoints (another user's job answers 404).  The
 result lies next to the job's store (``<id>.diagnosis.json`` / ``.png``; a failure leaves
@@ -28,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 from fastapi import APIRouter, Body, HTTPException, Request, Response, status
+from fastapi.responses import HTMLResponse
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, MAX_REFITS, REFIT_PARTICLES
@@ -35,6 +37,7 @@ from worker.jobspec import JobSpec
 
 from ..access import done_job, own_job
 from ..deps import JobIdDep, ManagerDep, UserDep
+from ..signing import Exp, LinkError, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, link_refused
 
 log = logging.getLogger("vfinfer.diagnose")
 
@@ -449,3 +452,62 @@ def get_diagnosis_figure(job_id: JobIdDep, user: UserDep, manager: ManagerDep, r
     if running or not (js.exists() and png.exists()):
         raise HTTPException(status.HTTP_404_NOT_FOUND, "diagnosis figure not available")
     return Response(png.read_bytes(), media_type="image/png")
+
+
+def diagnosis_report_scope(job_id: str) -> str:
+    """The signed-link scope of a job's diagnosis page: another page than the job's report, so a link to one
+    never opens the other."""
+    return f"diagnosis-report/{job_id}"
+
+
+@router.get("/jobs/{job_id}/diagnosis/report", response_class=HTMLResponse,
+            summary="A finished diagnosis as one self-contained HTML page (figure embedded): verdict, located "
+                    "mismatch, ranked catalogue entries, cost; opens with the bearer token or with a signed link "
+                    "from POST /jobs/{id}/diagnosis/report-link",
+            responses={401: {"description": "neither a bearer token nor a signed link"},
+                       403: {"description": "a signed link that is expired, altered or made for another page"},
+                       404: {"description": "no such job of yours, or no finished diagnosis of it"}})
+def get_diagnosis_report(job_id: JobIdDep, manager: ManagerDep, signer: SignerDep, user: OptionalUserDep,
+                         request: Request, exp: Exp = None, sig: Sig = None) -> HTMLResponse:
+    from ..report import PAGE_HEADERS, data_uri
+    from ..report_diagnose import render_diagnosis_report
+    if user is None:
+        if exp is None and sig is None:
+            raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing bearer token or signed link (POST "
+                                "/jobs/{id}/diagnosis/report-link makes a link a browser can open)",
+                                headers={"WWW-Authenticate": "Bearer"})
+        try:
+            signer.verify(diagnosis_report_scope(job_id), exp, sig)
+        except LinkError as exc:
+            raise link_refused(exc) from None
+        # the signature names this job's diagnosis, and only its owner was given one: read it as the owner
+        row = manager.db.get(job_id)
+        if row is None:
+            raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
+        user = row["owner"]
+    jid = _done_diagnosis(manager, job_id, user, request)
+    js, png, _ = _paths(manager, jid)
+    d = json.loads(js.read_text())
+    fig = data_uri(png.read_bytes()) if png.exists() else None
+    return HTMLResponse(render_diagnosis_report(d, fig, f"vfinfer diagnosis of job {jid}", source={"job": jid}),
+                        headers=PAGE_HEADERS)
+
+
+@router.post("/jobs/{job_id}/diagnosis/report-link", response_model=LinkOut,
+             summary="A short-lived signed link to a finished diagnosis's HTML page that a browser opens without "
+                     "the bearer token")
+def diagnosis_report_link(job_id: JobIdDep, user: UserDep, manager: ManagerDep, signer: SignerDep,
+                          request: Request) -> LinkOut:
+    jid = _done_diagnosis(manager, job_id, user, request)
+    return link_out(request, signer.sign(diagnosis_report_scope(jid), f"/jobs/{jid}/diagnosis/report"))
+
+
+def _done_diagnosis(manager, job_id: str, user: str, request: Request) -> str:
+    """The id of ``user``'s job whose diagnosis is finished; 404 otherwise (as the figure)."""
+    jid = own_job(manager, job_id, user)["id"]
+    reg = _registry(request)
+    with reg.lock:
+        running = jid in reg.running
+    if running or not _paths(manager, jid)[0].exists():
+        raise HTTPException(status.HTTP_404_NOT_FOUND, "no finished diagnosis of this job")
+    return jid
