@@ -230,8 +230,8 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
               seed: Annotated[Optional[int], typer.Option(min=0, help="with --start: random seed")] = None,
               wait: Annotated[bool, typer.Option(help="poll, printing each new stage, until it ends")] = False,
               cancel: Annotated[bool, typer.Option(help="cancel the running diagnosis (DELETE)")] = False,
-              out: Annotated[Optional[Path], typer.Option(help="when done: write diagnosis.json and "
-                                                               "diagnosis.png here and print the report")] = None,
+              out: Annotated[Optional[Path], typer.Option(help="when done: write diagnosis.json, diagnosis.png "
+                                                               "and index.html here and print the report")] = None,
               ) -> None:
     """A job's diagnosis on a running service: start it, follow it, cancel it, fetch it
     (POST/GET/DELETE /jobs/{id}/diagnosis; the same pipeline as ``vfinfer diagnose``)."""
@@ -273,8 +273,11 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
             r = svc.request("GET", f"/jobs/{job_id}/diagnosis/figure", ok_missing=True)
             if r.status_code == 200:
                 (out / "diagnosis.png").write_bytes(r.content)
+            from .report_diagnose import write_diagnosis_report
+            page = write_diagnosis_report(out, d["report"], title=f"vfinfer diagnosis of job {job_id}")
             print_report(d["report"])
-            console.print(f"wrote {out / 'diagnosis.json'}" + (" and diagnosis.png" if r.status_code == 200 else ""))
+            console.print(f"wrote {out / 'diagnosis.json'}" + (", diagnosis.png" if r.status_code == 200 else "")
+                          + f"; report: {page}", highlight=False)
     if d["state"] == "failed":
         raise typer.Exit(1)
 

@@ -153,6 +153,8 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
     assert "diagnosis done" in r.output and "missing physics: leak" in r.output and "time by stage" in r.output
     assert json.loads((out / "diagnosis.json").read_text())["winner"] == "leak"
     assert (out / "diagnosis.png").read_bytes().startswith(b"\x89PNG")
+    page = (out / "index.html").read_text()                          # the offline report, figure linked relatively
+    assert "leak" in page and "src='diagnosis.png'" in page and "http" not in page.split("<body")[1]
     r = CliRunner().invoke(app, ["diagnosis", jid, "--cancel"], env=env)
     assert r.exit_code == 2 and "409" in r.output, r.output           # nothing running
     r = CliRunner().invoke(app, ["diagnosis", jid, "--particles", "12"], env=env)
