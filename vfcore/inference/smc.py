@@ -231,6 +231,11 @@ class SMCSampler:
         log_alpha = np.where(np.isnan(log_alpha), np.inf, log_alpha)  # old -inf, new finite
         u = self._rng(_ACCEPT, self._step).random(idx.size)
         acc = np.log(u) < log_alpha
+        self._finish_move(self._accept(idx, props, acc, ev))
+
+    def _accept(self, idx, props, acc, ev) -> np.ndarray:
+        """Move the particles ``idx[acc]`` to their proposals (and evaluations); clear the pending batch.
+        Returns the (n,) accepted mask."""
         accepted = np.zeros(self.n, bool)
         accepted[idx[acc]] = True
         th = self.theta.copy()
@@ -238,7 +243,7 @@ class SMCSampler:
         self.theta = th
         self.ev = self.ev.scatter(idx[acc], ev.take(np.flatnonzero(acc)))
         self._pending = self._pending_idx = None
-        self._finish_move(accepted)
+        return accepted
 
     # ------------------------------------------------------------------ delayed acceptance
     def _tell_screen(self, ll_cheap: np.ndarray) -> None:
@@ -279,18 +284,11 @@ class SMCSampler:
         log_a2 = np.where(np.isnan(log_a2), np.inf, log_a2)
         u = self._rng(_ACCEPT, 2 * self._step + 2).random(idx.size)
         acc = np.log(u) < log_a2
-        accepted = np.zeros(self.n, bool)
-        accepted[idx[acc]] = True
-        th = self.theta.copy()
-        th[idx[acc]] = props[acc]
-        self.theta = th
         lc = self.ll_cheap.copy()
         lc[idx[acc]] = lc_new[acc]
         self.ll_cheap = lc
-        self.ev = self.ev.scatter(idx[acc], ev.take(np.flatnonzero(acc)))
-        self._pending = self._pending_idx = None
         self.stage = "screen"
-        self._finish_move(accepted)
+        self._finish_move(self._accept(idx, props, acc, ev))
 
     # ------------------------------------------------------------------ internals
     def _advance(self) -> None:

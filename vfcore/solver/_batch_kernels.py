@@ -48,6 +48,18 @@ def _move_column(x, src, dst) -> None:
 
 
 @njit(cache=True)
+def _move_sample(kval, mval, dval, Lx, u, v, a, src, dst) -> None:
+    """Move sample ``src``'s columns of every (., B) array the vectorised loops read into slot ``dst``."""
+    _move_column(kval, src, dst)
+    _move_column(mval, src, dst)
+    _move_column(dval, src, dst)
+    _move_column(Lx, src, dst)
+    _move_column(u, src, dst)
+    _move_column(v, src, dst)
+    _move_column(a, src, dst)
+
+
+@njit(cache=True)
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
                    sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
                    width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out,
@@ -118,13 +130,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
         if status[b] == 0:
             orig[nb] = b
             if nb != b:
-                _move_column(kval, b, nb)
-                _move_column(mval, b, nb)
-                _move_column(dval, b, nb)
-                _move_column(Lx, b, nb)
-                _move_column(u, b, nb)
-                _move_column(v, b, nb)
-                _move_column(a, b, nb)
+                _move_sample(kval, mval, dval, Lx, u, v, a, b, nb)
             nb += 1
     ntr = 0
     for k in range(1, n_steps + 1):
@@ -278,13 +284,7 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
                 if leave[s]:
                     last = nb - 1
                     if last != s:
-                        _move_column(kval, last, s)
-                        _move_column(mval, last, s)
-                        _move_column(dval, last, s)
-                        _move_column(Lx, last, s)
-                        _move_column(u, last, s)
-                        _move_column(v, last, s)
-                        _move_column(a, last, s)
+                        _move_sample(kval, mval, dval, Lx, u, v, a, last, s)
                         orig[s] = orig[last]
                         leave[s] = leave[last]
                     nb -= 1

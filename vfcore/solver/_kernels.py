@@ -169,6 +169,31 @@ def spd_solve_lower(S, rhs, k) -> None:
 
 
 @njit(cache=True)
+def _active_list(active, idx) -> int:
+    """Write the indices of the active nodes into ``idx``; return their number."""
+    k = 0
+    for j in range(active.size):
+        if active[j]:
+            idx[k] = j
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def _apply_multipliers(u, u0, G, idx, x, lam, k) -> None:
+    """lam = the k multipliers ``x`` on the nodes ``idx`` (0 elsewhere); u = u0 + G[:, idx] x."""
+    for j in range(lam.size):
+        lam[j] = 0.0
+    for a in range(k):
+        lam[idx[a]] = x[a]
+    for i in range(u.size):
+        t = u0[i]
+        for a in range(k):
+            t += G[i, idx[a]] * x[a]
+        u[i] = t
+
+
+@njit(cache=True)
 def contact_correct(u, sdx, sX, x_mid, G, lam, active, max_iter):
     """Enforce x <= x_mid on free-surface nodes with Lagrange multipliers.
 
@@ -205,26 +230,14 @@ def contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, u0, S, rhs, 
     for i in range(n):
         u0[i] = u[i]
     for it in range(max_iter):
-        k = 0
-        for j in range(m):
-            if active[j]:
-                idx[k] = j
-                k += 1
+        k = _active_list(active, idx)
         for a in range(k):
             ja = idx[a]
             rhs[a] = (x_mid - sX[ja]) - u0[sdx[ja]]
             for b in range(a + 1):
                 S[a, b] = G[sdx[ja], idx[b]]
         spd_solve_lower(S, rhs, k)
-        for j in range(m):
-            lam[j] = 0.0
-        for a in range(k):
-            lam[idx[a]] = rhs[a]
-        for i in range(n):
-            t = u0[i]
-            for a in range(k):
-                t += G[i, idx[a]] * rhs[a]
-            u[i] = t
+        _apply_multipliers(u, u0, G, idx, rhs, lam, k)
         changed = False
         for j in range(m):
             if sdx[j] < 0:
@@ -281,11 +294,7 @@ def contact_layer_ws(u, un, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, max_i
     for i in range(n):
         u0[i] = u[i]
     for it in range(max_iter):
-        k = 0
-        for j in range(m):
-            if active[j]:
-                idx[k] = j
-                k += 1
+        k = _active_list(active, idx)
         for a in range(k):
             ja = idx[a]
             rhs[a] = -(u0[sdx[ja]] + bb[ja] / keff[ja])
@@ -293,15 +302,7 @@ def contact_layer_ws(u, un, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, max_i
                 S[a, b] = G[sdx[ja], idx[b]]
             S[a, a] += 1.0 / (wl * keff[ja])
         spd_solve_lower(S, rhs, k)
-        for j in range(m):
-            lam[j] = 0.0
-        for a in range(k):
-            lam[idx[a]] = rhs[a]
-        for i in range(n):
-            t = u0[i]
-            for a in range(k):
-                t += G[i, idx[a]] * rhs[a]
-            u[i] = t
+        _apply_multipliers(u, u0, G, idx, rhs, lam, k)
         changed = False
         for j in range(m):
             d = sdx[j]
