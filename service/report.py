@@ -53,7 +53,7 @@ PAGE_HEADERS = {
 }
 
 
-def _f(x, fmt: str = ".4g") -> str:
+def fmt_num(x, fmt: str = ".4g") -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "–"
     return format(x, fmt)
@@ -77,24 +77,24 @@ def _diagnostics(s: dict) -> list[tuple[str, str]]:
                                                "the importance weights are unreliable (k̂ ≥ 0.7).")))
     le, se = s.get("log_evidence"), s.get("log_evidence_se")
     if le is not None:
-        out.append(("ok", f"Log evidence {le:.2f} ± {_f(se, '.2f')} (compares models fitted to the same recording)."))
+        out.append(("ok", f"Log evidence {le:.2f} ± {fmt_num(se, '.2f')} (compares models fitted to the same recording)."))
     nc = s.get("noise_check")
     if nc and nc.get("residual_rms"):
         r = nc["residual_rms"]
-        out.append(("ok", f"Residual RMS of the fit {_f(r.get('q50'), '.3g')} mm² (90 %: {_f(r.get('q05'), '.3g')} – "
-                          f"{_f(r.get('q95'), '.3g')}); noise model: {escape(str(nc.get('noise')))}, "
-                          f"σ_e = {_f(nc.get('sigma_e'), '.3g')} mm²."))
+        out.append(("ok", f"Residual RMS of the fit {fmt_num(r.get('q50'), '.3g')} mm² (90 %: {fmt_num(r.get('q05'), '.3g')} – "
+                          f"{fmt_num(r.get('q95'), '.3g')}); noise model: {escape(str(nc.get('noise')))}, "
+                          f"σ_e = {fmt_num(nc.get('sigma_e'), '.3g')} mm²."))
     return out
 
 
-def _table(head: list[str], rows: list[list[str]], numeric_from: int = 1) -> str:
+def html_table(head: list[str], rows: list[list[str]], numeric_from: int = 1) -> str:
     h = "".join(f"<th>{escape(c)}</th>" for c in head)
     body = "".join("<tr>" + "".join(f"<td class='n'>{c}</td>" if i >= numeric_from else f"<td>{c}</td>"
                                      for i, c in enumerate(r)) + "</tr>" for r in rows)
     return f"<table><tr>{h}</tr>{body}</table>"
 
 
-def _head(title: str) -> str:
+def page_head(title: str) -> str:
     return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{escape(title)}</title>"
             f"<meta name='viewport' content='width=device-width, initial-scale=1'><style>{_CSS}</style></head><body>")
 
@@ -102,7 +102,7 @@ def _head(title: str) -> str:
 def html_page(title: str, body: str) -> str:
     """A page in the report's style: ``title`` (escaped here) as its heading, then ``body`` (HTML, escaped by
     the caller)."""
-    return f"{_head(title)}\n<h1>{escape(title)}</h1>\n{body}\n</body></html>"
+    return f"{page_head(title)}\n<h1>{escape(title)}</h1>\n{body}\n</body></html>"
 
 
 def render_report(summary: dict, images: dict[str, str], title: str, links: dict[str, str] | None = None,
@@ -111,7 +111,7 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
     data file name -> ``href``; ``timings``: the run's cost (``timings.json`` of a local run, or the job's
     status timings)."""
     s = summary
-    parts = [_head(title), f"<h1>{escape(title)}</h1>",
+    parts = [page_head(title), f"<h1>{escape(title)}</h1>",
              f"<p class='muted'>{escape(str(s.get('method', '?')).upper())} posterior from "
              f"{s.get('n_simulations', '?')} simulations ({s.get('n_failed', 0)} failed); "
              f"{s.get('n_samples', '?')} weighted draws, {s.get('n_resampled', '?')} resampled.</p>"]
@@ -121,38 +121,38 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
     if "gaw_fit" in images:
         parts.append(f"<h2>Recording and fit</h2><figure><img src='{escape(images['gaw_fit'])}' alt='GAW fit'>"
                      f"<figcaption>{FIGURES['gaw_fit']}</figcaption></figure>")
-    rows = [[escape(r["name"]), escape(r.get("unit", "")), _f(r["mean"], ".5g"), _f(r["sd"], ".4g"),
-             _f(r.get("pct"), ".1f"), f"{_f(r['q05'], '.5g')} – {_f(r['q95'], '.5g')}"] for r in s.get("table", [])]
-    parts.append("<h2>Posterior</h2>" + _table(["parameter", "unit", "mean", "sd", "sd, % of mean", "90 % interval"],
+    rows = [[escape(r["name"]), escape(r.get("unit", "")), fmt_num(r["mean"], ".5g"), fmt_num(r["sd"], ".4g"),
+             fmt_num(r.get("pct"), ".1f"), f"{fmt_num(r['q05'], '.5g')} – {fmt_num(r['q95'], '.5g')}"] for r in s.get("table", [])]
+    parts.append("<h2>Posterior</h2>" + html_table(["parameter", "unit", "mean", "sd", "sd, % of mean", "90 % interval"],
                                                rows, numeric_from=2))
     if "corner" in images:
         parts.append(f"<figure><img src='{escape(images['corner'])}' alt='posterior pair plot'>"
                      f"<figcaption>{FIGURES['corner']}</figcaption></figure>")
     pred = s.get("predictive") or {}
     if pred:
-        rows = [[escape(k.replace("_", " ")), escape(q.get("unit", "")), _f(q.get("mean")), _f(q.get("sd"), ".3g"),
-                 f"{_f(q.get('q05'))} – {_f(q.get('q95'))}"
+        rows = [[escape(k.replace("_", " ")), escape(q.get("unit", "")), fmt_num(q.get("mean")), fmt_num(q.get("sd"), ".3g"),
+                 f"{fmt_num(q.get('q05'))} – {fmt_num(q.get('q95'))}"
                  + ("" if q.get("converged", True) else " (depends on mesh and time step)")]
                 for k, q in pred.items()]
         parts.append("<h2>Flow and contact pressure</h2>"
-                     + _table(["quantity", "unit", "mean", "sd", "90 % interval"], rows, numeric_from=2))
+                     + html_table(["quantity", "unit", "mean", "sd", "90 % interval"], rows, numeric_from=2))
     if "contact_pressure" in images:
         parts.append(f"<figure><img src='{escape(images['contact_pressure'])}' alt='flow and contact pressure'>"
                      f"<figcaption>{FIGURES['contact_pressure']}</figcaption></figure>")
     ident = s.get("identifiability") or {}
     combos = ident.get("combinations") or []
     if combos:
-        rows = [[escape(c["label"]), escape(c.get("unit", "")), _f(c.get("value"), ".5g"),
-                 f"{_f(c.get('q05'))} – {_f(c.get('q95'))}", _f(c.get("ratio"), ".2f")] for c in combos]
+        rows = [[escape(c["label"]), escape(c.get("unit", "")), fmt_num(c.get("value"), ".5g"),
+                 f"{fmt_num(c.get('q05'))} – {fmt_num(c.get('q95'))}", fmt_num(c.get("ratio"), ".2f")] for c in combos]
         parts.append("<h2>What a GAW determines</h2><p class='muted'>A GAW cannot fix the common scale of the "
                      "stiffnesses, pressure, density and viscosity; these combinations are unchanged by it "
                      "(ratio: posterior sd / prior sd of the log, 0 = fully determined, 1 = only the prior).</p>"
-                     + _table(["combination", "unit", "value", "90 % interval", "ratio"], rows, numeric_from=2))
+                     + html_table(["combination", "unit", "value", "90 % interval", "ratio"], rows, numeric_from=2))
     diag = _diagnostics(s)
     if diag:
         parts.append("<h2>Sampler diagnostics</h2>" + "".join(f"<div class='{c}'>{t}</div>" for c, t in diag))
     if timings:
-        cost = ", ".join(f"{escape(k.replace('_', ' '))} {_f(v, '.1f')}" for k, v in timings.items()
+        cost = ", ".join(f"{escape(k.replace('_', ' '))} {fmt_num(v, '.1f')}" for k, v in timings.items()
                          if isinstance(v, (int, float)) and not isinstance(v, bool))
         parts.append(f"<h2>Cost</h2><p>{cost}</p>")
     if links:

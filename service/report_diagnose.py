@@ -14,7 +14,7 @@ import math
 from html import escape
 from pathlib import Path
 
-from .report import _f, _head, _table
+from .report import fmt_num, html_table, page_head
 
 #: The diagnosis figure, with its caption.
 FIGURE_CAPTION = ("Top: the recording (dots), the base fit and, when physics is named, the extended fit, each with "
@@ -73,14 +73,14 @@ def _verdict(d: dict) -> str:
     a = (d.get("refits") or {}).get(win) or {}
     phys = d.get("physics") or win
     gain = a.get("rms_improvement", row.get("rms_gain"))
-    ev = (f"dlogZ = {_f(_num(row.get('delta')), '.2f')} ± {_f(_num(row.get('delta_se')), '.2f')} nats against "
-          f"{escape(str(d.get('reference') or 'base'))}; residual RMS {_f(_num((d.get('base') or {}).get('residual_rms')), '.3g')}"
-          f" → {_f(_num(a.get('residual_rms')), '.3g')} mm² ({_pct(gain)} lower)")
+    ev = (f"dlogZ = {fmt_num(_num(row.get('delta')), '.2f')} ± {fmt_num(_num(row.get('delta_se')), '.2f')} nats against "
+          f"{escape(str(d.get('reference') or 'base'))}; residual RMS {fmt_num(_num((d.get('base') or {}).get('residual_rms')), '.3g')}"
+          f" → {fmt_num(_num(a.get('residual_rms')), '.3g')} mm² ({_pct(gain)} lower)")
     if _num(row.get("residual_removed")) is not None:
         ev += f"; removes {_pct(row['residual_removed'])} of the localised residual"
     rivals = d.get("rivals") or []
     riv = ("<p>The evidence cannot tell it from: " + ", ".join(
-        f"{escape(str(r.get('physics')))} ({_f(_num(r.get('gap')), '.1f')} ± {_f(_num(r.get('se')), '.1f')} nats below)"
+        f"{escape(str(r.get('physics')))} ({fmt_num(_num(r.get('gap')), '.1f')} ± {fmt_num(_num(r.get('se')), '.1f')} nats below)"
         for r in rivals) + ".</p>") if rivals else ""
     model = f" (entry <code>{escape(win)}</code>)" if phys != win else ""
     return (f"<div class='ok'><strong>Missing physics: {escape(str(phys))}</strong>{model}<br>{ev}.</div>{riv}"
@@ -92,12 +92,12 @@ def _mismatch(b: dict, d: dict) -> str:
     dom = b.get("dominant_phase")
     where = (f"concentrated in the <strong>{escape(str(dom))}</strong> phase" if dom in _PHASES
              else "spread over the whole cycle")
-    parts.append(f"<p>The base fit's residual (RMS {_f(_num(b.get('residual_rms')), '.3g')} mm²) is {where}.</p>")
+    parts.append(f"<p>The base fit's residual (RMS {fmt_num(_num(b.get('residual_rms')), '.3g')} mm²) is {where}.</p>")
     prms, conc = b.get("phase_rms") or {}, b.get("concentration") or {}
     if prms:
-        rows = [[escape(p) + (" ◀" if p == dom else ""), _f(_num(prms.get(p)), ".3g"), _f(_num(conc.get(p)), ".2f")]
+        rows = [[escape(p) + (" ◀" if p == dom else ""), fmt_num(_num(prms.get(p)), ".3g"), fmt_num(_num(conc.get(p)), ".2f")]
                 for p in _PHASES if p in prms]
-        parts.append(_table(["cycle phase", "residual RMS (mm²)", "concentration (> 1: more than its share)"], rows))
+        parts.append(html_table(["cycle phase", "residual RMS (mm²)", "concentration (> 1: more than its share)"], rows))
     meas = b.get("measures") or {}
     if meas:
         win = d.get("winner")
@@ -109,17 +109,17 @@ def _mismatch(b: dict, d: dict) -> str:
         pv = b.get("pvalues") or {}
         for k, m in meas.items():
             m = m or {}
-            row = [escape(k.replace("_", " ")), _f(_num(m.get("observed"))), _f(_num(m.get("predicted"))), _p(pv.get(k))]
+            row = [escape(k.replace("_", " ")), fmt_num(_num(m.get("observed"))), fmt_num(_num(m.get("predicted"))), _p(pv.get(k))]
             if a:
                 am = (a.get("measures") or {}).get(k) or {}
-                row += [_f(_num(am.get("predicted"))), _p((a.get("pvalues") or {}).get(k))]
+                row += [fmt_num(_num(am.get("predicted"))), _p((a.get("pvalues") or {}).get(k))]
             rows.append(row)
             if (_num(pv.get(k)) or 1.0) < 0.05:
                 off.append(k.replace("_", " "))
-        noise = _f(_num(b.get("predictive_noise_sd")), ".3g")
+        noise = fmt_num(_num(b.get("predictive_noise_sd")), ".3g")
         said = (f"The base fit cannot reproduce: <strong>{escape(', '.join(off))}</strong>." if off else
                 "Every measure of the recording lies within what the base fit's replicated recordings show.")
-        parts.append(f"<p>{said}</p>" + _table(head, rows)
+        parts.append(f"<p>{said}</p>" + html_table(head, rows)
                      + f"<p class='muted'>Two-sided posterior-predictive p-values (* p &lt; 0.05); replicated "
                        f"recordings carry noise sd {noise} mm², estimated from the recording.</p>")
     return "".join(parts)
@@ -147,7 +147,7 @@ def _entries(d: dict) -> str:
             ext_names |= set(get(n).param_names)
         except Exception:  # noqa: BLE001 - without the catalogue, all of the refit's parameters are shown
             ext_names |= set(ext)
-        pars = ", ".join(f"{escape(k)} = {_f(_num(v.get('mean')))} ± {_f(_num(v.get('sd')), '.2g')}"
+        pars = ", ".join(f"{escape(k)} = {fmt_num(_num(v.get('mean')))} ± {fmt_num(_num(v.get('sd')), '.2g')}"
                          for k, v in ext.items() if k in ext_names) or "–"
         if n in ranking:
             found = "<strong>named</strong>" if n == d.get("winner") else ("yes" if r.get("found") else "no")
@@ -155,11 +155,11 @@ def _entries(d: dict) -> str:
         else:
             found, why = "not refitted", ""
         rows.append([str(i), f"<code>{escape(n)}</code>" + (f"<br><span class='muted'>{escape(sig)}</span>" if sig else ""),
-                     escape(kind), _f(_num(s.get("score")), ".2f"),
-                     f"{_f(_num(r.get('delta')), '.2f')} ± {_f(_num(r.get('delta_se')), '.2f')}" if r else "–",
-                     _f(_num(a.get("residual_rms")), ".3g"), _pct(a.get("rms_improvement")), pars,
+                     escape(kind), fmt_num(_num(s.get("score")), ".2f"),
+                     f"{fmt_num(_num(r.get('delta')), '.2f')} ± {fmt_num(_num(r.get('delta_se')), '.2f')}" if r else "–",
+                     fmt_num(_num(a.get("residual_rms")), ".3g"), _pct(a.get("rms_improvement")), pars,
                      found + (f"<br><span class='muted'>{why}</span>" if why else "")])
-    return _table(["#", "entry", "kind", "screening score (nats)", "dlogZ (nats)", "residual RMS (mm²)",
+    return html_table(["#", "entry", "kind", "screening score (nats)", "dlogZ (nats)", "residual RMS (mm²)",
                    "RMS gain", "extension parameters", "found"], rows, numeric_from=3)
 
 
@@ -170,9 +170,9 @@ def _cost(d: dict) -> str:
     by = (d.get("cost") or {}).get("by_stage") or {}
     if by:
         rows = [[escape(k), _duration((v or {}).get("wall_s")),
-                 _f(_num((v or {}).get("simulations")), ",.0f")]
+                 fmt_num(_num((v or {}).get("simulations")), ",.0f")]
                 for k, v in sorted(by.items(), key=lambda kv: -(_num((kv[1] or {}).get("wall_s")) or 0))]
-        parts.append(_table(["stage", "wall time", "simulations"], rows))
+        parts.append(html_table(["stage", "wall time", "simulations"], rows))
     rs = d.get("resume_store") or {}
     if _num(rs.get("earlier_attempts")):
         parts.append(f"<p class='muted'>Resumed after {int(rs['earlier_attempts'])} interrupted attempt(s): "
@@ -187,7 +187,7 @@ def render_diagnosis_report(d: dict, figure: str | None, title: str, links: dict
     or a data URI), or None; ``links``: data file name -> ``href``; ``source``: label -> value lines about
     the recording and the settings (file, job, estimated parameters...), shown as given (escaped here)."""
     b = d.get("base") or {}
-    parts = [_head(title), f"<h1>{escape(title)}</h1>", "<h2>Verdict</h2>", _verdict(d)]
+    parts = [page_head(title), f"<h1>{escape(title)}</h1>", "<h2>Verdict</h2>", _verdict(d)]
     src = dict(source or {})
     req = d.get("request") or {}
     for k in ("candidates", "n_particles", "refit_particles", "max_refits", "continuation", "seed"):
@@ -195,16 +195,16 @@ def render_diagnosis_report(d: dict, figure: str | None, title: str, links: dict
             src.setdefault(k.replace("_", " "), req[k] if req[k] is not None else "all")
     parts.append("<h2>Recording and base fit</h2>")
     if src:
-        parts.append(_table(["", ""], [[escape(str(k)), escape(", ".join(map(str, v)) if isinstance(v, list)
+        parts.append(html_table(["", ""], [[escape(str(k)), escape(", ".join(map(str, v)) if isinstance(v, list)
                                                                else str(v))] for k, v in src.items()], numeric_from=9))
-    parts.append(_table(["residual RMS (mm²)", "log evidence", "simulations"],
-                        [[_f(_num(b.get("residual_rms")), ".3g"),
-                          f"{_f(_num(b.get('log_evidence')), '.2f')} ± {_f(_num(b.get('log_evidence_se')), '.2f')}",
-                          _f(_num(b.get("n_simulations")), ",.0f")]], numeric_from=0))
+    parts.append(html_table(["residual RMS (mm²)", "log evidence", "simulations"],
+                        [[fmt_num(_num(b.get("residual_rms")), ".3g"),
+                          f"{fmt_num(_num(b.get('log_evidence')), '.2f')} ± {fmt_num(_num(b.get('log_evidence_se')), '.2f')}",
+                          fmt_num(_num(b.get("n_simulations")), ",.0f")]], numeric_from=0))
     bp = {k: v for k, v in (b.get("params") or {}).items() if isinstance(v, dict)}
     if bp:
-        parts.append(_table(["base parameter", "mean", "sd"],
-                            [[escape(k), _f(_num(v.get("mean")), ".5g"), _f(_num(v.get("sd")), ".3g")]
+        parts.append(html_table(["base parameter", "mean", "sd"],
+                            [[escape(k), fmt_num(_num(v.get("mean")), ".5g"), fmt_num(_num(v.get("sd")), ".3g")]
                              for k, v in bp.items()]))
     if figure:
         parts.append(f"<figure><img src='{escape(figure)}' alt='recording, base and extended fits, residual by "
