@@ -22,3 +22,23 @@ def done_job(manager, job_id: str, user: str) -> dict:
     if rec["state"] != "done":
         raise HTTPException(status.HTTP_409_CONFLICT, f"job is {rec['state']}, not done")
     return rec
+
+
+def page_reader(manager, job_id: str, user: str | None, signer, scope: str, exp, sig, how: str) -> str:
+    """Whose view of a job's HTML page a request gets: the bearer token's user, else the job's owner when the
+    request carries a valid signed link for ``scope`` (only the owner is ever given one). 401 with neither (the
+    message names ``how`` to make a link), 403 for a link that does not open this page, 404 for no such job."""
+    from .signing import LinkError, link_refused
+    if user is not None:
+        return user
+    if exp is None and sig is None:
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"missing bearer token or signed link ({how} makes a "
+                            "link a browser can open)", headers={"WWW-Authenticate": "Bearer"})
+    try:
+        signer.verify(scope, exp, sig)
+    except LinkError as exc:
+        raise link_refused(exc) from None
+    row = manager.db.get(job_id)
+    if row is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
+    return row["owner"]

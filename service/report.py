@@ -156,11 +156,16 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
                          if isinstance(v, (int, float)) and not isinstance(v, bool))
         parts.append(f"<h2>Cost</h2><p>{cost}</p>")
     if links:
-        parts.append("<h2>Data</h2><ul>" + "".join(
-            f"<li><a href='{escape(href)}'>{escape(name)}</a>: {escape(DATA_FILES.get(name, ''))}</li>"
-            for name, href in links.items()) + "</ul>")
+        parts.append(data_section(links, DATA_FILES))
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def data_section(links: dict, described: dict) -> str:
+    """The page's "Data" list: each ``{name: href}`` linked, with its description from ``described``."""
+    return "<h2>Data</h2><ul>" + "".join(
+        f"<li><a href='{escape(href)}'>{escape(name)}</a>: {escape(described.get(name, ''))}</li>"
+        for name, href in links.items()) + "</ul>"
 
 
 def write_report(folder: Path, summary: dict, title: str = "vfinfer result") -> Path:

@@ -14,7 +14,7 @@ import math
 from html import escape
 from pathlib import Path
 
-from .report import fmt_num, html_table, page_head
+from .report import data_section, fmt_num, html_table, page_head
 
 #: The diagnosis figure, with its caption.
 FIGURE_CAPTION = ("Top: the recording (dots), the base fit and, when physics is named, the extended fit, each with "
@@ -219,9 +219,7 @@ def render_diagnosis_report(d: dict, figure: str | None, title: str, links: dict
         parts.append("<h2>Notes</h2>" + "".join(f"<div class='warn'>{escape(str(n))}</div>" for n in notes))
     parts.append("<h2>Cost</h2>" + _cost(d))
     if links:
-        parts.append("<h2>Data</h2><ul>" + "".join(
-            f"<li><a href='{escape(href)}'>{escape(name)}</a>: {escape(DATA_FILES.get(name, ''))}</li>"
-            for name, href in links.items()) + "</ul>")
+        parts.append(data_section(links, DATA_FILES))
     parts.append("</body></html>")
     return "\n".join(parts)
 

@@ -35,9 +35,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, MAX_REFITS, REFIT_PARTICLES
 from worker.jobspec import JobSpec
 
-from ..access import done_job, own_job
+from ..access import done_job, own_job, page_reader
 from ..deps import JobIdDep, ManagerDep, UserDep
-from ..signing import Exp, LinkError, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, link_refused
+from ..signing import Exp, LinkOut, OptionalUserDep, Sig, SignerDep, link_out
 
 log = logging.getLogger("vfinfer.diagnose")
 
@@ -471,20 +471,8 @@ def get_diagnosis_report(job_id: JobIdDep, manager: ManagerDep, signer: SignerDe
                          request: Request, exp: Exp = None, sig: Sig = None) -> HTMLResponse:
     from ..report import PAGE_HEADERS, data_uri
     from ..report_diagnose import render_diagnosis_report
-    if user is None:
-        if exp is None and sig is None:
-            raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing bearer token or signed link (POST "
-                                "/jobs/{id}/diagnosis/report-link makes a link a browser can open)",
-                                headers={"WWW-Authenticate": "Bearer"})
-        try:
-            signer.verify(diagnosis_report_scope(job_id), exp, sig)
-        except LinkError as exc:
-            raise link_refused(exc) from None
-        # the signature names this job's diagnosis, and only its owner was given one: read it as the owner
-        row = manager.db.get(job_id)
-        if row is None:
-            raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
-        user = row["owner"]
+    user = page_reader(manager, job_id, user, signer, diagnosis_report_scope(job_id), exp, sig,
+                       "POST /jobs/{id}/diagnosis/report-link")
     jid = _done_diagnosis(manager, job_id, user, request)
     js, png, _ = _paths(manager, jid)
     d = json.loads(js.read_text())

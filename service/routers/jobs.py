@@ -15,10 +15,10 @@ from worker import store as st
 from worker.jobspec import JobSpec
 from worker.reduce import compare_posteriors
 
-from ..access import done_job, own_job
+from ..access import done_job, own_job, page_reader
 from ..db import ACTIVE
 from ..deps import JOB_ID_RE, JobIdDep, ManagerDep, SettingsDep, UserDep
-from ..signing import Exp, LinkError, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, link_refused, report_scope
+from ..signing import Exp, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, report_scope
 
 router = APIRouter(tags=["jobs"])
 
@@ -174,20 +174,8 @@ def get_figure(job_id: JobIdDep, name: Figure, user: UserDep, manager: ManagerDe
 def get_report(job_id: JobIdDep, manager: ManagerDep, signer: SignerDep, user: OptionalUserDep,
                exp: Exp = None, sig: Sig = None) -> HTMLResponse:
     from ..report import FIGURES, PAGE_HEADERS, data_uri, render_report
-    if user is None:
-        if exp is None and sig is None:
-            raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing bearer token or signed link (POST "
-                                "/jobs/{id}/report-link, or 'vfinfer report ID', makes a link a browser can open)",
-                                headers={"WWW-Authenticate": "Bearer"})
-        try:
-            signer.verify(report_scope(job_id), exp, sig)
-        except LinkError as exc:
-            raise link_refused(exc) from None
-        # the signature names this job, and only its owner was given one: read the page as the owner
-        row = manager.db.get(job_id)
-        if row is None:
-            raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
-        user = row["owner"]
+    user = page_reader(manager, job_id, user, signer, report_scope(job_id), exp, sig,
+                       "POST /jobs/{id}/report-link, or 'vfinfer report ID',")
     rec = done_job(manager, job_id, user)
     path = manager.store_path(rec["id"])
     summary = st.read_summary(path)
