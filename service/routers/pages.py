@@ -1,5 +1,6 @@
 """The service's home page: the caller's jobs as HTML, each finished one linked to its report by a fresh
-signed link; without credentials, a page that says how to get in. Nothing on it loads from another host
+signed link, and the diagnoses of those jobs, each finished one linked to its diagnosis report; without
+credentials, a page that says how to get in. Nothing on it loads from another host
 and nothing runs a script (``report.PAGE_HEADERS``)."""
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from ..deps import ManagerDep, SettingsDep, UserDep
 from ..report import PAGE_HEADERS, html_page
 from ..signing import (Exp, LinkError, LinkOut, OptionalUserDep, Sig, Signer, SignerDep, jobs_scope, link_out,
                        report_scope)
+from .diagnose import diagnosis_report_scope, get_diagnosis
 
 router = APIRouter(tags=["pages"])
 
@@ -83,7 +85,45 @@ with a bearer token, which a browser cannot send on a plain link, so open these 
     return _page("vfinfer", body, code)
 
 
-def jobs_page(user: str, jobs: list[dict], signer: Signer, now: float, link_expires: int | None) -> HTMLResponse:
+def diagnoses_of(jobs: list[dict], user: str, manager, request: Request) -> list[tuple[str, object]]:
+    """``(job id, DiagnosisStatus)`` of every finished finite-element job of ``user`` that has a diagnosis, as
+    ``GET /jobs/{id}/diagnosis`` answers it, so the page never disagrees with the API wherever diagnoses are
+    kept."""
+    out = []
+    for r in sorted(jobs, key=lambda r: -r["created"]):
+        if r["state"] != "done" or _sampler(r["spec"])[1] != "FE":      # only such jobs can be diagnosed
+            continue
+        st = get_diagnosis(r["id"], user, manager, request)
+        if st.state != "none":
+            out.append((r["id"], st))
+    return out
+
+
+def _diagnosis_row(jid: str, st, signer: Signer, now: float) -> str:
+    state, verdict, sims, run_s, link = escape(st.state), "–", "–", None, "–"
+    if st.state == "running" and st.progress:
+        p = st.progress
+        where = " ".join(str(x) for x in (p.get("stage"), p.get("entry")) if x)
+        if p.get("step") and p.get("steps"):
+            where += f" ({p['step']} of {p['steps']})"
+        state += f"<br><span class='muted'>{escape(where)}</span>"
+        sims, run_s = p.get("simulations"), p.get("elapsed_s")
+    elif st.state == "failed" and st.error:
+        state += f"<br><span class='muted'>{escape(st.error[:300])}</span>"
+    elif st.state == "done":
+        rep = st.report or {}
+        verdict = escape(str(rep.get("verdict") or "–"))
+        sims, run_s = rep.get("n_simulations"), rep.get("wall_s")
+        path = f"/jobs/{jid}/diagnosis/report"
+        link = f"<a href='{escape(signer.sign(diagnosis_report_scope(jid), path, now=now).path)}'>diagnosis report</a>"
+    sims = f"{sims:,}" if isinstance(sims, int) else "–"
+    run = _duration(float(run_s)) if isinstance(run_s, (int, float)) else "–"
+    return (f"<tr><td><code>{escape(jid)}</code></td><td>{state}</td><td>{verdict}</td><td class='n'>{sims}</td>"
+            f"<td class='n'>{run}</td><td>{link}</td></tr>")
+
+
+def jobs_page(user: str, jobs: list[dict], signer: Signer, now: float, link_expires: int | None,
+              diagnoses: list[tuple[str, object]] = ()) -> HTMLResponse:
     rows = []
     for r in sorted(jobs, key=lambda r: -r["created"]):
         sampler, model = _sampler(r["spec"])
@@ -104,7 +144,13 @@ def jobs_page(user: str, jobs: list[dict], signer: Signer, now: float, link_expi
                                              "run time", ""))
     table = (f"<table><tr>{head}</tr>{''.join(rows)}</table>" if rows else
              "<p>No jobs yet: <code>vfinfer submit GAW.csv</code> or <code>POST /jobs</code> starts one.</p>")
-    done = sum(r["state"] == "done" for r in jobs)
+    if diagnoses:
+        dhead = "".join(f"<th>{h}</th>" for h in ("job", "diagnosis", "verdict", "simulations", "run time", ""))
+        table += ("<h2>Diagnoses</h2><p class='muted'>Which physics the model misses, per diagnosed job "
+                  "(<code>vfinfer diagnosis</code>, <code>POST /jobs/{id}/diagnose</code>).</p>"
+                  f"<table><tr>{dhead}</tr>{''.join(_diagnosis_row(j, st, signer, now) for j, st in diagnoses)}"
+                  "</table>")
+    done = sum(r["state"] == "done" for r in jobs) + sum(st.state == "done" for _, st in diagnoses)
     notes = []
     if done:
         notes.append(f"The report links are valid for {_duration(signer.ttl_s)}, until "
@@ -119,11 +165,12 @@ def jobs_page(user: str, jobs: list[dict], signer: Signer, now: float, link_expi
 
 
 @router.get("/", response_class=HTMLResponse,
-            summary="Your jobs as an HTML page, with signed links to the finished jobs' reports (bearer token or "
-                    "a signed link from POST /page-link); without either, a page saying how to sign in",
+            summary="Your jobs and their diagnoses as an HTML page, with signed links to the finished jobs' and "
+                    "diagnoses' reports (bearer token or a signed link from POST /page-link); without either, a page "
+                    "saying how to sign in",
             responses={401: {"description": "a wrong bearer token"},
                        403: {"description": "a signed link that is expired, altered or made for another user"}})
-def home(manager: ManagerDep, settings: SettingsDep, signer: SignerDep, user: OptionalUserDep,
+def home(manager: ManagerDep, settings: SettingsDep, signer: SignerDep, user: OptionalUserDep, request: Request,
          link_user: Annotated[str | None, Query(alias="user", max_length=200,
                                                 description="signed link: whose jobs (with exp and sig)")] = None,
          exp: Exp = None, sig: Sig = None) -> HTMLResponse:
@@ -141,7 +188,8 @@ def home(manager: ManagerDep, settings: SettingsDep, signer: SignerDep, user: Op
         if link_user not in settings.users:       # a user removed from the service loses its links too
             return sign_in_page("this link's user has no access to this service", status.HTTP_403_FORBIDDEN)
         user, link_expires = link_user, exp
-    return jobs_page(user, manager.db.list(owner=user), signer, now, link_expires)
+    jobs = manager.db.list(owner=user)
+    return jobs_page(user, jobs, signer, now, link_expires, diagnoses_of(jobs, user, manager, request))
 
 
 @router.post("/page-link", response_model=LinkOut,

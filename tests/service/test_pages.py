@@ -233,3 +233,45 @@ def test_cli_prints_a_signed_link_and_opens_it(svc, monkeypatch):
     assert r.exit_code == 2 and len(err) == 1 and "404" in err[0] and "Traceback" not in r.output
     r = CliRunner().invoke(app, ["report", svc.failed], env=env)
     assert r.exit_code == 2 and "409" in r.stderr and "failed" in r.stderr
+
+
+# ------------------------------------------------------------------------------------ diagnoses on the jobs page
+def test_jobs_page_lists_the_owners_diagnoses(service):
+    """Each finished FE job's diagnosis, in the state GET /jobs/{id}/diagnosis gives, the finished one linked to
+    its diagnosis report; jobs without a diagnosis, and another user's diagnoses, are not listed."""
+    import threading
+
+    from svc_helpers import done_fe_job
+    settings, http = service.settings, service.http
+    done, failed, running, plain = (done_fe_job(settings, owner="alice") for _ in range(4))
+    bobs = done_fe_job(settings, owner="bob")
+    stores = settings.stores_dir
+    for jid in (done, bobs):
+        (stores / f"{jid}.diagnosis.json").write_text(json.dumps(
+            {"verdict": "missing physics: leak <named>", "n_simulations": 1234, "wall_s": 125.0}))
+        (stores / f"{jid}.diagnosis.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    (stores / f"{failed}.diagnosis.error").write_text("RuntimeError: the cluster went <away>")
+    reg = service.server.config.app.state.diagnoses          # a diagnosis in flight, as the router keeps it
+    with reg.lock:
+        reg.running[running] = threading.current_thread()
+        reg.progress[running] = {"stage": "refit", "entry": "leak", "step": 2, "steps": 6, "simulations": 480,
+                                 "elapsed_s": 75.0}
+    try:
+        page = http.get("/", headers=auth("alice")).text
+    finally:
+        with reg.lock:
+            reg.running.pop(running)
+            reg.progress.pop(running)
+    diag = page[page.index("<h2>Diagnoses</h2>"):]
+    assert _ids(page) == {done, failed, running, plain} and bobs not in page
+    assert _ids(diag) == {done, failed, running}                              # no row for the undiagnosed job
+    assert "missing physics: leak &lt;named&gt;" in diag and "1,234" in diag and "2 min 05 s" in diag
+    assert "the cluster went &lt;away&gt;" in diag and "refit leak (2 of 6)" in diag and "480" in diag
+    _no_external_host(page)
+    links = re.findall(r"href='(/jobs/[^']+/diagnosis/report\?[^']+)'", page)
+    assert len(links) == 1 and done in links[0]                                  # the finished diagnosis only
+    r = httpx.get(service.url + links[0].replace("&amp;", "&"), timeout=60)   # no bearer header: the signed link
+    assert r.status_code == 200 and "missing physics: leak" in r.text.lower()
+    by_link = httpx.get(service.url + http.post("/page-link", headers=auth("alice")).json()["url"], timeout=60)
+    assert "<h2>Diagnoses</h2>" in by_link.text and _ids(by_link.text) == _ids(page)
+    assert "<h2>Diagnoses</h2>" not in http.get("/", headers=auth("carol")).text
