@@ -41,7 +41,7 @@ from vfcore import TABLE3, Params, SimConfig, simulate
 from vfcore.measures import estimate_f0
 from vfcore.result import HR_OVERSAMPLE
 
-from .config import BASE_CONFIG, PRESENCE_SIGMA, TRUTH_BOUNDS
+from .config import BASE_CONFIG, MATERIAL_SETS, PRESENCE_SIGMA, TRUTH_BOUNDS
 
 __all__ = ["MaterialSpace", "unabsorbed_rms", "CONTINUATION_SEARCH", "continued_unabsorbed_rms", "windows",
            "AUDIT_SEARCH", "audit_presence"]
@@ -67,13 +67,14 @@ def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
 
 
 class MaterialSpace:
-    """The material box of the absorption searches: ``E_body, E_cover, p_sub`` in ``TRUTH_BOUNDS``
-    mapped to the unit cube, the other parameters at TABLE3."""
+    """The material box of the absorption searches: the parameters of ``bounds`` (default
+    ``TRUTH_BOUNDS``: E_body, E_cover, p_sub) mapped to the unit cube, the others at TABLE3."""
 
-    def __init__(self):
-        self.names = list(TRUTH_BOUNDS)
-        self.lo = np.array([TRUTH_BOUNDS[n][0] for n in self.names])
-        self.hi = np.array([TRUTH_BOUNDS[n][1] for n in self.names])
+    def __init__(self, bounds: dict | None = None):
+        bounds = TRUTH_BOUNDS if bounds is None else bounds
+        self.names = list(bounds)
+        self.lo = np.array([bounds[n][0] for n in self.names])
+        self.hi = np.array([bounds[n][1] for n in self.names])
         self._base = TABLE3.as_dict()
 
     def params_of(self, u) -> Params:
@@ -99,10 +100,10 @@ class MaterialSpace:
 
 def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimConfig = BASE_CONFIG,
                    n_sobol: int = 64, n_starts: int = 1, maxfev: int = 80, seed: int = 0,
-                   starts: list[dict] | None = None) -> tuple[float, dict]:
+                   starts: list[dict] | None = None, bounds: dict | None = None) -> tuple[float, dict]:
     """RMS (mm^2) of what the BASE model cannot absorb of a clean waveform: the minimum over the
     material parameters (E_body, E_cover, p_sub in ``TRUTH_BOUNDS``, the rest at TABLE3) and over
-    the sub-frame lag of ``RMS(clean - base)``. A scrambled-Sobol design of ``n_sobol`` points
+    the sub-frame lag of ``RMS(clean - base)`` (``bounds``: another material box, :class:`MaterialSpace`). A scrambled-Sobol design of ``n_sobol`` points
     (plus ``truth`` and the material dicts in ``starts`` when given) is simulated in lock-step,
     then a bounded Nelder-Mead polishes the ``n_starts`` best design points, the truth and every
     ``starts`` point (``maxfev`` simulations each). It is an upper bound on the true minimum (a
@@ -110,7 +111,7 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
     from scipy.optimize import minimize
 
     from vfcore.batch import simulate_many
-    space = MaterialSpace()
+    space = MaterialSpace(bounds)
     names, params_of = space.names, space.params_of
     y = np.asarray(clean, dtype=float)
 
@@ -168,11 +169,11 @@ def windows(n: int, frames_per_cycle: float, cycles0: float) -> list[int]:
 
 def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list[dict] | tuple = (),
                              n_sobol: int = 256, n_keep: int = 3, cycles0: float = 3.0, maxfev: int = 30,
-                             seed: int = 0) -> tuple[float, dict, int]:
+                             seed: int = 0, bounds: dict | None = None) -> tuple[float, dict, int]:
     """RMS (mm²) of what the base model cannot absorb of ``clean`` (frames at ``fps``), found by
     window continuation (module docstring).
 
-    The material parameters ``E_body, E_cover, p_sub`` range over ``config.TRUTH_BOUNDS`` (the
+    The material parameters range over ``bounds`` (default ``config.TRUTH_BOUNDS``; the
     rest at TABLE3) and the sub-frame lag is free, exactly as in :func:`unabsorbed_rms`.
     Continued from: the ``n_keep`` design points with the smallest misfit on the first window, the
     design point best on the whole window, and every material dict in ``starts``.
@@ -186,7 +187,7 @@ def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list
     y = np.asarray(clean, dtype=float)
     if y.ndim != 1 or y.size < 4 or not np.all(np.isfinite(y)):
         raise ValueError("clean must be a finite 1-D waveform of at least 4 frames")
-    space = MaterialSpace()
+    space = MaterialSpace(bounds)
     names, params_of = space.names, space.params_of
     ws = windows(y.size, fps / estimate_f0(y, fps), cycles0)
 
@@ -246,19 +247,19 @@ AUDIT_SEARCH = {"n_sobol": 512, "n_starts": 6, "maxfev": 150}
 
 
 def _audit_one(args):
-    cid, t, config, search, method = args
+    cid, t, config, search, method, bounds = args
     if t.get("label") == "control":
         return cid, {"present": False}
     starts = [t["truth"]] + ([t["absorbing_fit"]] if t.get("absorbing_fit") else [])
     clean = np.asarray(t["clean"], dtype=float)
     u, fit, n_sim, by = math.inf, {}, 0, None
     if method in ("continuation", "both"):
-        u, fit, n_sim = continued_unabsorbed_rms(clean, config, config.fps, starts=starts,
+        u, fit, n_sim = continued_unabsorbed_rms(clean, config, config.fps, starts=starts, bounds=bounds,
                                                  **search.get("continuation", search))
         by = "continuation"
     # "both": the design search too, unless the continuation already decided the case
     if method == "design" or (method == "both" and u >= PRESENCE_SIGMA * float(t["sigma_mm2"])):
-        ud, fitd = unabsorbed_rms(clean, None, config, starts=starts, **search.get("design", search))
+        ud, fitd = unabsorbed_rms(clean, None, config, starts=starts, bounds=bounds, **search.get("design", search))
         if ud < u:
             u, fit, by = ud, fitd, "design"
     before = float(t.get("unabsorbed_rms_mm2", math.nan))
@@ -286,6 +287,12 @@ def _check_search(search: dict, method: str) -> None:
             raise ValueError(f"search of the {m} method: unknown keys {bad}; allowed {sorted(allowed)}")
 
 
+def suite_bounds(public: dict) -> dict:
+    """The material box of a suite from its public ``cases.json``: the set named by "material"
+    (suites written before the full set have none and are "three")."""
+    return MATERIAL_SETS[public.get("material", "three")]
+
+
 def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig = BASE_CONFIG,
                    search: dict | None = None, method: str = "both") -> dict:
     """Re-test the presence rule of an existing suite with a stronger absorption search and
@@ -307,7 +314,9 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
                "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH}}[method]
     search = dict(default if search is None else search)
     _check_search(search, method)
-    jobs = [(cid, t, config, search, method) for cid, t in sorted(hidden["cases"].items())]
+    public = suite / "cases.json"
+    bounds = suite_bounds(json.loads(public.read_text()) if public.exists() else {})
+    jobs = [(cid, t, config, search, method, bounds) for cid, t in sorted(hidden["cases"].items())]
     if workers > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as ex:

@@ -40,7 +40,7 @@ from vfcore import TABLE3, Params, SimConfig, simulate
 from vfcore.measures import estimate_f0
 
 from .absorb import AUDIT_SEARCH, MaterialSpace, audit_presence, unabsorbed_rms
-from .config import BASE_CONFIG, N_OBS, N_Y, PRESENCE_SIGMA, TRUTH_BOUNDS
+from .config import BASE_CONFIG, MATERIAL_SETS, N_OBS, N_Y, PRESENCE_SIGMA, SCALE_ANCHOR, TRUTH_BOUNDS
 from .mechanisms import (PIXEL_MM, SUB_C, asymmetric_area, boxcar_average, epithelium_profile,
                          forward_extensions_available, frame_times, gap_profile, hr_times, leak_area,
                          quantise_scale, sample_hr, subglottal_modes, zipper_area)
@@ -75,13 +75,28 @@ MIN_EFFECT_RMS = {"default": 0.5, "control": 0.0, "exposure": 0.0}
 #: Draws tried for a present effect before the case is kept as *not present* (the draw with the
 #: largest ``unabsorbed / sigma``); exposure at 2000 fps never passes (README).
 PRESENCE_ATTEMPTS = 12
+#: The presence rule's absorbing search in the five-parameter box: a denser design and longer
+#: polishes than the three-parameter defaults, since a Nelder-Mead simplex in 5-D needs more steps.
+FULL_PRESENCE_SEARCH = {"n_sobol": 128, "n_starts": 2, "maxfev": 150}
 
 PHYSICAL = ("leak", "sep_ratio", "epithelium", "zipper", "subglottal", "asymmetry")
 CAMERA = ("exposure", "frame_rate", "scale")
 EFFECTS = PHYSICAL + CAMERA
-LABELS = EFFECTS + ("control",)
-#: Cases per label in the default suite (physical and camera effects twice, 4 controls).
+#: Effects no catalogue entry models (the right answer is to name nothing): a slow amplitude
+#: modulation (vocal tremor, 3-7 Hz), alternate cycles of different amplitude (diplophonia, a
+#: period-doubled vibration), and a nonlinear area read-out (``A_ref (A/A_ref)^gamma``, an
+#: edge-detection threshold that grows or shrinks the opening with its size).
+OUTSIDE = ("tremor", "diplophonia", "gamma")
+#: Two concealed effects in one recording: a forward-level effect re-simulated, then an
+#: observation-level one applied to its waveform. Named right when either is named.
+PAIRS = ("sep_ratio+leak", "epithelium+scale", "subglottal+zipper", "sep_ratio+frame_rate")
+FORWARD = ("sep_ratio", "epithelium", "subglottal")
+LABELS = EFFECTS + ("control",) + OUTSIDE + PAIRS
+#: Cases per label in the default suite of the "three" material set (physical and camera effects
+#: twice, 4 controls) and of the "full" set (each effect once, the effects outside the catalogue,
+#: the pairs, 4 controls).
 SUITE_COUNTS = {**{e: 2 for e in EFFECTS}, "control": 4}
+SUITE_COUNTS_FULL = {**{e: 1 for e in EFFECTS + OUTSIDE + PAIRS}, "control": 4}
 
 # ------------------------------------------------------------------ effect ranges (README)
 LEAK_AREA_MM2 = (0.5, 3.0)          # total posterior chink area
@@ -107,6 +122,11 @@ EXPOSURE_FRAC = (0.6, 1.0)
 EXPOSURE_JITTER = (0.02, 0.05)      # relative sd of the per-frame exposure time
 RATE_RANGES = ((0.93, 0.97), (1.03, 1.07))
 SCALE_RANGES = ((0.8, 0.9), (1.1, 1.2))
+LEAK_SHAPE_POWER = (0.5, 2.0)       # gap profile exponent along the chink (1: linear wedge)
+TREMOR_HZ = (3.0, 7.0)
+TREMOR_DEPTH = (0.15, 0.3)
+DIPLO_DEPTH = (0.15, 0.3)
+GAMMA_RANGES = ((0.6, 0.8), (1.3, 1.6))
 
 
 def _uniform(rng, lo_hi) -> float:
@@ -150,11 +170,54 @@ def _ok(res) -> bool:
     return bool(res.ok and oscillates(res.gaw, res.fps))
 
 
-def draw_truth(rng) -> Params:
+def draw_truth(rng, material: str = "three") -> Params:
+    """The material truth: the parameters of ``MATERIAL_SETS[material]`` uniform in their bounds,
+    the rest at TABLE3 (with "full", rho at ``SCALE_ANCHOR``)."""
     d = TABLE3.as_dict()
-    for k, b in TRUTH_BOUNDS.items():
+    if material == "full":
+        d.update(SCALE_ANCHOR)
+    for k, b in MATERIAL_SETS[material].items():
         d[k] = _uniform(rng, b)
     return Params(**d)
+
+
+def _forward(label: str, truth: Params, rng, config: SimConfig, sim):
+    """A forward-level effect's simulation and its parameters; ``None`` when it does not oscillate."""
+    if label == "sep_ratio":
+        r = _two_sided(rng, SEP_RATIO_RANGES)
+        res = sim(truth, config.replace(sep_ratio=r))
+        eff = {"sep_ratio": r}
+    elif label == "epithelium":
+        if not forward_extensions_available()["epithelium"]:
+            raise NotImplementedError("SimConfig has no epithelium fields in this vfcore")
+        E = _uniform(rng, EPI_E_KPA)
+        h = _uniform(rng, EPI_H_MM)
+        mr = _uniform(rng, EPI_MEDIAL_RATIO)
+        wd = _uniform(rng, EPI_MEDIAL_WIDTH_MM)
+        prof = epithelium_profile(mr, wd, config.mesh)
+        res = sim(truth, config.replace(epithelium_E_kpa=E, epithelium_h_mm=h, epithelium_profile=prof))
+        eff = {"epithelium_E_kpa": E, "epithelium_h_mm": h, "medial_ratio": mr, "medial_width_mm": wd,
+               "epithelium_profile": list(prof)}
+    elif label == "subglottal":
+        if not forward_extensions_available()["subglottal"]:
+            raise NotImplementedError("SimConfig has no subglottal_modes field in this vfcore")
+        tube = _uniform(rng, SUB_TUBE_M)
+        z1 = _uniform(rng, SUB_Z1)
+        zeta = _uniform(rng, SUB_ZETA1)
+        modes = subglottal_modes(tube, z1, zeta)
+        res = sim(truth, config.replace(subglottal_modes=modes))
+        eff = {"tube_length_m": tube, "c_m_s": SUB_C, "Z1_pa_s_m3": z1, "zeta1": zeta,
+               "subglottal_modes": [list(m) for m in modes]}
+    else:
+        raise ValueError(f"{label!r} is not a forward-level effect; known: {FORWARD}")
+    if not _ok(res) or res.cycles is None:
+        return None
+    return res, eff
+
+
+def _cycle_index(res, t: np.ndarray) -> np.ndarray:
+    """Index of the simulated cycle (minimum to minimum) each time of ``t`` falls in."""
+    return np.searchsorted(np.asarray(res.cycles.t_start, dtype=float), t, side="right")
 
 
 @dataclass
@@ -191,9 +254,10 @@ class Case:
 
 
 def apply_effect(label: str, base, truth: Params, offset: float, rng, config: SimConfig = BASE_CONFIG,
-                 n_obs: int = N_OBS, sim=simulate):
+                 n_obs: int = N_OBS, sim=simulate, shapes: bool = True):
     """Draw the effect parameters and return ``(clean, effect_params)``; ``None`` when the
-    effect's simulation does not oscillate (caller redraws)."""
+    effect's simulation does not oscillate (caller redraws). ``shapes``: draw the shape knobs
+    that the suites of the "three" set held fixed (the leak's gap profile)."""
     fps = config.fps
     t_hr = hr_times(base)
     t = frame_times(n_obs, offset, fps)
@@ -204,9 +268,10 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
     if label == "leak":
         area = _uniform(rng, LEAK_AREA_MM2)
         start = _uniform(rng, LEAK_START_FRAC)
-        g = gap_profile(area, start, L)
+        power = _uniform(rng, LEAK_SHAPE_POWER) if shapes else 1.0
+        g = gap_profile(area, start, L, power=power)
         w = sample_hr(gaw_hr / L, t_hr, t)
-        return leak_area(w, g, length_mm=L), {"chink_area_mm2": area, "start_frac": start,
+        return leak_area(w, g, length_mm=L), {"chink_area_mm2": area, "start_frac": start, "shape_power": power,
                                                "posterior_gap_mm": float(g.max()), "n_y": N_Y,
                                                "env": "uniform"}
     if label == "zipper":
@@ -227,39 +292,38 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
     if label == "scale":
         s = _two_sided(rng, SCALE_RANGES)
         return quantise_scale(sample_hr(gaw_hr, t_hr, t), s, L), {"scale": s, "pixel_mm": PIXEL_MM}
-    if label == "sep_ratio":
-        r = _two_sided(rng, SEP_RATIO_RANGES)
-        res = sim(truth, config.replace(sep_ratio=r))
-        if not _ok(res):
+    if label in FORWARD:
+        out = _forward(label, truth, rng, config, sim)
+        if out is None:
             return None
-        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), {"sep_ratio": r}
-    if label == "epithelium":
-        if not forward_extensions_available()["epithelium"]:
-            raise NotImplementedError("SimConfig has no epithelium fields in this vfcore")
-        E = _uniform(rng, EPI_E_KPA)
-        h = _uniform(rng, EPI_H_MM)
-        mr = _uniform(rng, EPI_MEDIAL_RATIO)
-        wd = _uniform(rng, EPI_MEDIAL_WIDTH_MM)
-        prof = epithelium_profile(mr, wd, config.mesh)
-        res = sim(truth, config.replace(epithelium_E_kpa=E, epithelium_h_mm=h, epithelium_profile=prof))
-        if not _ok(res):
+        res, eff = out
+        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), eff
+    if "+" in label:
+        first, second = label.split("+")
+        out = _forward(first, truth, rng, config, sim)
+        if out is None or not math.isfinite(out[0].f0):
             return None
-        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), {
-            "epithelium_E_kpa": E, "epithelium_h_mm": h, "medial_ratio": mr, "medial_width_mm": wd,
-            "epithelium_profile": list(prof)}
-    if label == "subglottal":
-        if not forward_extensions_available()["subglottal"]:
-            raise NotImplementedError("SimConfig has no subglottal_modes field in this vfcore")
-        tube = _uniform(rng, SUB_TUBE_M)
-        z1 = _uniform(rng, SUB_Z1)
-        zeta = _uniform(rng, SUB_ZETA1)
-        modes = subglottal_modes(tube, z1, zeta)
-        res = sim(truth, config.replace(subglottal_modes=modes))
-        if not _ok(res):
+        res, eff1 = out
+        got = apply_effect(second, res, truth, offset, rng, config, n_obs, sim, shapes)
+        if got is None:
             return None
-        return sample_hr(np.asarray(res.gaw_hr), hr_times(res), t), {
-            "tube_length_m": tube, "c_m_s": SUB_C, "Z1_pa_s_m3": z1, "zeta1": zeta,
-            "subglottal_modes": [list(m) for m in modes]}
+        return got[0], {first: eff1, second: got[1]}
+    if label == "tremor":
+        f_m, depth, phase = _uniform(rng, TREMOR_HZ), _uniform(rng, TREMOR_DEPTH), _uniform(rng, (0.0, 2 * math.pi))
+        a = sample_hr(gaw_hr, t_hr, t)
+        return a * (1.0 + depth * np.sin(2 * math.pi * f_m * t + phase)), {"mod_hz": f_m, "depth": depth,
+                                                                            "phase_rad": phase}
+    if label == "diplophonia":
+        depth = _uniform(rng, DIPLO_DEPTH)
+        a = sample_hr(gaw_hr, t_hr, t)
+        # cycles start at an area minimum, so the step between alternate gains falls where the area is least
+        sign = np.where(_cycle_index(base, t) % 2 == 0, 1.0, -1.0)
+        return a * (1.0 + depth * sign), {"depth": depth}
+    if label == "gamma":
+        g = _two_sided(rng, GAMMA_RANGES)
+        a = np.clip(sample_hr(gaw_hr, t_hr, t), 0.0, None)
+        ref = float(np.percentile(a, 95))
+        return ref * (a / ref) ** g, {"gamma": g, "ref_mm2": ref}
     if label == "asymmetry":
         Q = _two_sided(rng, ASYM_Q_RANGES)
         lag = _uniform(rng, ASYM_LAG_CYCLES)
@@ -284,17 +348,19 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
 
 def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config: SimConfig = BASE_CONFIG,
               n_obs: int = N_OBS, max_attempts: int = 20, sim=simulate, presence: bool = True,
-              presence_attempts: int = PRESENCE_ATTEMPTS) -> Case:
+              presence_attempts: int = PRESENCE_ATTEMPTS, material: str = "three") -> Case:
     """One case, deterministic in ``seed_seq``: draw truth until the base oscillates, draw the
     offset and the effect (redrawn when its simulation does not oscillate), add noise; the whole
     draw is repeated (same stream) when the recording does not phonate (:func:`phonates`) and,
     with ``presence``, when the effect is not present (:data:`PRESENCE_SIGMA`, at most
     ``presence_attempts`` such draws; then the draw with the largest ``unabsorbed / sigma`` is
-    kept and its ``present`` is False)."""
+    kept and its ``present`` is False). ``material``: the material set of the truth and of the
+    presence rule's absorbing fit (:data:`.config.MATERIAL_SETS`)."""
     rng = np.random.default_rng(seed_seq)
+    full = material == "full"
     best_absent, n_absent = None, 0
     for attempt in range(1, max_attempts + 1):
-        truth = draw_truth(rng)
+        truth = draw_truth(rng, material)
         base = sim(truth, config)
         if not _ok(base) or base.cycles is None or not math.isfinite(base.f0):
             continue
@@ -303,7 +369,7 @@ def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config
         floor = MIN_EFFECT_RMS.get(label, MIN_EFFECT_RMS["default"])
         out = None
         for _ in range(3):
-            out = apply_effect(label, base, truth, offset, rng, config, n_obs, sim)
+            out = apply_effect(label, base, truth, offset, rng, config, n_obs, sim, shapes=full)
             if (out is not None and oscillates(out[0], config.fps)
                     and np.sqrt(np.mean((out[0] - base_clean) ** 2)) >= floor):
                 break
@@ -321,7 +387,8 @@ def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config
                     attempts=attempt)
         if not presence or label == "control":
             return case
-        case.unabsorbed, case.absorbing_fit = unabsorbed_rms(clean, truth, config)
+        case.unabsorbed, case.absorbing_fit = unabsorbed_rms(clean, truth, config, bounds=MATERIAL_SETS[material],
+                                                             **(FULL_PRESENCE_SEARCH if full else {}))
         if case.present:
             return case
         n_absent += 1
@@ -349,19 +416,23 @@ def suite_labels(counts: dict | None = None) -> list[str]:
 
 
 def _make_case_star(args):
-    return make_case(*args[:5], sim=args[5], presence=args[6])
+    return make_case(*args[:5], sim=args[5], presence=args[6], material=args[7])
 
 
 def generate_suite(seed: int, counts: dict | None = None, config: SimConfig = BASE_CONFIG,
-                   n_obs: int = N_OBS, sim=simulate, presence: bool = True, workers: int = 1) -> list[Case]:
+                   n_obs: int = N_OBS, sim=simulate, presence: bool = True, workers: int = 1,
+                   material: str = "three") -> list[Case]:
     """The benchmark suite: each label ``counts[label]`` times (default :data:`SUITE_COUNTS`),
     in an order shuffled by ``seed`` (ids carry no label information). Case i uses the i-th
     child of ``SeedSequence(seed)`` (the last child shuffles the order). ``workers`` > 1 makes
     the cases in a process pool (same cases: each depends on its own seed only)."""
+    if counts is None and material == "full":
+        counts = SUITE_COUNTS_FULL
     labels = suite_labels(counts)
     children = np.random.SeedSequence(seed).spawn(len(labels) + 1)
     order = np.random.default_rng(children[-1]).permutation(len(labels))
-    jobs = [(f"{i:02d}", labels[j], children[i], config, n_obs, sim, presence) for i, j in enumerate(order)]
+    jobs = [(f"{i:02d}", labels[j], children[i], config, n_obs, sim, presence, material)
+            for i, j in enumerate(order)]
     if workers > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as ex:
@@ -370,21 +441,22 @@ def generate_suite(seed: int, counts: dict | None = None, config: SimConfig = BA
 
 
 # ------------------------------------------------------------------ output
-def public_fixed() -> dict:
-    """The parameters a suite holds fixed (Table 3 values, all but ``TRUTH_BOUNDS``'s), as written
-    to the public ``cases.json``."""
-    return {k: v for k, v in TABLE3.as_dict().items() if k not in TRUTH_BOUNDS}
+def public_fixed(material: str = "three") -> dict:
+    """The parameters a suite holds fixed (Table 3 values, the anchor of the "full" set), all but
+    the drawn ones, as written to the public ``cases.json``."""
+    d = {**TABLE3.as_dict(), **(SCALE_ANCHOR if material == "full" else {})}
+    return {k: v for k, v in d.items() if k not in MATERIAL_SETS[material]}
 
 
 def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = None,
-                config: SimConfig = BASE_CONFIG) -> None:
+                config: SimConfig = BASE_CONFIG, material: str = "three") -> None:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     public = {
         "description": "GAW observations (mm^2) for model diagnosis; fit the base model to each case",
         "model": {"mesh": config.mesh, "dt": config.dt, "duration": config.duration,
                   "discard": config.discard},
-        "estimated": list(TRUTH_BOUNDS), "fixed": public_fixed(),
+        "material": material, "estimated": list(MATERIAL_SETS[material]), "fixed": public_fixed(material),
         "cases": [{"id": c.id, "file": f"case_{c.id}.csv", "fps": c.fps, "n_frames": int(c.gaw.size)}
                   for c in cases],
     }
@@ -418,6 +490,10 @@ def main(argv=None) -> int:
                          "(default; the design only where the continuation left the effect present)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes (same cases for any number)")
+    ap.add_argument("--material", choices=tuple(MATERIAL_SETS), default="full",
+                    help="material truth: 'full' draws every combination a GAW determines (the common scale at "
+                         "the anchor) and adds effects outside the catalogue and two-effect cases; 'three' "
+                         "draws E_body, E_cover, p_sub with the rest at Table 3 (the suites of seeds 0-9)")
     ap.add_argument("--no-presence", action="store_true",
                     help="skip the presence rule (effects may then be absorbed by the base model)")
     a = ap.parse_args(argv)
@@ -436,8 +512,8 @@ def main(argv=None) -> int:
         return 0
     if not a.out:
         ap.error("--out is required (or --audit SUITE)")
-    cases = generate_suite(a.seed, presence=not a.no_presence, workers=a.workers)
-    write_suite(cases, a.out, a.seed)
+    cases = generate_suite(a.seed, presence=not a.no_presence, workers=a.workers, material=a.material)
+    write_suite(cases, a.out, a.seed, material=a.material)
     dt = time.perf_counter() - t0
     counts: dict[str, int] = {}
     for c in cases:
@@ -448,7 +524,7 @@ def main(argv=None) -> int:
         print(f"  {c.id} {c.label:11s} effect RMS {c.effect_rms:6.2f} mm^2  sigma {c.sigma:.2f}  "
               f"loglik gap {c.effect_loglik:8.1f}  peak {c.clean.max():5.1f}  attempts {c.attempts}  "
               f"unabsorbed {c.unabsorbed:5.2f} mm^2 ({c.unabsorbed / c.sigma:4.2f} sigma)"
-              + ("" if c.label == "control" else ("  present" if c.present else "  NOT PRESENT")))
+              + ("" if c.label in ("control",) + OUTSIDE else ("  present" if c.present else "  NOT PRESENT")))
     return 0
 
 

@@ -76,12 +76,14 @@ def _slices(length_mm: float, n_y: int = N_Y):
 
 
 # ------------------------------------------------------------------ leak
-def gap_profile(chink_area_mm2: float, start_frac: float, length_mm: float, n_y: int = N_Y) -> np.ndarray:
+def gap_profile(chink_area_mm2: float, start_frac: float, length_mm: float, n_y: int = N_Y,
+                power: float = 1.0) -> np.ndarray:
     """Posterior chink: full gap width g(y), mm, on ``n_y`` slices (y = 0 anterior, L posterior):
-    zero anterior of ``start_frac * L``, rising linearly to the posterior end, scaled so that
-    ``sum g dy = chink_area_mm2``."""
+    zero anterior of ``start_frac * L``, rising as ``s^power`` (s from 0 there to 1 at the posterior
+    end; 1 = a linear wedge, < 1 a blunt gap, > 1 a narrow slit that opens at the end), scaled so
+    that ``sum g dy = chink_area_mm2``."""
     y, dy = _slices(length_mm, n_y)
-    shape = np.clip((y / length_mm - start_frac) / (1.0 - start_frac), 0.0, None)
+    shape = np.clip((y / length_mm - start_frac) / (1.0 - start_frac), 0.0, None) ** float(power)
     if chink_area_mm2 == 0 or shape.sum() == 0:
         return np.zeros(n_y)
     return shape * chink_area_mm2 / (shape.sum() * dy)

@@ -42,7 +42,7 @@ def test_generator_does_not_import_diagnose():
 def test_suite_covers_every_label():
     labels = G.suite_labels()
     avail = G.forward_extensions_available()
-    for lab in G.LABELS:
+    for lab in G.EFFECTS + ("control",):
         if lab in avail and not avail[lab]:
             continue
         assert labels.count(lab) >= (4 if lab == "control" else 1), lab
@@ -50,6 +50,62 @@ def test_suite_covers_every_label():
         if avail.get(lab, True):
             assert labels.count(lab) >= 2, lab
     assert sum(lab != "control" for lab in labels) >= 16 - 2 * (not all(avail.values()))
+
+
+def test_full_suite_covers_outside_effects_pairs_and_controls():
+    labels = G.suite_labels(G.SUITE_COUNTS_FULL)
+    assert set(labels) == set(G.LABELS)
+    assert labels.count("control") >= 4
+    for pair in G.PAIRS:
+        first, second = pair.split("+")
+        assert first in G.FORWARD and second in G.EFFECTS and second not in G.FORWARD
+
+
+def test_full_truth_draws_five_combinations_at_the_anchor():
+    from benchmarks.concealed.config import FULL_BOUNDS, SCALE_ANCHOR
+    rng = np.random.default_rng(0)
+    draws = [G.draw_truth(rng, "full") for _ in range(200)]
+    for name, (lo, hi) in FULL_BOUNDS.items():
+        v = np.array([getattr(d, name) for d in draws])
+        assert lo <= v.min() and v.max() <= hi and v.max() - v.min() > 0.8 * (hi - lo), name
+    assert all(d.rho == SCALE_ANCHOR["rho"] and d.x0 == TABLE3.x0 for d in draws)
+    # the three-parameter set keeps E_lig, rho and eta at Table 3 (its suites are reproducible)
+    three = G.draw_truth(np.random.default_rng(0))
+    assert (three.E_lig, three.rho, three.eta) == (TABLE3.E_lig, TABLE3.rho, TABLE3.eta)
+
+
+def test_public_files_of_a_full_suite_name_the_five_and_the_anchor(tmp_path):
+    cases = G.generate_suite(2, counts={"control": 1}, presence=False, material="full")
+    G.write_suite(cases, tmp_path, 2, material="full")
+    pub = json.loads((tmp_path / "cases.json").read_text())
+    assert pub["material"] == "full" and set(pub["estimated"]) == {"E_body", "E_cover", "E_lig", "p_sub", "eta"}
+    assert pub["fixed"] == {"rho": 1051.0, "x0": TABLE3.x0}
+
+
+def test_outside_effects_have_their_shapes(base):
+    t_hr, t, a = _window(base)
+    rng = np.random.default_rng(1)
+    clean, eff = G.apply_effect("diplophonia", base, TABLE3, 77.3, rng)
+    k = G._cycle_index(base, t)
+    ratio = clean[a > 1.0] / a[a > 1.0]
+    gains = {1.0 + eff["depth"], 1.0 - eff["depth"]}
+    assert all(min(abs(r - g) for g in gains) < 1e-12 for r in ratio)       # alternate cycles, two gains
+    assert len(set(k % 2)) == 2
+    clean, eff = G.apply_effect("gamma", base, TABLE3, 77.3, np.random.default_rng(2))
+    assert np.all(np.diff(clean[np.argsort(a)]) >= -1e-12)                  # a monotone read-out of the area
+    i = np.argmin(abs(a - eff["ref_mm2"]))
+    assert clean[i] == pytest.approx(a[i] * (a[i] / eff["ref_mm2"]) ** (eff["gamma"] - 1.0), rel=1e-12)
+    clean, eff = G.apply_effect("tremor", base, TABLE3, 77.3, np.random.default_rng(3))
+    env = clean / np.where(a > 1.0, a, np.nan)
+    assert np.nanmax(env) <= 1.0 + eff["depth"] + 1e-12 and np.nanmin(env) >= 1.0 - eff["depth"] - 1e-12
+
+
+def test_leak_shape_power_moves_the_gap_posteriorly():
+    blunt = G.gap_profile(2.0, 0.5, L, power=0.5)
+    slit = G.gap_profile(2.0, 0.5, L, power=2.0)
+    dy = L / blunt.size
+    assert blunt.sum() * dy == pytest.approx(2.0) and slit.sum() * dy == pytest.approx(2.0)
+    assert slit[-1] > G.gap_profile(2.0, 0.5, L)[-1] > blunt[-1]
 
 
 SMALL = {"leak": 1, "sep_ratio": 1, "control": 1}
@@ -176,12 +232,14 @@ def test_forward_extension_inputs():
     CFG.replace(epithelium_E_kpa=10.0, epithelium_profile=tuple(prof))   # accepted by SimConfig
 
 
-@pytest.mark.parametrize("label", G.EFFECTS)
+@pytest.mark.parametrize("label", G.EFFECTS + G.OUTSIDE + G.PAIRS)
 def test_each_effect_changes_the_waveform(label):
     avail = G.forward_extensions_available()
     if label in avail and not avail[label]:
         pytest.skip(f"{label}: SimConfig lacks the forward-model fields")
-    c = G.make_case("e", label, np.random.SeedSequence([3, G.EFFECTS.index(label)]), presence=False)
+    full = label not in G.EFFECTS
+    c = G.make_case("e", label, np.random.SeedSequence([3, G.LABELS.index(label)]), presence=False,
+                    material="full" if full else "three")
     assert c.label == label and c.effect
     assert G.oscillates(c.clean, CFG.fps)
     # exposure at 2000 fps on a ~60-150 Hz GAW is a weak low-pass (documented in the README)
@@ -199,6 +257,8 @@ def test_each_effect_changes_the_waveform(label):
     if label == "leak":
         assert G.LEAK_AREA_MM2[0] <= c.effect["chink_area_mm2"] <= G.LEAK_AREA_MM2[1]
         assert c.clean.min() >= c.effect["chink_area_mm2"] - 1e-9
+    if "+" in label:                  # both effects drawn, each with its own parameters
+        assert set(c.effect) == set(label.split("+")) and all(c.effect.values())
 
 
 def test_aligned_sse_finds_any_subframe_lag(base):
