@@ -112,9 +112,9 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     clean = np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200])
     noise = 0.4 * rng.standard_normal(200)
     with ProcessPoolExecutor(2) as ex:
-        rep = diagnose(Problem(clean + 1.5 + noise, FPS, prior, config=CFG), n_particles=24, seed=2,
+        rep = diagnose(Problem(clean + 1.5 + noise, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2,
                        map=ex.map, chunk_size=12, candidates=["leak", "scale", "sep_ratio"], max_refits=1)
-        ctl = diagnose(Problem(clean + noise, FPS, prior, config=CFG), n_particles=24, seed=2,
+        ctl = diagnose(Problem(clean + noise, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2,
                        map=ex.map, chunk_size=12, candidates=["leak", "scale", "sep_ratio"], max_refits=1)
     assert rep.winner == "leak", rep.to_dict()["ranking"]
     assert rep.after["leak"]["rms_improvement"] >= 0.3
@@ -214,7 +214,7 @@ def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(11)
     y = 1.12 * np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
-    rep = diagnose(Problem(y, FPS, prior, config=CFG), n_particles=24, seed=2, candidates=["asymmetry", "scale"],
+    rep = diagnose(Problem(y, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2, candidates=["asymmetry", "scale"],
                    max_refits=1, refit_forward=False)
     assert rep.screening["asymmetry"]["score"] > rep.screening["scale"]["score"]
     assert rep.winner == "scale", rep.verdict
@@ -250,7 +250,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     monkeypatch.setattr(pipeline, "fit_extended", failing_first)
     pb = Problem(y, FPS, prior, config=CFG)
     fail = True
-    rep = pipeline.diagnose(pb, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
+    rep = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
     assert calls == ["sep_ratio", "sep_ratio"], calls
     res = rep.after["sep_ratio"]["rescued"]
     lo, hi = res["boxes"][0]["E_cover"]
@@ -264,7 +264,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     assert rep.after["sep_ratio"]["params"]["sep_ratio"]["mean"] < 1.2     # moved off the model's 1.3
     calls.clear()
     fail = False
-    rep2 = pipeline.diagnose(pb, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
+    rep2 = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
     assert calls == ["sep_ratio"] and "rescued" not in rep2.after["sep_ratio"]
     assert abs(rep2.after["sep_ratio"]["params"]["sep_ratio"]["mean"] - 1.1) < 0.05
     # the rescue's value is a lower bound: not above the whole-prior estimate beyond the errors
@@ -299,7 +299,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
 
     monkeypatch.setattr(pipeline, "fit_extended", failing_first)
     pb = Problem(y, FPS, prior, config=CFG)
-    rep = pipeline.diagnose(pb, n_particles=16, seed=6, candidates=["scale"], base_runs=1)
+    rep = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1)
     assert calls == ["scale", "scale"], calls
     res = rep.after["scale"]["rescued"]
     assert res["method"] == "reference"
@@ -310,7 +310,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     assert abs(rep.after["scale"]["params"]["E_cover"]["mean"] - TABLE3.E_cover) < 0.1 * TABLE3.E_cover
     calls.clear()
-    box = pipeline.diagnose(pb, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_method="box")
+    box = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_method="box")
     boxes = box.after["scale"]["rescued"]["boxes"]
     assert calls == ["scale"] * (1 + len(boxes)) and box.winner == "scale"      # one refit per box tried
     assert boxes[0]["E_cover"][1] < TABLE3.E_cover                 # the first box cut the mode off
@@ -319,7 +319,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     assert abs(box.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     assert box.after["scale"]["rms_improvement"] > 0.45           # far from the 30 % naming threshold
     calls.clear()
-    off = pipeline.diagnose(pb, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
+    off = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
     assert calls == ["scale"] and "rescued" not in off.after["scale"]
     assert off.winner is None
 
@@ -356,7 +356,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     monkeypatch.setattr(pipeline, "fit_extended", stuck_asymmetry)
     monkeypatch.setattr(pipeline, "base_fit", base_fit)
     pb = Problem(y, FPS, prior, config=CFG)
-    kw = dict(n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
+    kw = dict(free_material=False, n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
     rep = pipeline.diagnose(pb, shared_mode=True, **kw)
     assert rep.before["shared_mode_leader"] == "scale"
     assert sorted(calls) == ["asymmetry", "asymmetry", "scale"], calls
@@ -398,7 +398,7 @@ def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clea
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     clean = np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200])
-    kw = dict(n_particles=16, seed=6, candidates=["scale", "leak"], base_runs=1, refit_forward=False)
+    kw = dict(free_material=False, n_particles=16, seed=6, candidates=["scale", "leak"], base_runs=1, refit_forward=False)
     pb = Problem(1.12 * clean + 0.4 * rng.standard_normal(200), FPS, prior, config=CFG)
     old = pipeline.diagnose(pb, best_of_base=False, **kw)
     assert old.winner is None and old.before["regularity"]["irregular"]

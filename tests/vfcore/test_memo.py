@@ -189,7 +189,7 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     small = {"n_design": 4, "n_keep": 1, "maxfev0": 6, "maxfev_step": 3}
 
     def go(mapper, progress=None):
-        rep = diagnose(pb, n_particles=12, refit_particles=10, seed=3, candidates=["scale"], base_runs=1, map=mapper,
+        rep = diagnose(pb, free_material=False, n_particles=12, refit_particles=10, seed=3, candidates=["scale"], base_runs=1, map=mapper,
                        continuation=True, continuation_options=small, progress=progress)
         def strip(x):                                    # wall times are the only clock readings
             if isinstance(x, dict):

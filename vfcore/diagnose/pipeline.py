@@ -36,9 +36,11 @@ import numpy as np
 
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem, aligned_loglik
+from .adequacy import MAX_RMS_RATIO, check_fit
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
 from .locate import PHASES, LocateReport, locate, measure_pvalues, noise_sd
+from .material import ANCHOR, MATERIAL, freed_problem, judge, pinned
 from .progress import ProgressTracker
 from .rank import (NO_FINDING, RankReport, local_passes, null_consistent, prefer_nested, prefer_parsimonious,
                    promote_local, rank_best_of_base, rank_extensions, residual_removed)
@@ -357,6 +359,52 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
     return best(runs), tau, factor, n_sims, notes
 
 
+def material_first(problem: Problem, base: Posterior | None, fit, *, rule: dict):
+    """Free the material combinations the problem holds at Table 3 before anything else
+    (:mod:`.material`). ``base``: a posterior of ``problem`` or of the problem with fewer estimated
+    parameters (a pinned fit, e.g. an inference job's posterior), or None. ``fit(problem)`` runs a
+    base fit and returns ``(posterior, tau, factor, n_simulations, notes, runs)`` (``runs``: the
+    ``(log Z, se)`` of every run).
+
+    Returns ``(problem, base, fitted, record)``: the problem and base fit the diagnosis goes on
+    with, the base-fit tuple of that fit (every simulation made here counted in it; ``None`` when
+    nothing was pinned and ``base`` is used as it is), and the report's ``material`` record
+    (``None`` when nothing was pinned). The freed model nests the pinned one, so it is kept
+    whenever its evidence is not lower; the record says whether freeing the parameters *explains*
+    the mismatch by the naming rule (``rule``: ``min_gain``, ``k_se``, ``min_rms_gain``)."""
+    names = problem.prior.names
+    if base is not None and tuple(base.names) != tuple(names):
+        extra = [n for n in names if n not in base.names]
+        if set(base.names) - set(names) or not extra:
+            raise ValueError(f"the base posterior estimates {list(base.names)}; the problem estimates {list(names)}")
+        table = problem.prior.to_params(problem.prior.lo)           # Table 3 or fixed values elsewhere
+        pinned_problem = dataclasses.replace(problem, prior=type(problem.prior)(
+            {n: b for n, b in problem.prior.bounds.items() if n not in extra},
+            {**problem.prior.fixed, **{n: float(getattr(table, n)) for n in extra}}))
+        free_problem, freed = problem, extra
+    else:
+        freed = pinned(problem)
+        if not freed:
+            return problem, base, None, None
+        pinned_problem, free_problem = problem, freed_problem(problem, freed)
+    if base is None:
+        pin = fit(pinned_problem)
+    else:
+        pin = (base, 0.0, 1, 0, [], [(float(base.log_evidence), float(base.log_evidence_se))])
+    free = fit(free_problem)
+    s_pin = fit_summary(pin[0], pinned_problem.obs_compared, pinned_problem.fps)
+    s_free = fit_summary(free[0], free_problem.obs_compared, free_problem.fps)
+    verdict = judge(s_pin, s_free, **rule)
+    keep_free = not s_free["log_evidence"] < s_pin["log_evidence"]
+    table = pinned_problem.prior.to_params(pinned_problem.prior.lo)
+    keys = ("log_evidence", "log_evidence_se", "residual_rms", "params")
+    record = {"freed": list(freed), "held_at": {n: float(getattr(table, n)) for n in freed}, "anchor": ANCHOR,
+              **verdict, "kept": "free" if keep_free else "pinned",
+              "pinned": {k: s_pin[k] for k in keys}, "free": {k: s_free[k] for k in keys}}
+    kept, other, pb = (free, pin, free_problem) if keep_free else (pin, free, pinned_problem)
+    return pb, kept[0], (kept[0], kept[1], kept[2], kept[3] + other[3], kept[4], kept[5]), record
+
+
 def best_of_base_from_summaries(before: dict, after: dict, **rule) -> RankReport:
     """:func:`.rank.rank_best_of_base` on a diagnosis' summaries: ``before`` (a report's ``"base"``:
     the base fit's log-evidence and residual RMS, its ``"base_runs"`` and ``"mode_checks"``) and
@@ -388,19 +436,36 @@ class DiagnoseReport:
     notes: list[str] = field(default_factory=list)
     #: wall time and rows evaluated per stage and per entry (:meth:`.progress.ProgressTracker.cost`)
     cost: dict = field(default_factory=dict)
+    #: freeing the material combinations held at Table 3 (:func:`material_first`), None when none were
+    material: dict | None = None
+    #: whether the best fit explains the recording (:func:`.adequacy.check_fit`), None when not checked
+    fit_check: object | None = None
+
+    @property
+    def fits(self) -> bool:
+        return self.fit_check is None or self.fit_check.fits
 
     @property
     def verdict(self) -> str:
+        if not self.fits:
+            partial = self.ranking.verdict.removeprefix("missing physics: ") if self.ranking.winner else (
+                _material_sentence(self.material) if self.material and self.material["found"] else None)
+            return self.fit_check.sentence(partial)
+        if self.material and self.material["found"]:
+            m = _material_sentence(self.material)
+            return (f"{self.ranking.verdict}; and {m}" if self.ranking.winner
+                    else f"the fixed parameters were wrong: {m}; {NO_FINDING}")
         return self.ranking.verdict
 
     @property
     def winner(self) -> str | None:
-        return self.ranking.winner
+        return self.ranking.winner if self.fits else None
 
     def to_dict(self) -> dict:
         rows = self.ranking.table()
         return {
-            "verdict": self.verdict, "winner": self.winner, "physics": self.ranking.physics,
+            "verdict": self.verdict, "winner": self.winner, "physics": self.ranking.physics if self.fits else None,
+            "material": self.material, "fit_check": None if self.fit_check is None else self.fit_check.to_dict(),
             "rivals": [{"physics": f, "gap": g, "se": e} for f, g, e in self.ranking.rivals],
             "base": self.before,
             "screening": {k: {kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
@@ -409,6 +474,12 @@ class DiagnoseReport:
             "n_simulations": self.n_simulations, "wall_s": self.wall_s, "notes": self.notes,
             "cost": self.cost,
         }
+
+
+def _material_sentence(m: dict) -> str:
+    held = ", ".join(f"{n} (held at {v:g})" for n, v in m["held_at"].items())
+    return (f"freeing {held} gives dlogZ = {m['delta']:.2f} +- {m['delta_se']:.2f}, residual RMS "
+            f"{100 * m['rms_gain']:.0f} % lower")
 
 
 def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: int = 0, map=map,
@@ -424,7 +495,8 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
              rescue_half_width: float = 0.15, rescue_method: str = "reference",
              rescue_inflate: float = 2.0, regularity_check: bool = True,
              best_of_base: bool = True, shared_mode: bool = False, continuation: bool = False,
-             continuation_options: dict | None = None,
+             continuation_options: dict | None = None, free_material: bool = True,
+             max_rms_ratio: float | None = MAX_RMS_RATIO,
              progress: Callable[[dict], None] | None = None) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
@@ -549,6 +621,15 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     one, and it cost 10,000-20,000 more simulations a case (docs/diagnose.md section 4, "Shared
     mode").
 
+    ``free_material``: before anything else, the scaled parameters the problem holds at Table 3
+    (all but the scale anchor, :func:`.material.pinned`) are freed and the base model refitted
+    with them (:func:`material_first`); when ``base`` estimates fewer parameters than ``problem``
+    it is taken as the pinned fit. The report's ``material`` says whether freeing them explains
+    the mismatch ("the fixed parameters were wrong"), by the naming rule; the catalogue then
+    competes against the freed fit. ``max_rms_ratio``: when even the best fit leaves a residual RMS
+    above this many times the recording's noise, the verdict is "the model does not fit" with
+    where the mismatch is, and nothing is named (:mod:`.adequacy`; None = never).
+
     ``progress``: a callback given a dict at each stage and after each batch of simulations (the
     stage, the entry, its place, the rows evaluated so far, the seconds elapsed;
     :mod:`.progress`). It only watches: the result is the same with or without it.
@@ -566,10 +647,26 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
     refit_n = refit_particles or n_particles
     all_base: list = []
     track.at("base fit")
+
+    def fit(pb):
+        runs: list = []
+        out = base_fit(pb, n_particles=n_particles, base_runs=base_runs, seed=seed, map=map, chunk_size=chunk_size,
+                       escalate_tau=escalate_tau, escalate_factor=escalate_factor, runs_out=runs, **opts)
+        return (*out, runs)
+
+    material = fitted = None
+    if free_material:
+        problem, base, fitted, material = material_first(problem, base, fit, rule=dict(
+            min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain))
+        if material is not None:
+            notes.append("material: " + ("the fixed parameters were wrong: " if material["found"] else "")
+                         + _material_sentence(material) + ("" if material["found"] else f" ({material['reason']})")
+                         + f"; the {material['kept']} model is the base from here on")
     if base is None:
-        base, tau, factor, nb, bnotes = base_fit(problem, n_particles=n_particles, base_runs=base_runs, seed=seed,
-                                                 map=map, chunk_size=chunk_size, escalate_tau=escalate_tau,
-                                                 escalate_factor=escalate_factor, runs_out=all_base, **opts)
+        fitted = fit(problem)
+    if fitted is not None:
+        base, tau, factor, nb, bnotes, runs = fitted
+        all_base.extend(runs)
         n_sims += nb
         notes.extend(bnotes)
         n_particles, refit_n = n_particles * factor, refit_n * factor
@@ -931,9 +1028,14 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         ranking = nested(ranking, local, rerank)
     ranking = prefer_parsimonious(ranking, parsimony_se)
     notes.extend(ranking.notes)
+    checked = None
+    if max_rms_ratio is not None:
+        checked = check_fit({"base": before, **{n: after[n] for n in after if not after[n].get("null_consistent")}},
+                            max_rms_ratio)
     track.at("done")
     return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
-                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes, cost=track.cost())
+                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes, cost=track.cost(),
+                          material=material, fit_check=checked)
 
 
 def plot_diagnosis(report: DiagnoseReport, problem: Problem, path, level: float = 0.9):
