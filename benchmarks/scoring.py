@@ -48,6 +48,9 @@ import numpy as np
 __all__ = ["CaseRecord", "load_suite", "load_table", "reference_rms", "summarise", "wilson", "format_summary",
            "WEAK_SD"]
 
+#: effects of the generator that no catalogue entry models (benchmarks/concealed/generate.py)
+OUTSIDE = ("tremor", "diplophonia", "gamma")
+
 #: unabsorbed effect RMS (in noise sds) below which an effect counts as weak
 WEAK_SD = 2.0
 #: the generator's presence rule: an effect the base model absorbs to below this many sds is absent
@@ -81,6 +84,13 @@ class CaseRecord:
     floor_gain: float = math.nan                  # 1 - sigma / RMS of the diagnosis' reference fit
     regenerated: bool = True                      # load_table: the row's recording regenerated
     wall_by_stage: dict = field(default_factory=dict)   # report "cost" (absent from older reports): stage -> seconds
+    no_fit: bool = False                          # the verdict was "the model does not fit"
+    material: bool = False                        # the verdict said the fixed parameters were wrong
+
+    @property
+    def outside(self) -> bool:
+        """The truth's effect lies outside the catalogue: the right answer names nothing."""
+        return self.label in OUTSIDE
 
 
 def _truth_table(cases_dir: Path) -> dict:
@@ -162,7 +172,8 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
             continue
         win = d.get("winner")
         physics = (d.get("physics") or physics_of(win)) if win else None
-        ok = (win is None) if control else (physics == label)
+        # a two-effect case is named right by either effect; nothing is right for effects outside the catalogue
+        ok = (win is None) if control or label in OUTSIDE else (physics in label.split("+"))
         gain = next((r["delta"] for r in d["ranking"] if r["name"] == win), math.nan) if win else math.nan
         imp = d["refits"][win]["rms_improvement"] if win else math.nan
         reg = d.get("base", {}).get("regularity")
@@ -174,7 +185,9 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
             None if reg is None else bool(reg["irregular"]),
             _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", [])), aud, floor,
             wall_by_stage={k: float(v.get("wall_s") or 0.0)
-                           for k, v in ((d.get("cost") or {}).get("by_stage") or {}).items()}))
+                           for k, v in ((d.get("cost") or {}).get("by_stage") or {}).items()},
+            no_fit=bool(d.get("fit_check") and not d["fit_check"]["fits"]),
+            material=bool((d.get("material") or {}).get("found"))))
     return recs
 
 
@@ -251,7 +264,8 @@ def _rate(recs) -> dict:
 
 def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
     """Counts over ``recs`` (one suite or several pooled); see the module docstring."""
-    eff = [r for r in recs if r.label != "control"]
+    outside = [r for r in recs if r.outside]
+    eff = [r for r in recs if r.label != "control" and not r.outside]
     present = [r for r in eff if r.present]
     ctl = [r for r in recs if r.label == "control"]
     named = [r for r in recs if r.winner not in (None, "rejected")]
@@ -286,6 +300,15 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
         # the truth named, or listed among the winner's rivals (entries the evidence does not separate from it)
         "named_or_rival": _count(len(shortlist), len(present)),
         "false_alarms": {"count": fa, "of": len(ctl), "wilson95": list(wilson(fa, len(ctl)))},
+        # present effects given another physics's name (a wrong name, not a miss)
+        "wrong_names": _count(sum(r.physics is not None and not r.ok for r in present), len(present)),
+        # "the model does not fit" verdicts, per class of case
+        "no_fit": {"present": _count(sum(r.no_fit for r in present), len(present)),
+                   "outside": _count(sum(r.no_fit for r in outside), len(outside)),
+                   "controls": _count(sum(r.no_fit for r in ctl), len(ctl))},
+        # effects outside the catalogue: silent (no name) is right
+        "outside_silent": _rate(outside),
+        "material_verdicts": sum(r.material for r in recs),
         "named_rms_ge_30pct": [sum(r.rms_improvement >= 0.3 for r in named), len(named)],
         "named_positive_gain": [sum(r.gain > 0 for r in named), len(named)],
         "by_effect": by_label,
@@ -327,6 +350,11 @@ def format_summary(s: dict) -> str:
              f"all effect cases named right: {_fmt_rate(s['all_effect_cases'])}",
              f"present effect named or among the winner's rivals: {_fmt_rate(s['named_or_rival'])}",
              f"false alarms in controls: {s['false_alarms']['count']}/{s['false_alarms']['of']}",
+             *([f"present effects given a wrong name: {_fmt_rate(s['wrong_names'])}",
+                "'the model does not fit' verdicts: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["no_fit"].items()
+                                                                  if v["of"]),
+                f"effects outside the catalogue left unnamed: {_fmt_rate(s['outside_silent'])}"]
+               if "wrong_names" in s else []),
              f"named effects with RMS improvement >= 30 %: {s['named_rms_ge_30pct'][0]}/{s['named_rms_ge_30pct'][1]}; "
              f"with dlogZ > 0: {s['named_positive_gain'][0]}/{s['named_positive_gain'][1]}",
              "by effect (present cases): " + "; ".join(f"{k} {v['named']}/{v['of']}" for k, v in s["by_effect"].items()),

@@ -256,3 +256,25 @@ def test_problem_carries_lag_search(tmp_path, search):
     pb = case_problem(meta, {"file": "c.csv", "fps": 2000.0}, tmp_path, None, 1.0, None, "fixed", search)
     assert pb.lag_search == search
     assert type(pb).from_dict(pb.to_dict()).lag_search == search
+
+
+def test_pairs_outside_effects_and_no_fit_verdicts_are_scored_apart(tmp_path):
+    no_fit = {"fit_check": {"fits": False}}
+    cdir, odir = _suite(tmp_path, "full", {
+        "00": (_truth("sep_ratio+leak"), _report("leak", physics="leak")),          # either effect is right
+        "01": (_truth("epithelium+scale"), _report("zipper", physics="zipper")),    # a wrong name
+        "02": (_truth("tremor"), _report(None) | no_fit),                          # silent, by "no fit"
+        "03": (_truth("gamma"), _report("scale", physics="scale")),                # a name where none is right
+        "04": (_truth("leak"), _report(None) | no_fit),
+        "05": (_truth("control"), _report(None) | {"material": {"found": True}})})
+    recs = {r.case: r for r in load_suite(cdir, odir)}
+    assert recs["00"].ok and not recs["01"].ok and recs["02"].ok and not recs["03"].ok
+    assert recs["02"].outside and recs["02"].no_fit and recs["05"].material and recs["05"].ok
+    s = summarise(list(recs.values()))
+    assert (s["present"]["named"], s["present"]["of"]) == (1, 3)
+    assert (s["wrong_names"]["named"], s["wrong_names"]["of"]) == (1, 3)
+    assert (s["no_fit"]["present"]["named"], s["no_fit"]["outside"]["named"]) == (1, 1)
+    assert (s["outside_silent"]["named"], s["outside_silent"]["of"]) == (1, 2)
+    assert s["material_verdicts"] == 1 and s["false_alarms"]["count"] == 0
+    text = format_summary(s)
+    assert "wrong name: 1/3" in text and "outside the catalogue left unnamed: 1/2" in text

@@ -19,3 +19,8 @@ DISCARD_S = 0.25
 #: concealed suite of seed 8 it named cases 00 and 06 right where the SMC fits alone named nothing,
 #: and controls 05, 07 and 09 stayed quiet; ~2-3x the simulations (docs/diagnose.md section 4)
 CONTINUATION = True
+#: the base model estimates every combination of the six scaled parameters a GAW determines; rho,
+#: the best known of them in tissue, anchors the common scale (docs/diagnose.md, "Material first")
+DEFAULT_ESTIMATE = "E_body,E_cover,E_lig,p_sub,eta"
+#: scaled parameters held at Table 3 are freed before the catalogue is screened (``diagnose(free_material=...)``)
+FREE_MATERIAL = True
