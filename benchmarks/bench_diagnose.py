@@ -101,10 +101,11 @@ def run(a) -> None:
                                base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
                                shared_mode=a.shared_mode, continuation=a.continuation,
+                               continuation_entries=a.continuation_entries or None,
                                continuation_options={"halving": True} if a.halving else None)
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
-            d["runner"] = {"continuation": a.continuation, "halving": a.halving, "shared_mode": a.shared_mode,
+            d["runner"] = {"continuation": a.continuation, "continuation_entries": a.continuation_entries, "halving": a.halving, "shared_mode": a.shared_mode,
                            "seed": a.seed, "noise": a.noise, "lag_search": a.lag_search}
             if store is not None:          # a resumed case: its earlier attempts' wall time counted in
                 account(d, inner)
@@ -167,7 +168,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True,
                     help="reports directory; with --score, a kept --score table file is read instead of reports")
     ap.add_argument("--score", action="store_true", help="score existing reports against truth.json")
-    from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, REFIT_PARTICLES
+    from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, CONTINUATION_ENTRIES, REFIT_PARTICLES
     ap.add_argument("--particles", type=int, default=BASE_PARTICLES)
     ap.add_argument("--base-runs", type=int, default=2, help="independent base SMC runs, largest evidence kept")
     ap.add_argument("--max-refits", type=int, default=0,
@@ -191,6 +192,9 @@ def main(argv=None) -> int:
     ap.add_argument("--halving", action="store_true",
                     help="continuation search with successive halving of its starts (off by default; "
                          "docs/diagnose.md section 4)")
+    ap.add_argument("--continuation-entries", type=int, default=CONTINUATION_ENTRIES,
+                    help="refitted entries searched by continuation, largest refit evidence first (0: all; "
+                         "default: vfcore.diagnose.defaults.CONTINUATION_ENTRIES)")
     ap.add_argument("--continuation", action=argparse.BooleanOptionalAction, default=CONTINUATION,
                     help="search the base and every entry by window continuation and fit from the optimum too "
                          "(diagnose(continuation=...); default: vfcore.diagnose.defaults.CONTINUATION)")

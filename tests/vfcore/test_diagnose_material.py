@@ -100,3 +100,40 @@ def test_a_recording_with_wrong_fixed_parameters_is_explained_by_freeing_them(cl
     assert abs(eta["mean"] - 6.5) < max(3 * eta["sd"], 1.0), eta
     assert rep.winner is None and "the fixed parameters were wrong" in rep.verdict
     assert rep.fits, rep.fit_check
+
+
+def _one_parameter(y):
+    return Problem(y, FPS, Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"}),
+                   config=CFG)
+
+
+SMALL = dict(free_material=False, n_particles=12, seed=2, base_runs=1, regularity_check=False, mode_checks=0,
+             local_check=False, candidates=["scale", "leak"])
+
+
+def test_a_base_fit_at_the_noise_stops_before_the_catalogue(clean):
+    """A recording of the model itself: the base fit leaves about the noise, no entry could lower
+    its RMS by 30 %, so nothing is screened or refitted and nothing is named."""
+    from vfcore.diagnose.pipeline import diagnose
+    y = clean + 0.4 * np.random.default_rng(3).standard_normal(clean.size)
+    rep = diagnose(_one_parameter(y), **SMALL)
+    assert rep.before["residual_rms"] < 1.43 * rep.before["predictive_noise_sd"]
+    assert rep.screening == {} and rep.refits == {} and rep.winner is None
+    assert rep.verdict == "no missing physics found" and rep.fits
+    assert any("none was screened" in n for n in rep.notes)
+
+
+@pytest.mark.slow
+def test_an_effect_outside_the_catalogue_is_not_named(clean):
+    """Alternate cycles 30 % larger and smaller (diplophonia, no catalogue entry): neither a scale
+    error nor a leak reproduces it, the best fit stays far above the noise, and the verdict says
+    the model does not fit instead of naming the entry that absorbed most."""
+    from vfcore.diagnose.pipeline import diagnose
+    r = simulate(TABLE3, CFG)
+    idx = np.searchsorted(np.asarray(r.cycles.t_start), (37 + HR_OVERSAMPLE * np.arange(200)) / (FPS * HR_OVERSAMPLE),
+                          side="right")
+    y = clean * np.where(idx % 2 == 0, 1.3, 0.7) + 0.3 * np.random.default_rng(4).standard_normal(clean.size)
+    rep = diagnose(_one_parameter(y), **SMALL)
+    assert not rep.fits and rep.winner is None
+    assert rep.verdict.startswith(NO_FIT) and rep.fit_check.ratio > 2.0
+    assert rep.to_dict()["winner"] is None and rep.to_dict()["fit_check"]["fits"] is False

@@ -24,3 +24,6 @@ CONTINUATION = True
 DEFAULT_ESTIMATE = "E_body,E_cover,E_lig,p_sub,eta"
 #: scaled parameters held at Table 3 are freed before the catalogue is screened (``diagnose(free_material=...)``)
 FREE_MATERIAL = True
+#: refitted entries searched by continuation, those of largest refit evidence (None: all); the named
+#: entry's first refit ranked 1st-5th on the suite of seed 9 (``diagnose(continuation_entries=...)``)
+CONTINUATION_ENTRIES = 5
