@@ -1,16 +1,17 @@
 """Which job records a request may read: the lookups every router shares (jobs, diagnosis).
 
 A job that is missing or belongs to someone else is the same 404, so ids of other users' jobs are
-not revealed; results exist only for a finished job (409 otherwise).
+not revealed; results exist only for a finished job (409 otherwise). An endpoint of one kind of job
+(an inference's posterior, a job's diagnosis) answers 404 for a job of another kind.
 """
 from __future__ import annotations
 
 from fastapi import HTTPException, status
 
 
-def own_job(manager, job_id: str, user: str) -> dict:
-    """The job's record if ``user`` owns it, else 404."""
-    rec = manager.db.get(job_id, owner=user)
+def own_job(manager, job_id: str, user: str, kind: str | None = "inference") -> dict:
+    """The job's record if ``user`` owns it and it is of ``kind`` (None: any kind), else 404."""
+    rec = manager.db.get(job_id, owner=user, kind=kind)
     if rec is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, "job not found")
     return rec

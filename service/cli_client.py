@@ -101,7 +101,7 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
            noise: Noise = "fixed", measure: Measure = None,
            force_reach: ForceReach = False, screen: Screen = None, prior_set: PriorSet = "paper") -> None:
     """Submit an inference job to a running service; prints the job id (and the service's warnings)."""
-    from .cli import build_spec, note_is
+    from .cli_spec import build_spec, note_is
     warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
@@ -220,11 +220,11 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
               candidates: Annotated[Optional[str], typer.Option(help="with --start: comma-separated catalogue "
                                                                      "entries (default: all implemented)")] = None,
               particles: Annotated[Optional[int], typer.Option(
-                  min=4, help="with --start: SMC particles of each base fit")] = None,
+                  help="with --start: SMC particles of each base fit (10-400)")] = None,
               refit_particles: Annotated[Optional[int], typer.Option(
-                  min=4, help="with --start: particles of each refit")] = None,
+                  help="with --start: particles of each refit (4-400)")] = None,
               max_refits: Annotated[Optional[int], typer.Option(
-                  min=0, help="with --start: most observation-level refits")] = None,
+                  help="with --start: most observation-level refits (0-6)")] = None,
               continuation: Annotated[Optional[bool], typer.Option(
                   "--continuation/--no-continuation", help="with --start: the window-continuation search")] = None,
               seed: Annotated[Optional[int], typer.Option(min=0, help="with --start: random seed")] = None,
@@ -235,7 +235,7 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
               ) -> None:
     """A job's diagnosis on a running service: start it, follow it, cancel it, fetch it
     (POST/GET/DELETE /jobs/{id}/diagnosis; the same pipeline as ``vfinfer diagnose``)."""
-    from .cli_diagnose import print_report, stage_line
+    from .cli_diagnose import diagnose_request, print_report, stage_line
     check_job_id(job_id)
     if start and cancel:
         raise fail("--start and --cancel exclude each other")
@@ -243,6 +243,7 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
                               ("max_refits", max_refits), ("continuation", continuation), ("seed", seed)) if v is not None}
     if candidates:
         body["candidates"] = [c.strip() for c in candidates.split(",") if c.strip()]
+    diagnose_request(**body)                 # the service's bounds, checked before anything is sent
     if body and not start:
         raise fail("diagnosis settings (--candidates, --particles, ...) need --start")
     if out is not None and out.exists() and not out.is_dir():
@@ -261,7 +262,7 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
             if p and (p["stage"], p.get("entry")) != last:
                 last = (p["stage"], p.get("entry"))
                 console.print(stage_line(p), highlight=False)
-            if not wait or d["state"] != "running":
+            if not wait or d["state"] not in ("queued", "running"):
                 break
             time.sleep(2)
         console.print(f"{job_id}  diagnosis {d['state']}")

@@ -1,4 +1,8 @@
-"""``vfinfer diagnose GAW``: which physics is the model missing? (vfcore.diagnose on this machine)."""
+"""``vfinfer diagnose GAW``: which physics is the model missing? (vfcore.diagnose on this machine).
+
+Its settings are the API's :class:`~service.api_models.DiagnoseRequest` (one set of defaults and bounds for the
+command line and the service) and it calls the diagnosis as the service does (:func:`service.diagnosis.run_diagnose`).
+"""
 from __future__ import annotations
 
 import json
@@ -12,8 +16,8 @@ from rich.console import Console
 from rich.table import Table
 
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw, warn
-from vfcore.diagnose.defaults import (BASE_PARTICLES, CONTINUATION, DISCARD_S, DURATION_S, MAX_REFITS,
-                                     REFIT_PARTICLES)
+from vfcore.diagnose.defaults import (BASE_PARTICLES, CONTINUATION, DEFAULT_ESTIMATE, DISCARD_S, DURATION_S,
+                                     FREE_MATERIAL, MAX_REFITS, REFIT_PARTICLES)
 
 console = Console()
 
@@ -24,6 +28,20 @@ def _fail(msg: str) -> typer.Exit:
 
 def _names(text: str | None) -> list[str]:
     return [n.strip() for n in (text or "").split(",") if n.strip()]
+
+
+def diagnose_request(**given):
+    """The diagnosis settings given on the command line (None: not given, the default), checked with the API's
+    bounds; a bad one is one ``error:`` line naming its option, exit 2."""
+    from pydantic import ValidationError
+
+    from .api_models import DIAGNOSIS_OPTIONS, DiagnoseRequest
+    try:
+        return DiagnoseRequest(**{k: v for k, v in given.items() if v is not None})
+    except ValidationError as exc:
+        e = exc.errors()[0]
+        field = str(e["loc"][0]) if e["loc"] else "settings"
+        raise _fail(f"{DIAGNOSIS_OPTIONS.get(field, field)}: {e['msg'].removeprefix('Value error, ')}") from None
 
 
 def _f(x, fmt: str = ".4g") -> str:
@@ -192,7 +210,8 @@ def diagnose_cmd(
         out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png, index.html)")],
         fps: Annotated[Optional[float], typer.Option(parser=POSITIVE, help="camera frame rate, frames/s, if the "
                                                                                 "file does not say")] = None,
-        estimate: Annotated[str, typer.Option(help="comma-separated parameters to estimate")] = "E_body,E_cover,p_sub",
+        estimate: Annotated[str, typer.Option(help="comma-separated parameters to estimate (default: the five "
+                                                   "combinations a GAW determines, rho anchoring the scale)")] = DEFAULT_ESTIMATE,
         fix: Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable; "
                                                          "parameters neither estimated nor fixed take Table 3 values")] = None,
         mesh: Annotated[str, typer.Option(parser=choice("coarse", "medium", "fine"), metavar="[coarse|medium|fine]",
@@ -205,15 +224,23 @@ def diagnose_cmd(
         sigma_e: Annotated[float, typer.Option(parser=POSITIVE, help="observation noise sd, mm^2")] = 1.0,
         noise: Annotated[str, typer.Option(parser=choice("fixed", "marginal"), metavar="[fixed|marginal]",
                                            help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
-        particles: Annotated[int, typer.Option(help="SMC particles of each base fit")] = BASE_PARTICLES,
-        refit_particles: Annotated[int, typer.Option(help="SMC particles of each extended fit")] = REFIT_PARTICLES,
+        particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = BASE_PARTICLES,
+        refit_particles: Annotated[int, typer.Option(
+            help="SMC particles of each extended fit (4-400)")] = REFIT_PARTICLES,
         max_refits: Annotated[Optional[int], typer.Option(
-            help="most observation-level extensions refitted, best screened first (default: all)")] = MAX_REFITS,
+            help="most observation-level extensions refitted, best screened first (0-6; default: all)")] = MAX_REFITS,
         candidates: Annotated[Optional[str], typer.Option(
             help="comma-separated extensions to screen (default: every implemented one)")] = None,
         continuation: Annotated[bool, typer.Option(
             help="also search the base model and every extension by window continuation and fit from the "
                  "optimum (~2,000 simulations each; docs/diagnose.md section 4)")] = CONTINUATION,
+        base: Annotated[Optional[Path], typer.Option(
+            help="a fitted posterior of this recording (posterior.nc of 'vfinfer infer' or of a job) to use as the "
+                 "base fit instead of fitting it again; one with fewer estimated parameters is the pinned fit "
+                 "that freeing the material parameters is judged against")] = None,
+        free_material: Annotated[bool, typer.Option(
+            help="free the scaled parameters held at Table 3 (all but the anchor rho) before the catalogue is "
+                 "screened, and report whether they explain the mismatch")] = FREE_MATERIAL,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
         resume: Annotated[bool, typer.Option(
             help="store finished simulations in OUT/.resume while running, so the same command run again "
@@ -221,29 +248,20 @@ def diagnose_cmd(
                  "diagnosis is written")] = True,
         seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = 0) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
-    from .routers.diagnose import check_candidates, jsonable
+    from .diagnosis import jsonable, plot, run_diagnose
 
-    cand = None
-    if candidates is not None:
-        try:
-            cand = check_candidates(_names(candidates))
-        except ValueError as exc:
-            raise _fail(f"--candidates: {exc}") from None
-    if particles < 4:
-        raise _fail(f"--particles must be >= 4, got {particles}")
-    if refit_particles < 4:
-        raise _fail(f"--refit-particles must be >= 4, got {refit_particles}")
-    if max_refits is not None and max_refits < 0:
-        raise _fail(f"--max-refits must be >= 0, got {max_refits}")
+    req = diagnose_request(candidates=None if candidates is None else _names(candidates), n_particles=particles,
+                           refit_particles=refit_particles, max_refits=max_refits, continuation=continuation,
+                           seed=seed, free_material=free_material)
     if workers < 1:
         raise _fail(f"--workers must be >= 1, got {workers}")
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out} exists and is not a folder")
     problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise)
+    base_post = load_base(base, problem) if base is not None else None
 
-    from vfcore.diagnose.pipeline import diagnose, plot_diagnosis
-    console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {particles} particles, "
-                  f"candidates {cand or 'all implemented'}, {workers} worker(s)")
+    console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "
+                  f"candidates {req.candidates or 'all implemented'}, {workers} worker(s)")
     t0 = time.perf_counter()
     store = out / ".resume"
     from vfcore.inference.memo import CachedMap, account
@@ -252,23 +270,22 @@ def diagnose_cmd(
             console.print(f"resuming: reading finished simulations back from {store}")
     try:
         with console.status("starting", spinner="dots") as status:
-            kw = dict(candidates=cand, n_particles=particles, refit_particles=refit_particles, max_refits=max_refits,
-                      seed=seed, continuation=continuation, progress=StageReporter(status))
             if workers == 1:
                 cmap = CachedMap(map, store) if resume else None
-                report = diagnose(problem, map=cmap or map, **kw)
+                report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status), base=base_post)
             else:
                 from concurrent.futures import ProcessPoolExecutor
-                chunk = max(1, math.ceil(particles / (2 * workers)))
+                chunk = max(1, math.ceil(req.n_particles / (2 * workers)))
                 with ProcessPoolExecutor(workers) as pool:
                     cmap = CachedMap(pool.map, store) if resume else None
-                    report = diagnose(problem, map=cmap or pool.map, chunk_size=chunk, **kw)
+                    report = run_diagnose(problem, req, map=cmap or pool.map, chunk_size=chunk,
+                                          progress=StageReporter(status), base=base_post)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
     d = jsonable(account(report.to_dict(), cmap))      # a resumed run counts its earlier attempts' time
     out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis.json").write_text(json.dumps(d, indent=1))
-    plot_diagnosis(report, problem, out / "diagnosis.png")
+    plot(report, problem, out / "diagnosis.png")
     page = write_page(out, d, gaw, problem, sigma_e, noise, mesh)
     if resume:
         import shutil
@@ -277,6 +294,30 @@ def diagnose_cmd(
     console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
                   f"({time.perf_counter() - t0:.1f} s)")
     console.print(f"report: {page.resolve()}", highlight=False, soft_wrap=True)
+
+
+def load_base(path: Path, problem):
+    """The ``--base`` posterior, checked against the problem: a NetCDF posterior of an FE fit with
+    predictions, estimating the problem's parameters or some of them, of the same recording."""
+    import numpy as np
+
+    from vfcore.inference.posterior import Posterior
+    if not path.is_file():
+        raise _fail(f"--base {path}: no such file")
+    try:
+        post = Posterior.from_netcdf(path)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file is one error line
+        raise _fail(f"--base {path}: not a vfinfer posterior.nc ({type(exc).__name__}: {exc})") from None
+    if post.predictive is None:
+        raise _fail(f"--base {path}: the posterior carries no predicted GAWs (not a finite-element fit)")
+    extra = sorted(set(post.names) - set(problem.prior.names))
+    if extra:
+        raise _fail(f"--base {path}: it estimates {extra}, which --estimate does not")
+    obs = None if post.obs_gaw is None else np.asarray(post.obs_gaw, dtype=float)
+    mine = np.asarray(problem.obs_compared, dtype=float)
+    if obs is not None and not (obs.shape == mine.shape and np.allclose(obs, mine, rtol=0, atol=1e-9)):
+        raise _fail(f"--base {path}: it was fitted to another recording (or another window of this one)")
+    return post
 
 
 def write_page(out: Path, d: dict, gaw: Path, problem, sigma_e: float, noise: str, mesh: str) -> Path:

@@ -29,12 +29,10 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
         manager = JobManager(s, db, cl)
         app.state.settings, app.state.manager = s, manager
         app.state.signer = Signer.from_settings(s)   # keys the signed links of the HTML pages
-        manager.start()
-        diagnose.on_startup(app, manager)          # interrupted diagnoses go on
+        manager.start()                            # interrupted jobs, inferences and diagnoses, go on
         try:
             yield
         finally:
-            diagnose.on_shutdown(app)
             await asyncio.to_thread(manager.stop)
             db.close()
             if own:

@@ -24,8 +24,8 @@ from urllib.parse import urlencode
 
 from fastapi import Depends, HTTPException, Query, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from pydantic import BaseModel, Field
 
+from .api_models import LinkOut
 from .deps import get_settings, get_user
 from .settings import Settings
 
@@ -123,13 +123,6 @@ OptionalUserDep = Annotated[str | None, Depends(bearer_user)]
 
 def link_refused(exc: LinkError) -> HTTPException:
     return HTTPException(status.HTTP_403_FORBIDDEN, str(exc))
-
-
-class LinkOut(BaseModel):
-    url: str = Field(description="the page's signed link, relative to the service (prefix your service URL)")
-    absolute_url: str = Field(description="the same link on the address this request was sent to")
-    expires: int = Field(description="when the link stops working, epoch seconds")
-    expires_in_s: int = Field(description="how long the link stays valid, seconds")
 
 
 def link_out(request: Request, link: SignedLink) -> LinkOut:

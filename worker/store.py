@@ -19,6 +19,14 @@
         samples (N, d), log_weights (N,), resampled (M,)
       products/                     uint8 blobs: figures (PNG), samples CSV + its JSON metadata, NetCDF
 
+A diagnosis job's store holds less (:func:`create_diagnosis_store`)::
+
+    <job_id>.zarr/                  attrs: kind="diagnosis", diagnosis (its spec, JSON), job_id, layout
+      products/                     diagnosis_png (the figure), then diagnosis_json (the report: its presence
+                                    means done)
+      resume/                       finished simulations while it runs (vfcore.inference.memo.CachedMap;
+                                    not Zarr, deleted once the report is written)
+
 Every array is chunked along its first axis with the job's ``chunk_size`` so each worker task
 owns whole Zarr chunks: concurrent tasks never write the same object, and a recomputed task
 overwrites its region with identical bytes.  ``done`` has one element per Zarr chunk.
@@ -37,7 +45,10 @@ LAYOUT_VERSION = 1
 EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "contact_impulse",
                "contact_pressure_in_contact")
 SUMMARY_ARRAYS = ("mean_flow", "mean_contact", "max_contact", "contact_impulse", "contact_pressure_in_contact")
-PRODUCT_NAMES = ("gaw_fit", "corner", "contact_pressure", "samples_csv", "samples_meta", "posterior_nc")
+PRODUCT_NAMES = ("gaw_fit", "corner", "contact_pressure", "samples_csv", "samples_meta", "posterior_nc",
+                 "diagnosis_json", "diagnosis_png")
+#: The folder of a diagnosis store that keeps its finished simulations while it runs.
+RESUME_DIR = "resume"
 
 
 def create_job_store(path: Path, job_id: str, spec_json: str, chunk_size: int, n_compare: int, ndim: int):
@@ -49,6 +60,17 @@ def create_job_store(path: Path, job_id: str, spec_json: str, chunk_size: int, n
     root.attrs.update({"layout": LAYOUT_VERSION, "job_id": job_id, "jobspec": json.loads(spec_json),
                        "chunk_size": int(chunk_size), "n_compare": int(n_compare), "ndim": int(ndim)})
     root.create_group("batches")
+    return root
+
+
+def create_diagnosis_store(path: Path, job_id: str, spec_json: str):
+    """Create (or reopen) the store of a diagnosis job."""
+    path = Path(path)
+    if (path / "zarr.json").exists():
+        return zarr.open_group(str(path), mode="r+")
+    root = zarr.open_group(str(path), mode="w")
+    root.attrs.update({"layout": LAYOUT_VERSION, "kind": "diagnosis", "job_id": job_id,
+                       "diagnosis": json.loads(spec_json)})
     return root
 
 

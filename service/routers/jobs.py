@@ -3,19 +3,17 @@ revealed).  Paths into the data directory are built from table rows, never from 
 from __future__ import annotations
 
 import time
-from enum import Enum
 from typing import Annotated, Literal
 
 import numpy as np
 from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from fastapi.responses import HTMLResponse, JSONResponse
-from pydantic import BaseModel, Field
 
 from worker import store as st
-from worker.jobspec import JobSpec
 from worker.reduce import compare_posteriors
 
 from ..access import done_job, own_job, page_reader
+from ..api_models import CompareRequest, Figure, JobSpec, JobStatus, Submitted
 from ..db import ACTIVE
 from ..deps import JOB_ID_RE, JobIdDep, ManagerDep, SettingsDep, UserDep
 from ..signing import Exp, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, report_scope
@@ -23,37 +21,8 @@ from ..signing import Exp, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, r
 router = APIRouter(tags=["jobs"])
 
 
-class Figure(str, Enum):
-    gaw_fit = "gaw_fit"
-    corner = "corner"
-    contact_pressure = "contact_pressure"
-
-
-class Submitted(BaseModel):
-    id: str
-    state: str
-    status_url: str
-    warnings: list[str] = Field(default_factory=list)
-
-
-class JobStatus(BaseModel):
-    id: str
-    state: Literal["queued", "running", "done", "failed", "cancelled"]
-    progress: dict
-    ess: float | None
-    timings: dict
-    error: str | None = None
-    sampler: str
-    model: str
-    stats: dict = Field(default_factory=dict)
-    warnings: list[str] = Field(default_factory=list)
-
-
-class CompareRequest(BaseModel):
-    job_ids: list[str] = Field(min_length=2, max_length=10)
-
-
 def _status(manager, rec: dict) -> JobStatus:
+    """A job's status from its table row and, while it runs, the manager's memory: no spec is parsed."""
     lv = manager.live(rec["id"]) if rec["state"] == "running" else None
     n_done, n_total, ess, phase = rec["n_done"], rec["n_total"], rec["ess"], rec["state"]
     if lv is not None:
@@ -64,12 +33,15 @@ def _status(manager, rec: dict) -> JobStatus:
     timings = {"created": rec["created"], "started": rec["started"], "finished": rec["finished"],
                "queued_s": ((rec["started"] or now) - rec["created"]),
                "running_s": (((rec["finished"] or now) - rec["started"]) if rec["started"] else None)}
-    spec = JobSpec.from_json(rec["spec"])
+    progress = {"simulations_done": n_done, "simulations_total": n_total,
+                "fraction": (n_done / n_total) if n_total else 0.0, "phase": phase}
+    if rec["kind"] == "diagnosis" and rec["state"] != "done":
+        # a diagnosis's simulations are known only once it ends: which stages run depends on the data
+        progress.update(simulations_total=None, fraction=None)
     return JobStatus(id=rec["id"], state=rec["state"], ess=ess, timings=timings, error=rec["error"],
-                     progress={"simulations_done": n_done, "simulations_total": n_total,
-                               "fraction": (n_done / n_total) if n_total else 0.0, "phase": phase},
-                     sampler=spec.sampler.kind, model=spec.model, stats=rec["stats"] or {},
-                     warnings=list((rec["stats"] or {}).get("warnings", [])))
+                     progress=progress, sampler=rec["sampler"] or "?", model=rec["model"] or "?",
+                     stats=rec["stats"] or {}, warnings=list((rec["stats"] or {}).get("warnings", [])),
+                     kind=rec["kind"], parent=rec["parent"])
 
 
 def reach_gate(spec: JobSpec) -> tuple[JSONResponse | None, dict]:
@@ -109,9 +81,10 @@ def list_jobs(user: UserDep, manager: ManagerDep) -> list[JobStatus]:
 
 
 @router.get("/jobs/{job_id}", response_model=JobStatus,
-            summary="A job's state, progress (simulations done), ESS, times (epoch s) and warnings")
+            summary="A job's state, progress (simulations done), ESS, times (epoch s) and warnings; an inference "
+                    "or a diagnosis (the diagnosis_id of POST /jobs/{id}/diagnose)")
 def get_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> JobStatus:
-    return _status(manager, own_job(manager, job_id, user))
+    return _status(manager, own_job(manager, job_id, user, kind=None))
 
 
 @router.get("/jobs/{job_id}/posterior",
@@ -197,9 +170,10 @@ def report_link(job_id: JobIdDep, user: UserDep, manager: ManagerDep, signer: Si
     return link_out(request, signer.sign(report_scope(rec["id"]), f"/jobs/{rec['id']}/report"))
 
 
-@router.delete("/jobs/{job_id}", summary="Cancel a queued or running job (a finished job keeps its state)")
+@router.delete("/jobs/{job_id}", summary="Cancel a queued or running job, an inference or a diagnosis (a finished "
+                                         "job keeps its state)")
 def cancel_job(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> dict:
-    rec = own_job(manager, job_id, user)
+    rec = own_job(manager, job_id, user, kind=None)
     if rec["state"] in ACTIVE:
         manager.cancel(rec["id"])
     return {"id": rec["id"], "state": manager.db.get(rec["id"])["state"]}

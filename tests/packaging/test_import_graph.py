@@ -103,10 +103,21 @@ def test_the_cycle_finder_sees_a_loop_through_a_deferred_import():
     assert _cycles({"a": {"b"}, "b": set()}) == []
 
 
-@pytest.mark.parametrize("packages", [("vfcore",), ("vfcore", "vfvideo", "worker")])
+@pytest.mark.parametrize("packages", [("vfcore",), ("vfcore", "vfvideo", "worker"), PRODUCT])
 def test_no_import_cycles(packages):
     cycles = _cycles(_graph(packages))
     assert not cycles, f"modules that import each other (directly or around a loop): {cycles}"
+
+
+def test_the_command_line_and_the_routes_never_import_each_other():
+    """They share the request types and their bounds through ``service.api_models``: a command that imported a
+    route (or a route a command) would tie the CLI to the HTTP layer."""
+    edges = _graph(("service",))
+    cli = {m for m in edges if m.split(".")[-1].startswith("cli")}
+    routes = {m for m in edges if m.startswith("service.routers")}
+    bad = sorted(f"{a} imports {b}" for a in edges for b in edges[a]
+                 if (a in cli and b in routes) or (a in routes and b in cli))
+    assert not bad, bad
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))

@@ -7,7 +7,6 @@ Shared by ``tests/service/test_browser.py`` (every page loads, every image loads
 """
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from contextlib import contextmanager
@@ -15,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
-from svc_helpers import TOKENS, ServerThread, auth, done_fe_job, wait_done
+from svc_helpers import TOKENS, ServerThread, auth, done_fe_job, store_diagnosis, wait_done
 
 #: The pages, in the order they are opened; each value says what to wait for before the page counts as shown
 #: (Swagger UI renders its operations from /openapi.json after the load event).
@@ -113,9 +112,7 @@ def pages_service(data_dir: Path, client, job_spec: dict, diagnosis: dict | None
             fig.raise_for_status()
             diagnosis_png = fig.content
         diag_job = done_fe_job(settings, owner=OWNER)
-        # the names GET /jobs/{id}/diagnosis reads, as a finished diagnosis leaves them
-        (settings.stores_dir / f"{diag_job}.diagnosis.png").write_bytes(diagnosis_png)
-        (settings.stores_dir / f"{diag_job}.diagnosis.json").write_text(json.dumps(diagnosis))
+        store_diagnosis(settings, diag_job, report=diagnosis, png=diagnosis_png)   # as a finished diagnosis leaves it
         yield Site(srv.url, http, job_id, diag_job)
 
 

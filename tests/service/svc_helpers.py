@@ -1,9 +1,14 @@
 """Helpers shared by the service tests (imported by name: tests/ has no packages)."""
 from __future__ import annotations
 
+import os
+import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import uvicorn
 
@@ -26,6 +31,46 @@ def toy_spec(n: int = 400, seed: int = 1, delay: float = 0.0, sampler: dict | No
             "duration": 0.35, "discard": 0.2, "sigma_e": 10.0, "seed": seed}
     spec.update(kw)
     return spec
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def start_service(data_dir: Path, port: int, script: list[str] | None = None, env: dict | None = None
+                  ) -> subprocess.Popen:
+    """``vfinfer serve`` (or ``script``, a command line run with this Python that serves the same way) in its own
+    process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir``; returns once both
+    workers answer."""
+    env = {**os.environ, "VFINFER_DATA_DIR": str(data_dir), "VFINFER_ALLOW_TOY": "1", "VFINFER_N_WORKERS": "2",
+           "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1", **(env or {})}
+    log = data_dir.parent / f"serve_{port}_{time.time_ns()}.log"       # kept for the error message
+    argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", str(port)]
+    with open(log, "wb") as fh:
+        p = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
+    import httpx
+    t0 = time.time()
+    while True:
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).json()["dask_workers"] == 2:
+                return p
+        except (httpx.HTTPError, KeyError, ValueError):
+            pass
+        if time.time() - t0 > 180 or p.poll() is not None:
+            rc = p.poll()
+            kill_service(p)
+            tail = log.read_text(errors="replace")[-3000:]
+            raise RuntimeError(f"service did not start on port {port} within {time.time() - t0:.0f} s "
+                               f"(exit code {rc}); its output:\n{tail}")
+        time.sleep(0.2)
+
+
+def kill_service(p: subprocess.Popen) -> None:
+    """SIGKILL the service and every process it started (its LocalCluster): a host crash."""
+    try:
+        os.killpg(p.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    p.wait(30)
 
 
 def free_port() -> int:
@@ -91,21 +136,22 @@ def dying_diagnosis(seen: list, message: str, n_parts: int = 3):
     return diagnose
 
 
-def done_fe_job(settings, owner: str = "alice") -> str:
+def done_fe_job(settings, owner: str = "alice", spec: dict | None = None) -> str:
     """A finished finite-element job put straight into the job table (its diagnosis is replaced
-    by a stand-in in the tests that use it, so nothing of it is simulated)."""
+    by a stand-in in the tests that use it, so nothing of it is simulated; ``spec``: another job's)."""
     import json
 
     import numpy as np
 
     from service.db import JobDB
     from service.manager import new_job_id
-    t = np.arange(800) / 4000.0
-    areas = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0) + 0.5
-    spec = {"model": "fe", "gaw": {"areas": [float(a) for a in areas], "fps": 4000.0, "units": "mm2"},
-            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
-            "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1, "mesh": "coarse",
-            "dt": 1e-4, "duration": 0.35, "discard": 0.15}
+    if spec is None:
+        t = np.arange(800) / 4000.0
+        areas = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0) + 0.5
+        spec = {"model": "fe", "gaw": {"areas": [float(a) for a in areas], "fps": 4000.0, "units": "mm2"},
+                "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
+                "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1, "mesh": "coarse",
+                "dt": 1e-4, "duration": 0.35, "discard": 0.15}
     settings.stores_dir.mkdir(parents=True, exist_ok=True)
     db = JobDB(settings.db_path)
     jid = new_job_id()
@@ -113,3 +159,68 @@ def done_fe_job(settings, owner: str = "alice") -> str:
     db.update(jid, state="done")
     db.close()
     return jid
+
+
+def leaky_fe_spec(fps: float = 4000.0) -> dict:
+    """A tiny FE job on a Table 3 simulation with a hidden 1.5 mm^2 leak and N(0, 0.3^2) noise: what the
+    diagnosis tests diagnose for real (coarse mesh, dt 1e-4 s, 0.35 s simulated)."""
+    import numpy as np
+
+    from vfcore import TABLE3, SimConfig, simulate
+    cfg = dict(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
+    r = simulate(TABLE3, SimConfig(fps=fps, **cfg))
+    assert r.ok, r.message
+    y = np.clip(r.gaw + 1.5 + np.random.default_rng(3).normal(0.0, 0.3, r.gaw.size), 0.0, None)
+    fixed = {k: v for k, v in TABLE3.as_dict().items() if k != "E_cover"}
+    return {"model": "fe", "gaw": {"areas": [float(a) for a in y], "fps": fps, "units": "mm2"},
+            "fixed": fixed, "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1,
+            "chunk_size": 8, **cfg}
+
+
+def store_diagnosis(settings, job_id: str, state: str = "done", report: dict | None = None, png: bytes | None = None,
+                    error: str | None = None) -> str:
+    """A diagnosis of the finished job ``job_id`` put straight into the job table and its store, as the service
+    leaves one in ``state`` (``report``: as ``DiagnoseReport.to_dict()`` after ``jsonable``, its ``request`` the
+    settings); returns the diagnosis's id."""
+    import time
+
+    from service.api_models import DiagnoseRequest, DiagnosisSpec
+    from service.db import JobDB, new_job_id
+    from service.diagnosis import write_report
+    db = JobDB(settings.db_path)
+    try:
+        owner = db.get(job_id)["owner"]
+        report = dict(report) if report is not None else None
+        spec = DiagnosisSpec(job=job_id, request=DiagnoseRequest(**((report or {}).pop("request", None) or {})))
+        diag = new_job_id()
+        db.insert(diag, owner, spec.to_json(), 0, kind="diagnosis", parent=job_id, sampler="smc", model="fe")
+        fields = {"state": state, "started": time.time(), "error": error}
+        if state == "done":
+            clock = write_report(settings.stores_dir / f"{diag}.zarr", diag, spec.to_json(), report, png)
+            fields.update(finished=time.time(), stats={"clock": clock})
+        db.update(diag, **fields)
+    finally:
+        db.close()
+    return diag
+
+
+def show_running(manager, diag_id: str, event: dict):
+    """Make the manager show a running diagnosis's progress ``event`` (what its runner thread would set): a
+    context manager."""
+    from contextlib import contextmanager
+
+    from service.manager import Live
+    from worker.run import JobControl, Progress
+
+    @contextmanager
+    def _cm():
+        live = Live(progress=Progress(n_done=event.get("simulations", 0), phase=event["stage"]),
+                    control=JobControl(), started=0.0, event=event)
+        with manager._lock:
+            manager._live[diag_id] = live
+        try:
+            yield live
+        finally:
+            with manager._lock:
+                manager._live.pop(diag_id, None)
+    return _cm()

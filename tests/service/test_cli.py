@@ -118,7 +118,7 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
     import threading
 
     import vfcore.diagnose.pipeline as P
-    import service.routers.diagnose as R
+    import service.diagnosis as D
     from svc_helpers import done_fe_job
 
     jid = done_fe_job(service.settings, owner="carol")
@@ -142,7 +142,7 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
         return type("Report", (), {"to_dict": lambda self: dict(report)})()
 
     monkeypatch.setattr(P, "diagnose", stand_in)
-    monkeypatch.setattr(R, "plot_atomic", lambda rep, pb, path: path.write_bytes(b"\x89PNG\r\n\x1a\nfake"))
+    monkeypatch.setattr(D, "plot", lambda rep, pb, path: path.write_bytes(b"\x89PNG\r\n\x1a\nfake"))
     env = {"VFINFER_URL": service.url, "VFINFER_TOKEN": TOKENS["carol"], "COLUMNS": "200"}
     out = tmp_path / "diag"
     r = CliRunner().invoke(app, ["diagnosis", jid, "--start", "--candidates", "leak,scale", "--particles", "12",

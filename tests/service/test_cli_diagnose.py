@@ -13,7 +13,7 @@ from service.cli import app
 pytest.importorskip("vfcore.forward", reason="FE forward model not available")
 
 FPS = 4000.0
-TINY = ["--mesh", "coarse", "--dt", "1e-4", "--duration", "0.35", "--discard", "0.15"]
+TINY = ["--mesh", "coarse", "--dt", "1e-4", "--duration", "0.35", "--discard", "0.15", "--no-free-material"]
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +100,7 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     from pathlib import Path
 
     from service.cli_diagnose import diagnose_cmd
-    from service.routers.diagnose import DiagnoseRequest
+    from service.api_models import DiagnoseRequest
     from vfcore.diagnose import defaults as D
     sig = inspect.signature(diagnose_cmd).parameters
     req = DiagnoseRequest()
@@ -118,6 +118,25 @@ def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypat
     assert (seen["particles"], seen["refit_particles"]) == (D.BASE_PARTICLES, D.REFIT_PARTICLES)
     assert seen["continuation"] == D.CONTINUATION
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
+
+
+def test_the_command_line_and_the_service_take_the_same_bounds():
+    """`vfinfer diagnose`, `vfinfer diagnosis --start` and POST /jobs/{id}/diagnose check one DiagnoseRequest:
+    a setting one refuses the others refuse, naming the option on the command line; the most refits that
+    can be asked for are the catalogue's observation-level entries."""
+    from pydantic import ValidationError
+
+    from service.api_models import OBSERVATION_ENTRIES, DiagnoseRequest
+    from vfcore.diagnose.extensions import CATALOGUE
+    assert OBSERVATION_ENTRIES == sum(e.kind == "observation" for e in CATALOGUE.values())
+    for opt, bad in (("--particles", "9"), ("--refit-particles", "3"), ("--max-refits", str(OBSERVATION_ENTRIES + 1))):
+        r = CliRunner().invoke(app, ["diagnose", "nope.csv", "--out", "o", opt, bad])
+        assert r.exit_code == 2 and opt in r.stderr, (opt, r.output)
+        r = CliRunner().invoke(app, ["diagnosis", "a" * 32, "--start", opt, bad])
+        assert r.exit_code == 2 and opt in r.stderr, (opt, r.output)
+    for field, bad in (("n_particles", 9), ("refit_particles", 3), ("max_refits", OBSERVATION_ENTRIES + 1)):
+        with pytest.raises(ValidationError):
+            DiagnoseRequest(**{field: bad})
 
 
 def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it_back(tmp_path, leaky_gaw,

@@ -1,6 +1,6 @@
-"""The service's Dask map (service.routers.diagnose.dask_map): results in order and streamed, so a
-diagnosis' store keeps the finished parts of an interrupted batch; a cancel or a shutdown ends a
-batch while it waits, and the batch's unstarted parts never run."""
+"""The service's Dask map (service.diagnosis.dask_map): results in order and streamed, so a
+diagnosis' store keeps the finished parts of an interrupted batch; a cancel or a shutdown (the same
+stop event) ends a batch while it waits, and the batch's unstarted parts never run."""
 from __future__ import annotations
 
 import threading
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.routers.diagnose import DiagnosisCancelled, DiagnosisInterrupted, dask_map
+from service.diagnosis import DiagnosisCancelled, dask_map
 
 
 class _Marked:
@@ -36,16 +36,15 @@ def test_results_come_in_order_and_equal_the_builtin_map(dask_client, tmp_path):
     assert dask_map(None) is map                             # no cluster: the builtin map
 
 
-@pytest.mark.parametrize("which, error", [("stop", DiagnosisCancelled), ("stopping", DiagnosisInterrupted)])
-def test_a_cancel_or_a_shutdown_ends_the_batch_while_it_waits(dask_client, tmp_path, which, error):
-    events = {"stop": threading.Event(), "stopping": threading.Event()}
+def test_a_cancel_or_a_shutdown_ends_the_batch_while_it_waits(dask_client, tmp_path):
+    stop = threading.Event()
     fn = _Marked(tmp_path, 1.0)
-    timer = threading.Timer(0.4, events[which].set)         # set while the first parts still run
+    timer = threading.Timer(0.4, stop.set)                  # set while the first parts still run
     got = []
     timer.start()
     try:
-        with pytest.raises(error):
-            for v in dask_map(dask_client, events["stop"], events["stopping"])(fn, _parts(10)):
+        with pytest.raises(DiagnosisCancelled):
+            for v in dask_map(dask_client, stop)(fn, _parts(10)):
                 got.append(v)
     finally:
         timer.cancel()

@@ -1,5 +1,6 @@
 """POST /jobs/{id}/diagnose, GET /jobs/{id}/diagnosis(/figure): ownership, states, validation, and one
-real (tiny) diagnosis of a finished finite-element job on the service's Dask cluster."""
+real (tiny) diagnosis of a finished finite-element job on the service's Dask cluster. A diagnosis is a
+job of the job table run by the job manager: resumed after a stop, cancelled by DELETE."""
 from __future__ import annotations
 
 import time
@@ -20,7 +21,7 @@ def _wait_diagnosis(http, job_id, user, timeout=300.0, progress: list | None = N
         d = r.json()
         if d["state"] in ("done", "failed"):
             return d
-        assert d["state"] == "running", d
+        assert d["state"] in ("queued", "running"), d
         if progress is not None and d["progress"] is not None:
             progress.append(d["progress"])
         if time.time() - t0 > timeout:
@@ -43,7 +44,7 @@ def test_diagnose_rules(service):
     assert r.status_code == 422 and "fe" in r.text, r.text
     # nothing ever started on it
     assert http.get(f"/jobs/{toy}/diagnosis", headers=auth("alice")).json() == \
-        {"state": "none", "error": None, "report": None, "progress": None}
+        {"state": "none", "error": None, "report": None, "progress": None, "diagnosis_id": None}
     assert http.get(f"/jobs/{toy}/diagnosis/figure", headers=auth("alice")).status_code == 404
     # body validation: unknown / unimplemented candidates are named, ranges enforced, extras refused
     r = http.post(f"/jobs/{toy}/diagnose", json={"candidates": ["leak", "warp_drive"]}, headers=auth("alice"))
@@ -63,15 +64,8 @@ def test_diagnose_rules(service):
 def leaky_spec():
     """A tiny FE job on a Table 3 simulation with a 1.5 mm^2 leak and N(0, 0.3^2) noise."""
     pytest.importorskip("vfcore.forward", reason="FE forward model not available")
-    from vfcore import TABLE3, SimConfig, simulate
-    cfg = dict(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
-    r = simulate(TABLE3, SimConfig(fps=FPS, **cfg))
-    assert r.ok, r.message
-    y = np.clip(r.gaw + 1.5 + np.random.default_rng(3).normal(0.0, 0.3, r.gaw.size), 0.0, None)
-    fixed = {k: v for k, v in TABLE3.as_dict().items() if k != "E_cover"}
-    return {"model": "fe", "gaw": {"areas": [float(a) for a in y], "fps": FPS, "units": "mm2"},
-            "fixed": fixed, "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1,
-            "chunk_size": 8, **cfg}
+    from svc_helpers import leaky_fe_spec
+    return leaky_fe_spec(FPS)
 
 
 @pytest.mark.slow
@@ -88,6 +82,7 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     r = http.post(f"/jobs/{job}/diagnose", json=body, headers=auth("alice"))
     assert r.status_code == 202, r.text
     assert r.json()["status_url"] == f"/jobs/{job}/diagnosis"
+    diag = r.json()["diagnosis_id"]
     # one at a time per job; the figure is not served while it runs
     assert http.post(f"/jobs/{job}/diagnose", json=body, headers=auth("alice")).status_code == 409
     assert http.get(f"/jobs/{job}/diagnosis/figure", headers=auth("alice")).status_code == 404
@@ -113,33 +108,37 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert fig.status_code == 200 and fig.headers["content-type"] == "image/png"
     assert fig.content[:8] == b"\x89PNG\r\n\x1a\n"
     assert http.get(f"/jobs/{job}/diagnosis/figure", headers=auth("bob")).status_code == 404
-    # no temporary files left next to the store
-    stores = service.settings.stores_dir
-    assert not [p.name for p in stores.iterdir() if p.name.startswith(".")]
-    assert (stores / f"{job}.diagnosis.json").exists() and (stores / f"{job}.diagnosis.png").exists()
-    assert not (stores / f"{job}.diagnosis.resume").exists()      # the resume store goes once done
+    # the diagnosis is a job of its own, its report and figure in its store, no temporary file left
+    st = http.get(f"/jobs/{diag}", headers=auth("alice")).json()
+    assert st["kind"] == "diagnosis" and st["parent"] == job and st["state"] == "done"
+    assert st["progress"]["simulations_done"] == rep["n_simulations"]
+    store = service.settings.stores_dir / f"{diag}.zarr"
+    assert not [p.name for p in store.rglob(".*") if p.name.startswith((".figure", ".tmp"))]
+    assert not (store / "resume").exists()                      # the resume store goes once done
 
 
-def test_an_interrupted_diagnosis_is_resumed_from_its_store(tmp_path, monkeypatch):
-    """The diagnosis thread's body, with the diagnosis replaced by one that evaluates 3 parts and
-    then dies: the failure is recorded, the 3 parts stay in <id>.diagnosis.resume, and the same
-    request started again reads all 3 back and simulates nothing."""
-    from types import SimpleNamespace
-
+def test_a_failed_diagnosis_leaves_its_simulations_to_the_next_request(service, monkeypatch):
+    """A diagnosis that evaluates 3 parts and then dies: the failure is recorded, the 3 parts stay in its
+    store, and the same request posted again reads all 3 back and simulates nothing."""
     import vfcore.diagnose.pipeline as P
-    from service.routers.diagnose import DiagnoseRequest, _Registry, _run, resume_store
+    from service.diagnosis import resume_dir
 
     maps = []
     monkeypatch.setattr(P, "diagnose", dying_diagnosis(maps, "worker lost"))
-    manager = SimpleNamespace(settings=SimpleNamespace(stores_dir=tmp_path), store_path=lambda jid: tmp_path / f"{jid}.zarr", client=None)
-    spec = SimpleNamespace(to_problem=lambda: None)
-    _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
-    assert "worker lost" in (tmp_path / "j1.diagnosis.error").read_text()
-    assert len(list(resume_store(manager, "j1").rglob("*.pkl"))) == 3
-    _run(manager, _Registry(), "j1", spec, DiagnoseRequest(continuation=False))
+    jid = done_fe_job(service.settings)
+    http, stores = service.http, service.settings.stores_dir
+    first = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).json()
+    d = _wait_diagnosis(http, jid, "alice", timeout=60)
+    assert d["state"] == "failed" and "worker lost" in d["error"], d
+    assert len(list(resume_dir(stores / f"{first['diagnosis_id']}.zarr").rglob("*.pkl"))) == 3
+    second = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).json()
+    assert _wait_diagnosis(http, jid, "alice", timeout=60)["state"] == "failed"
     store = maps[1].inner                                 # the store, inside the cancellable map
     assert (store.hits, store.misses) == (3, 0)
     assert store.earlier_attempts == 1                    # the dead attempt's time is on record
+    # the new diagnosis replaced the old one, which is gone with its store
+    assert http.get(f"/jobs/{first['diagnosis_id']}", headers=auth("alice")).status_code == 404
+    assert not (stores / f"{first['diagnosis_id']}.zarr").exists() and second["diagnosis_id"] != first["diagnosis_id"]
 
 
 def httpx_client(srv):
@@ -147,12 +146,19 @@ def httpx_client(srv):
     return httpx.Client(base_url=srv.url, timeout=60)
 
 
+def _diagnosis_row(settings, jid: str) -> dict:
+    from service.db import JobDB
+    db = JobDB(settings.db_path)
+    try:
+        return db.children(jid)[0]
+    finally:
+        db.close()
+
+
 def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, dask_client, monkeypatch):
     """The service stops while a diagnosis runs (its cluster calls then fail): the failure is not
-    recorded, the request stays on disk, and the next start of the service runs the same request
-    again; a failure of its own is then recorded, and the request is gone (no third start)."""
-    import threading
-
+    recorded, the job stays running, and the next start of the service runs the same request
+    again; a failure of its own is then recorded (no third start)."""
     import vfcore.diagnose.pipeline as P
     from service.main import create_app
     from svc_helpers import ServerThread
@@ -160,27 +166,27 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     jid = done_fe_job(settings)
     body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 6, "max_refits": 2,
             "continuation": False, "seed": 5}
-    gate, entered, calls = threading.Event(), threading.Event(), []
+    calls = []
 
     def first(problem, *, map, **kw):          # runs until the service stops, then loses its cluster
         calls.append(kw)
-        entered.set()
-        gate.wait(30)
-        raise OSError("connection to the scheduler lost")
+        while True:
+            try:
+                map(np.square, [np.zeros((1, 1))])
+            except Exception:                   # noqa: BLE001 - the stop, seen by the map
+                raise OSError("connection to the scheduler lost") from None
+            time.sleep(0.05)
 
     monkeypatch.setattr(P, "diagnose", first)
-    request_file = settings.stores_dir / f"{jid}.diagnosis.request.json"
     with ServerThread(create_app(settings, client=dask_client)) as srv:
         with httpx_client(srv) as http:
             assert http.post(f"/jobs/{jid}/diagnose", json=body, headers=auth("alice")).status_code == 202
-            assert entered.wait(30)
-            assert http.get(f"/jobs/{jid}/diagnosis", headers=auth("alice")).json()["state"] == "running"
-            assert request_file.exists()
-    gate.set()                                  # the shutdown has happened: now the thread fails
-    for t in threading.enumerate():
-        if t.name.startswith(f"vfinfer-diagnose-{jid[:8]}"):
-            t.join(30)
-    assert request_file.exists() and not (settings.stores_dir / f"{jid}.diagnosis.error").exists()
+            t0 = time.time()
+            while not calls or http.get(f"/jobs/{jid}/diagnosis", headers=auth("alice")).json()["state"] != "running":
+                assert time.time() - t0 < 30
+                time.sleep(0.05)
+    row = _diagnosis_row(settings, jid)
+    assert row["state"] == "running" and row["error"] is None and row["attempts"] == 1
 
     def second(problem, *, map, **kw):
         calls.append(kw)
@@ -194,39 +200,88 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     assert len(calls) == 2 and calls[1]["candidates"] == ["leak", "scale"]
     assert {k: calls[1][k] for k in ("n_particles", "refit_particles", "max_refits", "continuation", "seed")} == \
         {"n_particles": 14, "refit_particles": 6, "max_refits": 2, "continuation": False, "seed": 5}
-    assert not request_file.exists()
+    assert _diagnosis_row(settings, jid)["attempts"] == 2
 
 
-def test_resume_pending_drops_what_it_cannot_run_and_gives_up_after_repeated_stops(settings, monkeypatch):
-    """A request whose job is gone is dropped with its store; one interrupted MAX_AUTO_RESUMES times
-    becomes a failure saying how to go on; an unreadable one is dropped; none of them starts."""
+def test_a_diagnosis_that_cannot_run_fails_and_one_stopped_too_often_is_not_started_again(settings, monkeypatch):
+    """At the start of the manager: a diagnosis whose job is gone, one whose spec cannot be read and one
+    interrupted MAX_AUTO_RESUMES + 1 times are recorded as failed, the last saying how to go on; none of
+    them runs the diagnosis."""
+    import vfcore.diagnose.pipeline as P
+    from service.api_models import DiagnoseRequest, DiagnosisSpec
+    from service.db import JobDB
+    from service.manager import MAX_AUTO_RESUMES, JobManager
+
+    def never(*a, **k):
+        raise AssertionError("a diagnosis ran")
+    monkeypatch.setattr(P, "diagnose", never)
+    jid = done_fe_job(settings)
+    db = JobDB(settings.db_path)
+    spec = DiagnosisSpec(job=jid, request=DiagnoseRequest()).to_json()
+    rows = {"gone": DiagnosisSpec(job="ab" * 16, request=DiagnoseRequest()).to_json(), "broken": "{broken",
+            "stopped": spec}
+    ids = {}
+    for name, s in rows.items():
+        ids[name] = name.ljust(32, "0")
+        db.insert(ids[name], "alice", s, 0, kind="diagnosis", parent=jid, sampler="smc", model="fe")
+    db.update(ids["stopped"], state="running", attempts=MAX_AUTO_RESUMES + 1)
+    manager = JobManager(settings, db, None)
+    manager.start()
+    try:
+        t0 = time.time()
+        while any(db.get(i)["state"] != "failed" for i in ids.values()):
+            assert time.time() - t0 < 30, [db.get(i) for i in ids.values()]
+            time.sleep(0.05)
+    finally:
+        manager.stop()
+    err = {name: db.get(i)["error"] for name, i in ids.items()}
+    db.close()
+    assert "gone" in err["gone"] and "ValidationError" in err["broken"]
+    assert f"interrupted {MAX_AUTO_RESUMES + 1} times" in err["stopped"] and f"POST /jobs/{jid}/diagnose" in err["stopped"]
+
+
+def test_diagnoses_kept_beside_the_stores_by_an_earlier_release_become_jobs(settings):
+    """The files a diagnosis left beside its job's store before diagnoses were jobs: a finished one is served as
+    before (report, figure), an interrupted one is queued again with its simulations and its interruptions
+    counted, a failed one keeps its error; the files are gone afterwards."""
     import json
-    from types import SimpleNamespace
 
     from service.db import JobDB
-    from service.routers.diagnose import MAX_AUTO_RESUMES, _Registry, resume_pending
+    from service.manager import JobManager
+    from test_report_diagnose import REPORT
 
-    jid = done_fe_job(settings)
-    gone = "ab" * 16
+    done, stopped, failed = (done_fe_job(settings) for _ in range(3))
     d = settings.stores_dir
-    (d / f"{gone}.diagnosis.request.json").write_text(json.dumps({"request": {}, "resumes": 0}))
-    (d / f"{gone}.diagnosis.resume").mkdir()
-    (d / f"{jid}.diagnosis.request.json").write_text(json.dumps({"request": {}, "resumes": MAX_AUTO_RESUMES}))
-    (d / f"{'cd' * 16}.diagnosis.request.json").write_text("{broken")
+    (d / f"{done}.diagnosis.json").write_text(json.dumps(REPORT))
+    (d / f"{done}.diagnosis.png").write_bytes(b"\x89PNG\r\n\x1a\nold")
+    (d / f"{stopped}.diagnosis.request.json").write_text(json.dumps({"request": {"n_particles": 14}, "resumes": 1}))
+    (d / f"{stopped}.diagnosis.resume" / "x").mkdir(parents=True)
+    (d / f"{failed}.diagnosis.error").write_text("RuntimeError: old failure")
     db = JobDB(settings.db_path)
-    manager = SimpleNamespace(settings=settings, store_path=lambda j: d / f"{j}.zarr", db=db, client=None)
-    reg = _Registry()
-    assert resume_pending(manager, reg) == [] and not reg.running
+    manager = JobManager(settings, db, None)
+    from service.diagnosis_import import import_legacy_diagnoses
+    made = import_legacy_diagnoses(manager)
+    rows = {r["parent"]: r for r in db.list(kind="diagnosis")}
     db.close()
-    assert not list(d.glob("*.diagnosis.request.json")) and not (d / f"{gone}.diagnosis.resume").exists()
-    err = (d / f"{jid}.diagnosis.error").read_text()
-    assert f"interrupted {MAX_AUTO_RESUMES + 1} times" in err and f"POST /jobs/{jid}/diagnose" in err
+    assert len(made) == 3 and set(rows) == {done, stopped, failed}
+    assert not list(d.glob("*.diagnosis.*"))
+    from service.diagnosis import read_report
+    from worker.store import read_blob
+    r = rows[done]
+    assert r["state"] == "done" and r["owner"] == "alice"
+    rep = read_report(d / f"{r['id']}.zarr", r["stats"], REPORT["request"])
+    assert rep == json.loads(json.dumps(REPORT))
+    assert read_blob(d / f"{r['id']}.zarr", "diagnosis_png") == b"\x89PNG\r\n\x1a\nold"
+    r = rows[stopped]
+    assert r["state"] == "running" and r["attempts"] == 2 and json.loads(r["spec"])["request"]["n_particles"] == 14
+    assert (d / f"{r['id']}.zarr" / "resume" / "x").is_dir()
+    assert rows[failed]["state"] == "failed" and rows[failed]["error"] == "RuntimeError: old failure"
 
 
 def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch):
-    """DELETE /jobs/{id}/diagnosis stops a running diagnosis at its next batch: its state becomes
-    "cancelled", its stored simulations and request are deleted, a second DELETE is a 409, another
-    user's is a 404, and a new POST starts afresh."""
+    """DELETE /jobs/{id}/diagnosis (and DELETE /jobs/{diagnosis_id}, as for any job) stops a running
+    diagnosis at its next batch: its state becomes "cancelled", its stored simulations are deleted, a second
+    DELETE is a 409, another user's is a 404, and a new POST starts afresh."""
     import threading
 
     import vfcore.diagnose.pipeline as P
@@ -247,26 +302,44 @@ def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch
 
     monkeypatch.setattr(P, "diagnose", endless)
     d = settings.stores_dir
+
+    def cancelled_by(http, delete) -> None:
+        batches.clear()
+        started.clear()
+        r = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice"))
+        assert r.status_code == 202, r.text
+        diag = r.json()["diagnosis_id"]
+        assert started.wait(60)
+        assert (d / f"{diag}.zarr" / "resume").exists()
+        assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("bob")).status_code == 404
+        assert http.delete(f"/jobs/{diag}", headers=auth("bob")).status_code == 404
+        delete(diag)
+        t0 = time.time()
+        while (st := http.get(f"/jobs/{jid}/diagnosis", headers=auth("alice")).json())["state"] == "running":
+            assert time.time() - t0 < 60
+            time.sleep(0.1)
+        assert st["state"] == "cancelled" and st["diagnosis_id"] == diag, st
+        n = len(batches)
+        time.sleep(0.3)
+        assert len(batches) == n                    # it stopped
+        assert not (d / f"{diag}.zarr" / "resume").exists()
+        assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409
+
     with ServerThread(create_app(settings, client=dask_client)) as srv:
         with httpx_client(srv) as http:
             assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409   # none running
-            assert http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).status_code == 202
-            assert started.wait(60)
-            assert (d / f"{jid}.diagnosis.resume").exists()
-            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("bob")).status_code == 404
-            r = http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice"))
-            assert r.status_code == 202 and r.json()["state"] == "cancelling", r.text
-            t0 = time.time()
-            while (st := http.get(f"/jobs/{jid}/diagnosis", headers=auth("alice")).json())["state"] == "running":
-                assert time.time() - t0 < 60
-                time.sleep(0.1)
-            assert st["state"] == "cancelled", st
-            n = len(batches)
-            time.sleep(0.3)
-            assert len(batches) == n                    # it stopped
-            assert not (d / f"{jid}.diagnosis.resume").exists()
-            assert not (d / f"{jid}.diagnosis.request.json").exists()
-            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409
+
+            def by_the_diagnosis_route(diag):
+                r = http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice"))
+                assert r.status_code == 202 and r.json()["state"] == "cancelling", r.text
+                assert r.json()["diagnosis_id"] == diag
+
+            def by_the_job_route(diag):
+                r = http.delete(f"/jobs/{diag}", headers=auth("alice"))
+                assert r.status_code == 200 and r.json() == {"id": diag, "state": "cancelled"}, r.text
+
+            cancelled_by(http, by_the_diagnosis_route)
+            cancelled_by(http, by_the_job_route)
 
             def fails(problem, *, map, **kw):
                 raise RuntimeError("second run")

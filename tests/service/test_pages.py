@@ -239,29 +239,19 @@ def test_cli_prints_a_signed_link_and_opens_it(svc, monkeypatch):
 def test_jobs_page_lists_the_owners_diagnoses(service):
     """Each finished FE job's diagnosis, in the state GET /jobs/{id}/diagnosis gives, the finished one linked to
     its diagnosis report; jobs without a diagnosis, and another user's diagnoses, are not listed."""
-    import threading
-
-    from svc_helpers import done_fe_job
+    from svc_helpers import done_fe_job, show_running, store_diagnosis
     settings, http = service.settings, service.http
     done, failed, running, plain = (done_fe_job(settings, owner="alice") for _ in range(4))
     bobs = done_fe_job(settings, owner="bob")
-    stores = settings.stores_dir
     for jid in (done, bobs):
-        (stores / f"{jid}.diagnosis.json").write_text(json.dumps(
-            {"verdict": "missing physics: leak <named>", "n_simulations": 1234, "wall_s": 125.0}))
-        (stores / f"{jid}.diagnosis.png").write_bytes(b"\x89PNG\r\n\x1a\n")
-    (stores / f"{failed}.diagnosis.error").write_text("RuntimeError: the cluster went <away>")
-    reg = service.server.config.app.state.diagnoses          # a diagnosis in flight, as the router keeps it
-    with reg.lock:
-        reg.running[running] = threading.current_thread()
-        reg.progress[running] = {"stage": "refit", "entry": "leak", "step": 2, "steps": 6, "simulations": 480,
-                                 "elapsed_s": 75.0}
-    try:
+        store_diagnosis(settings, jid, report={"verdict": "missing physics: leak <named>", "n_simulations": 1234,
+                                               "wall_s": 125.0}, png=b"\x89PNG\r\n\x1a\n")
+    store_diagnosis(settings, failed, "failed", error="RuntimeError: the cluster went <away>")
+    in_flight = store_diagnosis(settings, running, "running")      # a diagnosis in flight, as the manager keeps it
+    with show_running(service.server.config.app.state.manager, in_flight,
+                      {"stage": "refit", "entry": "leak", "step": 2, "steps": 6, "simulations": 480,
+                       "elapsed_s": 75.0}):
         page = http.get("/", headers=auth("alice")).text
-    finally:
-        with reg.lock:
-            reg.running.pop(running)
-            reg.progress.pop(running)
     diag = page[page.index("<h2>Diagnoses</h2>"):]
     assert _ids(page) == {done, failed, running, plain} and bobs not in page
     assert _ids(diag) == {done, failed, running}                              # no row for the undiagnosed job

@@ -5,7 +5,6 @@ and the service serves it to the job's owner (bearer token or a signed link) and
 from __future__ import annotations
 
 import copy
-import json
 import re
 from html.parser import HTMLParser
 
@@ -153,18 +152,13 @@ def test_cli_writes_index_html(tmp_path, monkeypatch):
 
 def test_service_serves_the_page_to_the_owner(service):
     from service.report import PAGE_HEADERS
-    from service.routers.diagnose import _paths
+    from svc_helpers import store_diagnosis
     jid = done_fe_job(service.settings, owner="alice")
-
-    class M:
-        settings = service.settings
     http = service.http
     url = f"/jobs/{jid}/diagnosis/report"
     assert http.get(url, headers=auth("alice")).status_code == 404            # no diagnosis yet
     assert http.post(url + "-link", headers=auth("alice")).status_code == 404
-    js, png, _ = _paths(M, jid)
-    js.write_text(json.dumps(REPORT))
-    png.write_bytes(b"\x89PNG\r\n\x1a\nfake")
+    store_diagnosis(service.settings, jid, report=REPORT, png=b"\x89PNG\r\n\x1a\nfake")
     r = http.get(url, headers=auth("alice"))
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     assert all(r.headers[k] == v for k, v in PAGE_HEADERS.items())

@@ -1,0 +1,156 @@
+"""Every request and response body of the REST API, and the diagnosis settings the CLI shares with it.
+
+The routes and the command line import their types and bounds from here (and never from each other), so
+``vfinfer diagnose``, ``vfinfer diagnosis --start`` and ``POST /jobs/{id}/diagnose`` accept exactly the same
+settings. An inference job's body is :class:`worker.jobspec.JobSpec` (the worker stores and re-runs it), re-exported
+here so that the API's types are read in one place.
+"""
+from __future__ import annotations
+
+from enum import Enum
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, FREE_MATERIAL, MAX_REFITS, REFIT_PARTICLES
+from worker.jobspec import JobSpec
+
+__all__ = ["JobSpec", "Figure", "Submitted", "JobStatus", "CompareRequest", "LinkOut", "DiagnoseRequest",
+           "DiagnosisSpec", "DiagnoseStarted", "DiagnosisStatus", "check_candidates", "KINDS", "DIAGNOSIS_OPTIONS"]
+
+#: What a row of the job table holds: an inference (a JobSpec) or a diagnosis of a finished inference.
+KINDS = ("inference", "diagnosis")
+
+# ------------------------------------------------------------------------------------ inference jobs
+class Figure(str, Enum):
+    gaw_fit = "gaw_fit"
+    corner = "corner"
+    contact_pressure = "contact_pressure"
+
+
+class Submitted(BaseModel):
+    id: str
+    state: str
+    status_url: str
+    warnings: list[str] = Field(default_factory=list)
+
+
+class JobStatus(BaseModel):
+    id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    progress: dict
+    ess: float | None
+    timings: dict
+    error: str | None = None
+    sampler: str
+    model: str
+    stats: dict = Field(default_factory=dict)
+    warnings: list[str] = Field(default_factory=list)
+    kind: Literal["inference", "diagnosis"] = Field(
+        default="inference", description='"inference" (POST /jobs) or "diagnosis" (POST /jobs/{id}/diagnose)')
+    parent: str | None = Field(default=None, description="a diagnosis: the id of the job it diagnoses")
+
+
+class CompareRequest(BaseModel):
+    job_ids: list[str] = Field(min_length=2, max_length=10)
+
+
+class LinkOut(BaseModel):
+    url: str = Field(description="the page's signed link, relative to the service (prefix your service URL)")
+    absolute_url: str = Field(description="the same link on the address this request was sent to")
+    expires: int = Field(description="when the link stops working, epoch seconds")
+    expires_in_s: int = Field(description="how long the link stays valid, seconds")
+
+
+# ------------------------------------------------------------------------------------ diagnoses
+def check_candidates(names) -> list[str]:
+    """Unknown or not-implemented extension names raise ValueError naming them."""
+    from vfcore.diagnose.extensions import CATALOGUE
+    names = list(dict.fromkeys(n.strip() for n in names))
+    unknown = [n for n in names if n not in CATALOGUE]
+    if unknown:
+        raise ValueError(f"unknown candidate(s) {unknown}; known: {sorted(CATALOGUE)}")
+    unimpl = [n for n in names if not CATALOGUE[n].implemented]
+    if unimpl:
+        impl = sorted(n for n, e in CATALOGUE.items() if e.implemented)
+        raise ValueError(f"candidate(s) {unimpl} are catalogued but not implemented; fittable: {impl}")
+    if not names:
+        raise ValueError("no candidates given")
+    return names
+
+
+#: The observation-level entries of the catalogue (vfcore.diagnose.extensions): more refits than these
+#: cannot be asked for (tests/service/test_cli_diagnose.py checks the count against the catalogue).
+OBSERVATION_ENTRIES = 6
+
+
+class DiagnoseRequest(BaseModel):
+    """A diagnosis's settings: the body of ``POST /jobs/{id}/diagnose`` and the options of ``vfinfer diagnose``
+    and ``vfinfer diagnosis --start``, with one set of bounds for all three. The defaults are
+    ``vfcore.diagnose.defaults``, the settings the concealed-effect benchmark measures."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    candidates: list[str] | None = Field(
+        default=None, min_length=1, max_length=50,
+        description="catalogued, implemented extensions to screen (default: all implemented ones)")
+    # fewer than 10 particles leave the tempered SMC no particles to resample from (the inference jobs'
+    # SMC has the same floor)
+    n_particles: int = Field(default=BASE_PARTICLES, ge=10, le=400, description="SMC particles of each base fit")
+    refit_particles: int = Field(default=REFIT_PARTICLES, ge=4, le=400,
+                                 description="SMC particles of each extended fit")
+    max_refits: int | None = Field(default=MAX_REFITS, ge=0, le=OBSERVATION_ENTRIES,
+                                   description="most observation-level extensions refitted, best screened "
+                                               f"first (default: all {OBSERVATION_ENTRIES})")
+    continuation: bool = Field(default=CONTINUATION,
+                               description="also search the base model and every extension by window "
+                                           "continuation and fit from the optimum (docs/diagnose.md section 4)")
+    free_material: bool = Field(default=FREE_MATERIAL,
+                                description="free the scaled parameters held at Table 3 (all but the anchor rho) "
+                                            "before the catalogue is screened, and report whether they explain the "
+                                            "mismatch (docs/diagnose.md, 'Material first')")
+    seed: int = Field(default=0, ge=0, lt=2**63)
+
+    @field_validator("candidates")
+    @classmethod
+    def _known(cls, v):
+        return None if v is None else check_candidates(v)
+
+
+#: The command-line option of each DiagnoseRequest field (error messages name what the user typed).
+DIAGNOSIS_OPTIONS = {"candidates": "--candidates", "n_particles": "--particles", "refit_particles": "--refit-particles",
+                     "max_refits": "--max-refits", "continuation": "--continuation",
+                     "free_material": "--free-material", "seed": "--seed"}
+
+
+class DiagnosisSpec(BaseModel):
+    """What a diagnosis job stores (its table row and its store): the job it diagnoses, the settings, and the
+    size of its batches, fixed when it was submitted so that a resumed run asks for the same parts its store
+    kept (``None``: sized from the cluster when it runs)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    version: Literal[1] = 1
+    job: str = Field(description="the id of the finished inference job diagnosed")
+    request: DiagnoseRequest
+    chunk_size: int | None = Field(default=None, ge=1, le=400)
+
+    def to_json(self) -> str:
+        return self.model_dump_json()
+
+
+class DiagnoseStarted(BaseModel):
+    id: str = Field(description="the job diagnosed")
+    state: str
+    status_url: str
+    diagnosis_id: str = Field(description="the diagnosis's own job id (GET or DELETE /jobs/{diagnosis_id})")
+
+
+class DiagnosisStatus(BaseModel):
+    state: str = Field(description='"none", "queued", "running", "done", "failed" or "cancelled"')
+    error: str | None = None
+    report: dict | None = None
+    progress: dict | None = Field(default=None, description=(
+        "while running: the stage, the catalogue entry, its place (step of steps), the simulations "
+        "evaluated so far and the seconds elapsed (vfcore.diagnose.progress)"))
+    diagnosis_id: str | None = Field(default=None, description="the diagnosis's own job id, once there is one")
