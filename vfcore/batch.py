@@ -44,15 +44,39 @@ def block_key(config: SimConfig) -> SimConfig:
     return dataclasses.replace(config, **{f: getattr(d, f) for f in PER_SAMPLE_FIELDS})
 
 
-def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResult]:
-    t_wall = time.perf_counter()
+@dataclasses.dataclass
+class BlockInputs:
+    """Host-side inputs of one block (CPU lock-step layout, sample index last except ``G``): the set-up every
+    backend shares, from :func:`prepare_block`."""
+
+    system: object
+    config: SimConfig                  # the block's shared numerics (configs[0])
+    n_steps: int
+    coefs: tuple                       # (am, af, beta, gamma)
+    kv: np.ndarray                     # (nnz, B)
+    mv: np.ndarray
+    dv: np.ndarray
+    Lx: np.ndarray                     # (nnz_L, B)
+    G: np.ndarray                      # (B, n, m)
+    u: np.ndarray                      # (n, B)
+    x_mid: np.ndarray                  # (B,)
+    p_sub: np.ndarray
+    sep: np.ndarray
+    sub_coef: np.ndarray               # (B, n_modes, 3)
+    kc: np.ndarray                     # (B, m)
+    cc: np.ndarray
+    traj_every: int
+    n_traj: int
+
+
+def prepare_block(ps: list[Params], configs: list[SimConfig]) -> BlockInputs:
+    """Per-sample set-up of a block: exactly that of ``forward.simulate`` (both call :mod:`vfcore.simcore`)."""
     config = configs[0]
     system = get_system(config.mesh, config.nu, config.element)
     B = len(ps)
     n, m, nnz, nl = system.n, system.sdx.size, system.indices.size, system.nnz_factor
     h = config.dt
     n_steps = int(round(config.duration / h))
-    am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
     kv = np.empty((nnz, B))
     mv = np.empty((nnz, B))
     dv = np.empty((nnz, B))
@@ -69,44 +93,92 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     cc = np.empty((B, m))
     for b, p in enumerate(ps):
         kc[b], cc[b] = contact_law(p, configs[b], system)
-        # exactly the per-sample set-up of forward.simulate (both call vfcore.simcore)
         x_mid[b] = midline(p, configs[b])
         p_sub[b] = p.si()["p_sub"]
         sep[b] = configs[b].sep_ratio
         kv[:, b], dv[:, b], mv[:, b], u[:, b], Lx[:, b], G[b] = setup(p, configs[b], system)
         sub_coef[b, : coefs[b].shape[0]] = coefs[b]
-    v = np.zeros((n, B))
-    a = np.zeros((n, B))
-    width = np.zeros((B, n_steps))
-    gsep = np.zeros((B, n_steps))
-    lam = np.zeros((B, n_steps, m))
-    p_in = np.repeat(p_sub[:, None], n_steps, axis=1) if nmod > 0 else np.zeros((B, 0))
     traj_every = 0
     n_traj = 0
     if config.keep_trajectories:
         traj_every = max(1, int(round(1.0 / (config.fps * h))))
         n_traj = n_steps // traj_every
-    tu = np.zeros((B, n_traj, n))
-    tv = np.zeros((B, n_traj, n))
-    status = np.zeros(B, dtype=np.int64)
-    proj = np.zeros((B, n_steps, m))
-    stop = np.zeros(B, dtype=np.int64)
-    integrate_many(n_steps, h, am, af, beta, gamma, system.indptr, system.indices, kv, mv, dv, system.Lp, system.Lj,
-                   Lx, G, system.sdx, system.sdz, system.sX, system.sZ, u, v, a, p_sub, config.p_sup, sep,
-                   x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-                   status, sub_coef, flow_coefficient(config), p_in, proj, config.contact == "layer", kc, cc,
-                   *stop_settings(config), stop)
-    t_each = (time.perf_counter() - t_wall) / B
+    return BlockInputs(system, config, n_steps, kern.newmark_coefficients(h, config.rho_inf), kv, mv, dv, Lx, G, u,
+                       x_mid, p_sub, sep, sub_coef, kc, cc, traj_every, n_traj)
+
+
+def assemble_block(blk: BlockInputs, ps: list[Params], configs: list[SimConfig], status, width, gsep, lam, tu, p_in,
+                   proj, stop, t_wall: float) -> list[SimResult]:
+    """SimResults of a block from its per-sample outputs, indexed ``[b]`` (``lam[b]`` (n_steps, m), ``p_in[b]``
+    (n_steps,) when the block has subglottal modes); ``t_wall``: the block's start (perf_counter)."""
+    t_each = (time.perf_counter() - t_wall) / len(ps)
     out = []
     for b, p in enumerate(ps):
         t0 = time.perf_counter() - t_each   # wall_time: this sample's share of the block
-        out.append(assemble_result(p, configs[b], system, int(status[b]), width[b], gsep[b], lam[b], traj_every,
-                                   tu[b], t0, p_in[b] if configs[b].has_subglottal else None, proj[b], int(stop[b])))
+        out.append(assemble_result(p, configs[b], blk.system, int(status[b]), width[b], gsep[b], lam[b],
+                                   blk.traj_every, tu[b], t0, p_in[b] if configs[b].has_subglottal else None, proj[b],
+                                   int(stop[b])))
+    return out
+
+
+def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResult]:
+    t_wall = time.perf_counter()
+    blk = prepare_block(ps, configs)
+    config, system, n_steps = blk.config, blk.system, blk.n_steps
+    B = len(ps)
+    n, m = system.n, system.sdx.size
+    nmod = blk.sub_coef.shape[1]
+    v = np.zeros((n, B))
+    a = np.zeros((n, B))
+    width = np.zeros((B, n_steps))
+    gsep = np.zeros((B, n_steps))
+    lam = np.zeros((B, n_steps, m))
+    p_in = np.repeat(blk.p_sub[:, None], n_steps, axis=1) if nmod > 0 else np.zeros((B, 0))
+    tu = np.zeros((B, blk.n_traj, n))
+    tv = np.zeros((B, blk.n_traj, n))
+    status = np.zeros(B, dtype=np.int64)
+    proj = np.zeros((B, n_steps, m))
+    stop = np.zeros(B, dtype=np.int64)
+    integrate_many(n_steps, config.dt, *blk.coefs, system.indptr, system.indices, blk.kv, blk.mv, blk.dv, system.Lp,
+                   system.Lj, blk.Lx, blk.G, system.sdx, system.sdz, system.sX, system.sZ, blk.u, v, a, blk.p_sub,
+                   config.p_sup, blk.sep, blk.x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep,
+                   lam, blk.traj_every, tu, tv, status, blk.sub_coef, flow_coefficient(config), p_in, proj,
+                   config.contact == "layer", blk.kc, blk.cc, *stop_settings(config), stop)
+    return assemble_block(blk, ps, configs, status, width, gsep, lam, tu, p_in, proj, stop, t_wall)
+
+
+def simulate_group_cuda(ps: list[Params], configs: list[SimConfig], max_batch: int | None = None,
+                        timings: dict | None = None) -> list[SimResult]:
+    """SimResults of rows that share a :func:`block_key`, integrated on the GPU (:mod:`vfcore.gpu`).
+
+    The rows are set up on the CPU (:func:`prepare_block`), integrated in launches of at most ``max_batch``
+    samples (default: what the GPU's free memory and the host's memory hold, :func:`vfcore.gpu.max_launch`)
+    and assembled as on the CPU (:func:`assemble_block`). ``timings`` (a dict, optional) gets the seconds of
+    each phase added: setup_s, to_device_s, kernel_s, to_host_s, assemble_s.
+    """
+    from .gpu import integrate_cuda, max_launch
+
+    t_wall = time.perf_counter()
+    blk = prepare_block(ps, configs)
+    if timings is not None:
+        timings["setup_s"] = timings.get("setup_s", 0.0) + time.perf_counter() - t_wall
+    cap = max_launch(blk.system, blk.n_steps, blk.sub_coef.shape[1], blk.n_traj, blk.config.contact != "layer")
+    if max_batch is not None:
+        cap = max(1, min(cap, int(max_batch)))
+    out: list[SimResult] = []
+    for lo in range(0, len(ps), cap):
+        sel = np.arange(lo, min(len(ps), lo + cap))
+        status, width, gsep, lam, proj, p_in, tu, stop = integrate_cuda(blk, sel, timings)
+        ta = time.perf_counter()
+        out.extend(assemble_block(blk, [ps[i] for i in sel], [configs[i] for i in sel], status, width, gsep, lam, tu,
+                                  p_in, proj, stop, t_wall))
+        if timings is not None:
+            timings["assemble_s"] = timings.get("assemble_s", 0.0) + time.perf_counter() - ta
     return out
 
 
 def simulate_many(params_array, config: SimConfig | None = None, block: int = 32,
-                  configs=None) -> list[SimResult]:
+                  configs=None, device: str = "cpu") -> list[SimResult]:
     """Simulate each row of ``params_array`` ((N, 7), ``PARAM_NAMES`` order, paper units).
 
     Rows are advanced ``block`` at a time in lock-step; results equal ``simulate`` row by
@@ -115,10 +187,16 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 32
     ``configs`` (optional, one SimConfig per row) overrides ``config`` row by row. Rows are
     grouped by :func:`block_key` (everything but the extensions in ``PER_SAMPLE_FIELDS``) and each
     group is simulated in blocks; the results come back in row order.
+
+    ``device``: ``"cpu"`` (this lock-step kernel), ``"cuda"`` (one GPU thread per row, :mod:`vfcore.gpu`; each
+    group goes to the GPU whole, in launches as large as its memory holds, and ``block`` is not used; raises
+    :class:`vfcore.gpu.CudaUnavailable` where no GPU can run it) or ``"auto"`` (``"cuda"`` when a GPU is usable).
     """
     arr = _as_rows(params_array)
     if block < 1:
         raise ValueError(f"block must be >= 1, got {block}")
+    from .gpu import resolve_device
+    device = resolve_device(device)
     ps = [Params.from_array(r) for r in arr]
     if configs is None:
         configs = [config or SimConfig()] * len(ps)
@@ -133,6 +211,10 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 32
         groups.setdefault(block_key(c), []).append(i)
     out: list[SimResult | None] = [None] * len(ps)
     for idx in groups.values():
+        if device == "cuda":
+            for i, r in zip(idx, simulate_group_cuda([ps[i] for i in idx], [configs[i] for i in idx])):
+                out[i] = r
+            continue
         for s in range(0, len(idx), block):
             sel = idx[s:s + block]
             for i, r in zip(sel, _simulate_block([ps[i] for i in sel], [configs[i] for i in sel])):

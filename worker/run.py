@@ -121,10 +121,20 @@ def expected_simulations(spec: JobSpec) -> tuple[int, int]:
     return lo * spec.sampler.n_particles, hi * spec.sampler.n_particles
 
 
+#: Simulations per task on a GPU worker: one launch of one thread per simulation needs thousands of them to
+#: keep the device busy (docs/gpu.md).
+GPU_CHUNK = 4096
+
+
+def job_device(spec: JobSpec) -> str:
+    """The job's forward-model device ("cpu", "cuda" or "auto"; "cpu" for a spec without the field)."""
+    return getattr(spec, "device", None) or "cpu"
+
+
 def chunk_size_for(spec: JobSpec) -> int:
     """Simulations per task; a function of the spec only (it fixes the store's chunking). At least one
     lock-step block of the FE model unless the batch is smaller: a narrower chunk costs more per
-    simulation than the finer load balance gains."""
+    simulation than the finer load balance gains; on a GPU, at least :data:`GPU_CHUNK`."""
     if spec.chunk_size:
         return int(spec.chunk_size)
     by_time = max(1, int(TARGET_CHUNK_SECONDS / estimated_seconds_per_sim(spec)))
@@ -132,13 +142,46 @@ def chunk_size_for(spec: JobSpec) -> int:
     size = min(by_time, by_count, 10_000)
     if spec.model == "fe":
         size = max(size, min(LOCKSTEP_BLOCK, spec.n_simulations))
+        if job_device(spec) == "cuda":
+            size = max(size, min(GPU_CHUNK, spec.n_simulations))
     return int(size)
+
+
+class DeviceEvaluator:
+    """:class:`ProblemEvaluator` of the FE model with its rows simulated on ``device``
+    (:func:`vfcore.batch.simulate_many`); picklable. A row whose parameters are invalid scores as failed,
+    as in :func:`vfcore.inference.problem.evaluate`; ``device="cuda"`` on a worker without a usable GPU
+    raises :class:`vfcore.gpu.CudaUnavailable`, which fails the chunk with its reason."""
+
+    def __init__(self, problem: Problem, device: str):
+        self.problem = problem
+        self.device = device
+
+    def __call__(self, thetas) -> Evaluation:
+        from vfcore.batch import simulate_many
+        from vfcore.inference.problem import score_results
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        results: list = [None] * thetas.shape[0]
+        params = []
+        for i, th in enumerate(thetas):
+            try:
+                params.append((i, self.problem.prior.to_params(th)))
+            except Exception as exc:  # noqa: BLE001 - reported per draw
+                results[i] = exc
+        if params:
+            sims = simulate_many([p for _, p in params], self.problem.config, block=LOCKSTEP_BLOCK,
+                                 device=self.device)
+            for (i, _), r in zip(params, sims):
+                results[i] = r
+        return score_results(results, self.problem)
 
 
 def evaluator_for(spec: JobSpec, problem: Problem) -> Callable[[np.ndarray], Evaluation]:
     if spec.model == "toy":
         from .toy import ToyEvaluator
         return ToyEvaluator(problem, spec.toy.delay_s if spec.toy else 0.0)
+    if job_device(spec) != "cpu":
+        return DeviceEvaluator(problem, job_device(spec))
     return ProblemEvaluator(problem)
 
 

@@ -6,6 +6,8 @@ its reciprocal (see :func:`sparse_cholesky`).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -153,7 +155,7 @@ def spd_solve_lower(S, rhs, k) -> None:
             for c in range(b):
                 t -= S[a, c] * S[b, c]
             if b == a:
-                S[a, a] = np.sqrt(t)
+                S[a, a] = math.sqrt(t)
             else:
                 S[a, b] = t / S[b, b]
     for a in range(k):
@@ -474,29 +476,43 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     """
     n = u.size
     m = sdx.size
+    nmod = sub_coef.shape[0]
+    return integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz,
+                        sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup, width, gsep_out,
+                        lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out, proj_out, layer, kc, cc,
+                        stop_window, stop_width, stop_vel, stop_out,
+                        np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m), np.empty(m),
+                        np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.zeros(m, dtype=np.bool_),
+                        np.empty((m, m)), np.empty(m), np.empty(m, dtype=np.int64), np.empty(m), np.empty(m),
+                        np.zeros(nmod), np.zeros(nmod))
+
+
+@njit(cache=True)
+def integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
+                 u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                 width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
+                 proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out,
+                 y1, y2, r, ws_u0, xs, zs, gap, fx, fz, pres, lam, active, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb,
+                 sub_p1, sub_p2):
+    """:func:`integrate_coupled` with caller-owned work arrays: y1, y2, r, ws_u0 (n,); xs, zs, gap, fx, fz, pres,
+    lam (m,); active (m,) bool; ws_S (m, m); ws_rhs (m,); ws_idx (m,) int64; ws_keff, ws_bb (m,); sub_p1, sub_p2
+    (n_modes,) (zeroed here). Every array may be a strided view.
+
+    It allocates nothing and assigns no slices, so numba's CUDA target compiles it as a device function:
+    :mod:`vfcore.solver._cuda_kernels` runs it once per GPU thread on the sample's columns of interleaved
+    ``[entry, sample]`` arrays, the same arithmetic as the scalar kernel.
+    """
+    n = u.size
+    m = sdx.size
     c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, am, af, beta, gamma)
-    y1 = np.empty(n)
-    y2 = np.empty(n)
-    r = np.empty(n)
-    xs = np.empty(m)
-    zs = np.empty(m)
-    gap = np.empty(m)
-    fx = np.empty(m)
-    fz = np.empty(m)
-    pres = np.empty(m)
-    lam = np.empty(m)
-    active = np.zeros(m, dtype=np.bool_)
-    ws_u0 = np.empty(n)
-    ws_S = np.empty((m, m))
-    ws_rhs = np.empty(m)
-    ws_idx = np.empty(m, dtype=np.int64)
-    ws_keff = np.empty(m)
-    ws_bb = np.empty(m)
     wl = 1.0 - af
     ntr = 0
     nmod = sub_coef.shape[0]
-    sub_p1 = np.zeros(nmod)
-    sub_p2 = np.zeros(nmod)
+    for i in range(nmod):
+        sub_p1[i] = 0.0
+        sub_p2[i] = 0.0
+    for j in range(m):
+        active[j] = False
     q1 = 0.0
     q2 = 0.0
     p_in = p_sub
@@ -570,14 +586,15 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
         gsep_out[k - 1] = sep_ratio * gmin if gmin > closed_tol else 0.0
         if nmod > 0:
             dpq = p_in - p_sup
-            q = flow_coef * gsep_out[k - 1] * np.sqrt(dpq) if dpq > 0.0 else 0.0
+            q = flow_coef * gsep_out[k - 1] * math.sqrt(dpq) if dpq > 0.0 else 0.0
             p_in = p_sub - subglottal_step(sub_coef, sub_p1, sub_p2, q, q2)
             q2 = q1
             q1 = q
             p_in_out[k - 1] = p_in
         if traj_every > 0 and k % traj_every == 0 and ntr < traj_u.shape[0]:
-            traj_u[ntr, :] = u
-            traj_v[ntr, :] = v
+            for i in range(n):
+                traj_u[ntr, i] = u[i]
+                traj_v[ntr, i] = v[i]
             ntr += 1
         if stop_window > 0:
             vm = 0.0
@@ -598,15 +615,17 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
                     for kk in range(k, n_steps):
                         width[kk] = width[k - 1]
                         gsep_out[kk] = gsep_out[k - 1]
-                        lam_out[kk, :] = lam_out[k - 1, :]
-                        if rec:
-                            proj_out[kk, :] = proj_out[k - 1, :]
+                        for j in range(m):
+                            lam_out[kk, j] = lam_out[k - 1, j]
+                            if rec:
+                                proj_out[kk, j] = proj_out[k - 1, j]
                         if nmod > 0:
                             p_in_out[kk] = p_in_out[k - 1]
                     if traj_every > 0:
                         for t in range(ntr, traj_u.shape[0]):
-                            traj_u[t, :] = u
-                            traj_v[t, :] = v
+                            for i in range(n):
+                                traj_u[t, i] = u[i]
+                                traj_v[t, i] = v[i]
                     return 0
                 prev_quiet = quiet
                 prev_v = win_v
