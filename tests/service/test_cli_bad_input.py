@@ -179,7 +179,8 @@ DIAGNOSE = [(f"gaw-{n}", ["diagnose", f, "--out", "{out}"], nd) for n, f, nd in 
         ("max-refits", ["--max-refits", "-1"], "--max-refits"), ("workers", ["--workers", "0"], "--workers"),
         ("mesh", ["--mesh", "huge"], "mesh"), ("noise", ["--noise", "loud"], "noise"), ("dt", ["--dt", "0"], "--dt"),
         ("discard", ["--discard", "-1"], "--discard"), ("sigma", ["--sigma-e", "0"], "--sigma-e"),
-        ("seed", ["--seed", "-1"], "--seed"), *GENERIC]] + [
+        ("seed", ["--seed", "-1"], "--seed"), ("base-missing", ["--base", "{d}/nothing.nc"], "--base"),
+        ("base-not-netcdf", ["--base", "{d}/good.csv"], "not a vfinfer posterior"), *GENERIC]] + [
     ("out-is-file", ["diagnose", "{d}/good.csv", "--out", "{d}/afile.txt"], "not a folder"),
     ("no-out", ["diagnose", "{d}/good.csv"], "--out")]
 REACH = [(n, ["reach", *a], nd) for n, a, nd in [
