@@ -91,51 +91,35 @@ def _host_memory() -> int:
         return 8 << 30
 
 
-def max_launch(system, n_steps: int, nmod: int, n_traj: int, projection: bool) -> int:
-    """Most samples one launch holds: a share of the free GPU memory and of the host's memory."""
+def max_launch(system, n_steps: int, nmod: int, n_traj: int, projection: bool, host: bool = True) -> int:
+    """Most samples one launch holds: a share of the free GPU memory and (``host``: the outputs come back) of
+    the host's memory."""
     from numba import cuda
     per = _bytes_per_sample(system, n_steps, nmod, n_traj, projection)
-    free = cuda.current_context().get_memory_info()[0]
-    cap = min(DEVICE_MEMORY_SHARE * free, HOST_MEMORY_SHARE * _host_memory())
-    return max(1, int(cap // per))
+    cap = DEVICE_MEMORY_SHARE * cuda.current_context().get_memory_info()[0]
+    if host:
+        cap = min(cap, HOST_MEMORY_SHARE * _host_memory())
+    return max(1, int(min(cap, 1 << 40) // per))
 
 
 def _zeros(shape):
     """A zero-filled float64 device array (filled on the device, not copied from the host)."""
     from numba import cuda
-    from .solver._cuda_kernels import SIMULATOR, THREADS_PER_BLOCK
+    from .solver._cuda_kernels import SIMULATOR, THREADS_PER_BLOCK, fill_zero
     if SIMULATOR or int(np.prod(shape)) == 0:
         return cuda.to_device(np.zeros(shape))
     d = cuda.device_array(shape)
-    flat = d.reshape(int(np.prod(shape)))
-    _fill_zero_kernel()[256, THREADS_PER_BLOCK](flat)
+    fill_zero[256, THREADS_PER_BLOCK](d.reshape(int(np.prod(shape))))
     return d
 
 
-_FILL = None
-
-
-def _fill_zero_kernel():
-    global _FILL
-    if _FILL is None:
-        from numba import cuda
-
-        @cuda.jit
-        def fill_zero(x):
-            i = cuda.grid(1)
-            step = cuda.gridsize(1)
-            while i < x.size:
-                x[i] = 0.0
-                i += step
-        _FILL = fill_zero
-    return _FILL
-
-
-def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None):
+def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None, fetch: bool = True):
     """Integrate the samples ``sel`` of a prepared block (:class:`vfcore.batch.BlockInputs`) on the GPU in one
     launch. Returns (status, width, gsep, lam, proj, p_in, traj_u, stop), each indexed ``[b]`` over ``sel`` and
-    contiguous per sample, as :func:`vfcore.batch.assemble_block` takes them. ``timings`` (a dict, optional)
-    gets the seconds of to_device_s, kernel_s (compilation on the first call included) and to_host_s added."""
+    contiguous per sample, as :func:`vfcore.batch.assemble_block` takes them. ``sel`` may repeat a sample.
+    ``timings`` (a dict, optional) gets the seconds of to_device_s, kernel_s (compilation on the first call
+    included) and to_host_s added, and device_bytes (the most this module allocated for one launch).
+    ``fetch=False`` leaves the outputs on the GPU and returns None (to time the integration alone)."""
     from numba import cuda
 
     from .simcore import BLOWUP, CLOSED_TOL, flow_coefficient, stop_settings
@@ -176,11 +160,23 @@ def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None):
     shared = [cuda.to_device(x) for x in (system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz,
                                           system.sX, system.sZ)]
     t1 = time.perf_counter()
-    scalars = (n_steps, config.dt, *blk.coefs, config.p_sup, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP,
-               flow_coefficient(config), not projection, blk.traj_every, *stop_settings(config))
+    stop_window, stop_width, stop_vel = stop_settings(config)
+    f = float
+    # fixed scalar types: one compiled kernel whatever numeric types a config holds
+    scalars = (int(n_steps), f(config.dt), *(f(x) for x in blk.coefs), f(config.p_sup), f(CLOSED_TOL),
+               f(config.closure_gap_mm * 1e-3), f(BLOWUP), f(flow_coefficient(config)), bool(not projection),
+               int(blk.traj_every), int(stop_window), f(stop_width), f(stop_vel))
     launch(B, scalars, (*shared, kdm, Lx, G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam,
                         proj, p_in, tu, tv, status, stop))
     t2 = time.perf_counter()
+    if timings is not None:
+        timings["kernel_s"] = timings.get("kernel_s", 0.0) + t2 - t1
+        timings["to_device_s"] = timings.get("to_device_s", 0.0) + t1 - t0
+        used = sum(int(x.nbytes) for x in (*shared, kdm, Lx, G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S,
+                                           subw, width, gsep, lam, proj, p_in, tu, tv, status, stop))
+        timings["device_bytes"] = max(timings.get("device_bytes", 0), used)
+    if not fetch:
+        return None
     h_width = width.copy_to_host().T
     h_gsep = gsep.copy_to_host().T
     h_lam = lam.copy_to_host().transpose(2, 0, 1)
@@ -194,7 +190,5 @@ def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None):
            stop.copy_to_host())
     t3 = time.perf_counter()
     if timings is not None:
-        timings["to_device_s"] = timings.get("to_device_s", 0.0) + t1 - t0
-        timings["kernel_s"] = timings.get("kernel_s", 0.0) + t2 - t1
         timings["to_host_s"] = timings.get("to_host_s", 0.0) + t3 - t2
     return out

@@ -147,40 +147,12 @@ def chunk_size_for(spec: JobSpec) -> int:
     return int(size)
 
 
-class DeviceEvaluator:
-    """:class:`ProblemEvaluator` of the FE model with its rows simulated on ``device``
-    (:func:`vfcore.batch.simulate_many`); picklable. A row whose parameters are invalid scores as failed,
-    as in :func:`vfcore.inference.problem.evaluate`; ``device="cuda"`` on a worker without a usable GPU
-    raises :class:`vfcore.gpu.CudaUnavailable`, which fails the chunk with its reason."""
-
-    def __init__(self, problem: Problem, device: str):
-        self.problem = problem
-        self.device = device
-
-    def __call__(self, thetas) -> Evaluation:
-        from vfcore.batch import simulate_many
-        from vfcore.inference.problem import score_results
-        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-        results: list = [None] * thetas.shape[0]
-        params = []
-        for i, th in enumerate(thetas):
-            try:
-                params.append((i, self.problem.prior.to_params(th)))
-            except Exception as exc:  # noqa: BLE001 - reported per draw
-                results[i] = exc
-        if params:
-            sims = simulate_many([p for _, p in params], self.problem.config, block=LOCKSTEP_BLOCK,
-                                 device=self.device)
-            for (i, _), r in zip(params, sims):
-                results[i] = r
-        return score_results(results, self.problem)
-
-
 def evaluator_for(spec: JobSpec, problem: Problem) -> Callable[[np.ndarray], Evaluation]:
     if spec.model == "toy":
         from .toy import ToyEvaluator
         return ToyEvaluator(problem, spec.toy.delay_s if spec.toy else 0.0)
     if job_device(spec) != "cpu":
+        from vfcore.inference.device_eval import DeviceEvaluator
         return DeviceEvaluator(problem, job_device(spec))
     return ProblemEvaluator(problem)
 

@@ -77,9 +77,9 @@ for name, cfgs in cases.items():
                               settled=sum(1 for r in cpu if r.ok and r.settled_at > 0),
                               failed=sum(1 for r in cpu if not r.ok), cuda_s=dt)
 
-# the worker's evaluator with device="cuda" scores as the CPU ProblemEvaluator does
+# the device evaluator (what a worker maps for a job with device "cuda") scores as the CPU ProblemEvaluator does
 from vfcore.inference import Prior, Problem, ProblemEvaluator
-from worker.run import DeviceEvaluator
+from vfcore.inference.device_eval import DeviceEvaluator
 cfg = SimConfig(mesh="coarse", duration=0.12, discard=0.02)
 obs = simulate_many(rows[-1:], cfg)[0].gaw[:80]
 prior = Prior({"E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)})
@@ -89,6 +89,12 @@ e_cpu = ProblemEvaluator(pb)(th)
 e_gpu = DeviceEvaluator(pb, "cuda")(th)
 out["evaluator"] = dict(ok=e_cpu.ok.tolist(), same_ok=bool(np.array_equal(e_cpu.ok, e_gpu.ok)),
                         same_loglik=bool(np.array_equal(e_cpu.loglik, e_gpu.loglik)))
+# the device-side zero fill (the simulator path of _zeros copies zeros instead)
+from numba import cuda
+from vfcore.solver._cuda_kernels import fill_zero
+x = cuda.to_device(np.ones(300))
+fill_zero[2, 64](x)
+out["fill_zero"] = bool(np.all(x.copy_to_host() == 0.0))
 out["total_s"] = time.perf_counter() - t_all
 print("RESULT " + json.dumps(out))
 """
@@ -134,11 +140,30 @@ def test_simulator_matches_the_cpu_lockstep_kernel(simulated):
         assert r["identical"], (name, r)
 
 
-def test_worker_device_evaluator_scores_as_the_cpu_evaluator(simulated):
+def test_device_zero_fill(simulated):
+    assert simulated[0]["fill_zero"]
+
+
+def test_device_evaluator_scores_as_the_cpu_evaluator(simulated):
     res, _ = simulated
     ev = res["evaluator"]
     assert ev["same_ok"] and ev["same_loglik"]
     assert ev["ok"][:3] == [True, True, True] and ev["ok"][3] is False
+
+
+def test_worker_passes_a_jobs_device_through():
+    """A job whose spec names a device gets the device evaluator and GPU-sized chunks; a spec without the
+    field (today's JobSpec) runs on the CPU as before."""
+    from types import SimpleNamespace
+
+    from vfcore.inference.device_eval import DeviceEvaluator
+    from vfcore.inference.problem import ProblemEvaluator
+    from worker.run import GPU_CHUNK, evaluator_for, job_device
+    assert job_device(SimpleNamespace(model="fe")) == "cpu"
+    ev = evaluator_for(SimpleNamespace(model="fe", device="cuda"), problem=None)
+    assert isinstance(ev, DeviceEvaluator) and ev.device == "cuda"
+    assert type(evaluator_for(SimpleNamespace(model="fe", device="cpu"), problem=None)) is ProblemEvaluator
+    assert GPU_CHUNK >= 4096
 
 
 def test_cuda_without_a_gpu_is_one_clear_error():
@@ -185,6 +210,7 @@ sig = ([i8, i8, f8, f8, f8, f8, f8, f8, f8, f8, f8, f8, types.boolean, i8, i8, f
 t = time.perf_counter()
 with ck._no_fma_contraction() as patched:
     ptx, _ = cuda.compile_ptx(ck.integrate_kernel, tuple(sig), cc=(9, 0))
+cuda.compile_ptx(ck.fill_zero.py_func, (arr(1),), cc=(9, 0))
 print("RESULT " + __import__("json").dumps(dict(
     patched=patched, chars=len(ptx), fma=len(re.findall(r"\bfma\.rn\.f64", ptx)), mul_rn=ptx.count("mul.rn.f64"),
     sqrt_rn=ptx.count("sqrt.rn.f64"), div_rn=ptx.count("div.rn.f64"), seconds=time.perf_counter() - t)))

@@ -90,6 +90,16 @@ def integrate_kernel(nb, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_r
              status, stop_out)
 
 
+@cuda.jit
+def fill_zero(x):
+    """x[:] = 0 for a 1-D float64 device array, grid-stride."""
+    i = cuda.grid(1)
+    step = cuda.gridsize(1)
+    while i < x.size:
+        x[i] = 0.0
+        i += step
+
+
 _compile_lock = threading.Lock()
 
 
