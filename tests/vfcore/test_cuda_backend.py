@@ -21,7 +21,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 #: The simulator check compiles run_sample for strided arrays on a cold cache (~30 s on the 2-core CI machine);
 #: past this the machine is too slow or too busy for it to say anything, and it skips saying so.
-SIM_TIMEOUT_S = 240
+SIM_TIMEOUT_S = 150
 
 # Prior draws of test_batch (seed 2) and Table 3, coarse mesh, a few tens of ms: both contact laws, the
 # per-row extensions (separation ratio, epithelium, subglottal modes), trajectories and the settled-response
