@@ -94,10 +94,10 @@ class DiagnoseRequest(BaseModel):
     candidates: list[str] | None = Field(
         default=None, min_length=1, max_length=50,
         description="catalogued, implemented extensions to screen (default: all implemented ones)")
-    # fewer than 10 particles leave the tempered SMC no particles to resample from (the inference jobs'
-    # SMC has the same floor)
+    # vfcore's SMC refuses fewer than 10 particles (vfcore.inference.smc.SMCSampler), and every base fit and
+    # refit is one: a smaller count would fail the diagnosis when it reaches that stage
     n_particles: int = Field(default=BASE_PARTICLES, ge=10, le=400, description="SMC particles of each base fit")
-    refit_particles: int = Field(default=REFIT_PARTICLES, ge=4, le=400,
+    refit_particles: int = Field(default=REFIT_PARTICLES, ge=10, le=400,
                                  description="SMC particles of each extended fit")
     max_refits: int | None = Field(default=MAX_REFITS, ge=0, le=OBSERVATION_ENTRIES,
                                    description="most observation-level extensions refitted, best screened "

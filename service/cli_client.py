@@ -222,7 +222,7 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
               particles: Annotated[Optional[int], typer.Option(
                   help="with --start: SMC particles of each base fit (10-400)")] = None,
               refit_particles: Annotated[Optional[int], typer.Option(
-                  help="with --start: particles of each refit (4-400)")] = None,
+                  help="with --start: particles of each refit (10-400)")] = None,
               max_refits: Annotated[Optional[int], typer.Option(
                   help="with --start: most observation-level refits (0-6)")] = None,
               continuation: Annotated[Optional[bool], typer.Option(

@@ -226,7 +226,7 @@ def diagnose_cmd(
                                            help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
         particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = BASE_PARTICLES,
         refit_particles: Annotated[int, typer.Option(
-            help="SMC particles of each extended fit (4-400)")] = REFIT_PARTICLES,
+            help="SMC particles of each extended fit (10-400)")] = REFIT_PARTICLES,
         max_refits: Annotated[Optional[int], typer.Option(
             help="most observation-level extensions refitted, best screened first (0-6; default: all)")] = MAX_REFITS,
         candidates: Annotated[Optional[str], typer.Option(

@@ -13,10 +13,10 @@ from worker import store as st
 from worker.reduce import compare_posteriors
 
 from ..access import done_job, own_job, page_reader
-from ..api_models import CompareRequest, Figure, JobSpec, JobStatus, Submitted
+from ..api_models import CompareRequest, Figure, JobSpec, JobStatus, LinkOut, Submitted
 from ..db import ACTIVE
 from ..deps import JOB_ID_RE, JobIdDep, ManagerDep, SettingsDep, UserDep
-from ..signing import Exp, LinkOut, OptionalUserDep, Sig, SignerDep, link_out, report_scope
+from ..signing import Exp, OptionalUserDep, Sig, SignerDep, link_out, report_scope
 
 router = APIRouter(tags=["jobs"])
 

@@ -129,12 +129,12 @@ def test_the_command_line_and_the_service_take_the_same_bounds():
     from service.api_models import OBSERVATION_ENTRIES, DiagnoseRequest
     from vfcore.diagnose.extensions import CATALOGUE
     assert OBSERVATION_ENTRIES == sum(e.kind == "observation" for e in CATALOGUE.values())
-    for opt, bad in (("--particles", "9"), ("--refit-particles", "3"), ("--max-refits", str(OBSERVATION_ENTRIES + 1))):
+    for opt, bad in (("--particles", "9"), ("--refit-particles", "9"), ("--max-refits", str(OBSERVATION_ENTRIES + 1))):
         r = CliRunner().invoke(app, ["diagnose", "nope.csv", "--out", "o", opt, bad])
         assert r.exit_code == 2 and opt in r.stderr, (opt, r.output)
         r = CliRunner().invoke(app, ["diagnosis", "a" * 32, "--start", opt, bad])
         assert r.exit_code == 2 and opt in r.stderr, (opt, r.output)
-    for field, bad in (("n_particles", 9), ("refit_particles", 3), ("max_refits", OBSERVATION_ENTRIES + 1)):
+    for field, bad in (("n_particles", 9), ("refit_particles", 9), ("max_refits", OBSERVATION_ENTRIES + 1)):
         with pytest.raises(ValidationError):
             DiagnoseRequest(**{field: bad})
 

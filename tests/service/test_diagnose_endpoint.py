@@ -164,7 +164,7 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     from svc_helpers import ServerThread
 
     jid = done_fe_job(settings)
-    body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 6, "max_refits": 2,
+    body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 10, "max_refits": 2,
             "continuation": False, "seed": 5}
     calls = []
 
@@ -199,7 +199,7 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     assert d["state"] == "failed" and "a failure of its own" in d["error"], d
     assert len(calls) == 2 and calls[1]["candidates"] == ["leak", "scale"]
     assert {k: calls[1][k] for k in ("n_particles", "refit_particles", "max_refits", "continuation", "seed")} == \
-        {"n_particles": 14, "refit_particles": 6, "max_refits": 2, "continuation": False, "seed": 5}
+        {"n_particles": 14, "refit_particles": 10, "max_refits": 2, "continuation": False, "seed": 5}
     assert _diagnosis_row(settings, jid)["attempts"] == 2
 
 

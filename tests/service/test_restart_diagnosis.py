@@ -18,8 +18,8 @@ from svc_helpers import auth, done_fe_job, free_port, kill_service, leaky_fe_spe
 HERE = Path(__file__).resolve().parent
 STAND_IN = {"script": [str(HERE / "serve_stand_in_diagnosis.py")], "body": {"seed": 3, "continuation": False},
             "kill_at": 8 * 12, "timeout": 120}
-REAL = {"script": None, "kill_at": 900, "timeout": 1800,
-        "body": {"candidates": ["leak"], "n_particles": 12, "refit_particles": 6, "max_refits": 1, "seed": 0,
+REAL = {"script": None, "kill_at": 300, "timeout": 1800,
+        "body": {"candidates": ["leak"], "n_particles": 12, "refit_particles": 10, "max_refits": 1, "seed": 0,
                  "continuation": False, "free_material": False}}
 
 
@@ -49,10 +49,12 @@ def test_a_restart_during_a_diagnosis_resumes_it_and_stores_the_same_report_byte
             r = http.post(f"/jobs/{interrupted}/diagnose", json=case["body"], headers=auth("alice"))
             assert r.status_code == 202, r.text
             diag = r.json()["diagnosis_id"]
-            _wait(http, interrupted, case["timeout"],
-                  until=lambda d: (d["progress"] or {}).get("simulations", 0) >= case["kill_at"] or d["state"] == "done")
+            first = _wait(http, interrupted, case["timeout"],
+                          until=lambda d: (d["progress"] or {}).get("simulations", 0) >= case["kill_at"]
+                          or d["state"] not in ("queued", "running"))
     finally:
         kill_service(p)
+    assert first["state"] == "running", first
     kept = len(list(resume_dir(data / "stores" / f"{diag}.zarr").rglob("*.pkl")))
     assert kept > 0 and report_bytes(data / "stores" / f"{diag}.zarr") is None     # killed in the middle
     p = start_service(data, port, script=case["script"])
