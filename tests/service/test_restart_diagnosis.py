@@ -2,9 +2,10 @@
 its store, reading back the simulations it had finished, and stores the same report and figure, byte for byte,
 as an uninterrupted diagnosis of the same job with the same settings.
 
-Fast: the diagnosis is a deterministic stand-in evaluated through the service's map
-(``serve_stand_in_diagnosis.py``). Slow: the real diagnosis at the smallest settings the endpoint tests use,
-which costs a few thousand simulations (minutes on 2 cores)."""
+Fast (~40 s on 2 cores, most of it two service starts): the diagnosis is a deterministic stand-in evaluated
+through the service's map (``serve_stand_in_diagnosis.py``). Slow (~100 s): the real diagnosis of a tiny FE job at
+the smallest settings the endpoint tests use (refit particles at vfcore's SMC floor of 10), 890 simulations, the
+service killed 300 simulations in."""
 from __future__ import annotations
 
 import time
