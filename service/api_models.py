@@ -109,6 +109,11 @@ class DiagnoseRequest(BaseModel):
                                 description="free the scaled parameters held at Table 3 (all but the anchor rho) "
                                             "before the catalogue is screened, and report whether they explain the "
                                             "mismatch (docs/diagnose.md, 'Material first')")
+    reuse_posterior: bool = Field(default=True,
+                                  description="start from the diagnosed job's own posterior as the base fit instead "
+                                              "of fitting the base model again (a job that estimated fewer material "
+                                              "parameters is the pinned fit that freeing them is judged against); "
+                                              "the command line's --base")
     seed: int = Field(default=0, ge=0, lt=2**63)
 
     @field_validator("candidates")
@@ -120,7 +125,7 @@ class DiagnoseRequest(BaseModel):
 #: The command-line option of each DiagnoseRequest field (error messages name what the user typed).
 DIAGNOSIS_OPTIONS = {"candidates": "--candidates", "n_particles": "--particles", "refit_particles": "--refit-particles",
                      "max_refits": "--max-refits", "continuation": "--continuation",
-                     "free_material": "--free-material", "seed": "--seed"}
+                     "free_material": "--free-material", "reuse_posterior": "--base", "seed": "--seed"}
 
 
 class DiagnosisSpec(BaseModel):

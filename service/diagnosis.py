@@ -231,17 +231,35 @@ def adopt_resume(old_store: Path, new_store: Path) -> bool:
     return True
 
 
+def job_posterior(store_path: Path):
+    """A finished inference job's posterior from its store (its ``posterior.nc``), or None when the store
+    keeps none or one without predicted GAWs (a diagnosis then fits its base itself)."""
+    from vfcore.inference.posterior import Posterior
+    data = st.read_blob(Path(store_path), "posterior_nc")
+    if not data:
+        return None
+    tmp = Path(store_path).parent / f".{Path(store_path).name}.{secrets.token_hex(6)}.nc"
+    try:
+        tmp.write_bytes(data)
+        post = Posterior.from_netcdf(tmp)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return post if post.predictive is not None else None
+
+
 # ------------------------------------------------------------------------------------ the job
 def run_diagnosis(client, job_id: str, store_path: Path, spec, problem, *, stop: threading.Event,
-                  progress=None) -> dict:
+                  progress=None, base=None) -> dict:
     """Run (or resume) the diagnosis job ``spec`` (a :class:`~service.api_models.DiagnosisSpec`) of ``problem`` to
     its stored report; returns its stats (the report's clock readings, the simulations). Raises
-    :class:`DiagnosisCancelled` once ``stop`` is set."""
+    :class:`DiagnosisCancelled` once ``stop`` is set. ``base``: the diagnosed job's posterior
+    (:func:`job_posterior`) to start from, or None."""
     from vfcore.inference.memo import CachedMap, account
     st.create_diagnosis_store(store_path, job_id, spec.to_json())
     cmap = CachedMap(dask_map(client, stop), resume_dir(store_path))
     chunk = spec.chunk_size or chunk_size_for(spec.request, client)
-    report = run_diagnose(problem, spec.request, map=cancellable(cmap, stop), chunk_size=chunk, progress=progress)
+    report = run_diagnose(problem, spec.request, map=cancellable(cmap, stop), chunk_size=chunk, progress=progress,
+                          base=base)
     d = account(report.to_dict(), cmap)          # a resumed run counts its earlier attempts' time
     png = figure_png(report, problem, store_path)
     clock = write_report(store_path, job_id, spec.to_json(), d, png)

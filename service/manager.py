@@ -245,8 +245,9 @@ class JobManager:
             lv.event = dg.jsonable(ev)
             flush(Progress(n_done=int(ev.get("simulations") or 0), phase=str(ev.get("stage"))))
 
+        base = dg.job_posterior(self.store_path(spec.job)) if spec.request.reuse_posterior else None
         stats = dg.run_diagnosis(self.client, job_id, self.store_path(job_id), spec, problem,
-                                 stop=lv.control.cancelled, progress=progress)
+                                 stop=lv.control.cancelled, progress=progress, base=base)
         n = stats["n_simulations"]
         return stats, {"n_done": n, "n_total": n}
 
