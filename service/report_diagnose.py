@@ -65,6 +65,17 @@ def _entry_info(name: str) -> tuple[str, str]:
 def _verdict(d: dict) -> str:
     verdict = escape(str(d.get("verdict") or "no verdict"))
     win = d.get("winner")
+    fc = d.get("fit_check") or {}
+    if fc and fc.get("fits") is False:
+        return (f"<div class='warn'><strong>The model does not fit.</strong> {verdict}.</div><p class='muted'>The "
+                f"best fit leaves {fmt_num(_num(fc.get('ratio')), '.1f')} times the recording's noise (at most "
+                f"{fmt_num(_num(fc.get('max_ratio')), 'g')} counts as a fit): no catalogue entry explains the "
+                "recording, so none is named; the ranked entries below are partial explanations.</p>")
+    mat = d.get("material") or {}
+    if not win and mat.get("found"):
+        return (f"<div class='ok'><strong>The fixed parameters were wrong.</strong><br>{verdict}.</div>"
+                "<p class='muted'>Freeing the material parameters held at Table 3 explains the mismatch by the "
+                "naming rule; no catalogued extension then beat the freed base model.</p>")
     if not win:
         return (f"<div class='warn'><strong>{verdict}</strong>: no catalogued extension beat the base model by "
                 "the naming rule (a log-evidence gain well above its error, a residual RMS at least 30 % lower, "
@@ -85,6 +96,23 @@ def _verdict(d: dict) -> str:
     model = f" (entry <code>{escape(win)}</code>)" if phys != win else ""
     return (f"<div class='ok'><strong>Missing physics: {escape(str(phys))}</strong>{model}<br>{ev}.</div>{riv}"
             f"<p class='muted'>{verdict}</p>")
+
+
+def _material(m: dict) -> str:
+    """The pinned base fit against the one with the held parameters freed (vfcore.diagnose.material)."""
+    held = ", ".join(f"{escape(str(k))} (held at {fmt_num(_num(v), 'g')})" for k, v in (m.get("held_at") or {}).items())
+    rows = [[label, f"{fmt_num(_num(f.get('log_evidence')), '.2f')} ± {fmt_num(_num(f.get('log_evidence_se')), '.2f')}",
+             fmt_num(_num(f.get("residual_rms")), ".3g")]
+            for label, f in (("held at Table 3", m.get("pinned") or {}), ("freed", m.get("free") or {}))]
+    free = (m.get("free") or {}).get("params") or {}
+    est = html_table(["freed parameter", "posterior mean", "sd"],
+                     [[escape(str(k)), fmt_num(_num((free.get(k) or {}).get("mean")), ".4g"),
+                       fmt_num(_num((free.get(k) or {}).get("sd")), ".3g")] for k in (m.get("held_at") or {})])
+    outcome = ("explains the mismatch" if m.get("found") else f"does not explain it ({escape(str(m.get('reason')))})")
+    return (f"<p>The base model held {held}. Freeing them (the scale anchored by {escape(str(m.get('anchor')))}) "
+            f"{outcome}: dlogZ = {fmt_num(_num(m.get('delta')), '.2f')} ± {fmt_num(_num(m.get('delta_se')), '.2f')}, "
+            f"residual RMS {_pct(m.get('rms_gain'))} lower; the {escape(str(m.get('kept')))} model is the base of "
+            "everything below.</p>" + html_table(["base model", "log evidence", "residual RMS (mm²)"], rows) + est)
 
 
 def _mismatch(b: dict, d: dict) -> str:
@@ -209,6 +237,8 @@ def render_diagnosis_report(d: dict, figure: str | None, title: str, links: dict
     if figure:
         parts.append(f"<figure><img src='{escape(figure)}' alt='recording, base and extended fits, residual by "
                      f"phase and measure p-values'><figcaption>{FIGURE_CAPTION}</figcaption></figure>")
+    if d.get("material"):
+        parts.append("<h2>Material first</h2>" + _material(d["material"]))
     parts.append("<h2>Where the mismatch lies</h2>" + _mismatch(b, d))
     parts.append("<h2>Catalogue entries, ranked</h2><p class='muted'>Screening: the best log-likelihood gain of "
                  "the entry with the material parameters held at the base posterior. Refit: base plus extension "

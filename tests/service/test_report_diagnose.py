@@ -123,6 +123,32 @@ def test_no_finding_page_and_missing_numbers():
     assert page.count("not refitted") == 3
 
 
+def test_no_fit_and_material_pages():
+    """'The model does not fit' is a warning with the best partial explanation and no name; 'the fixed
+    parameters were wrong' shows the pinned and the freed base fits side by side."""
+    from service.report_diagnose import render_diagnosis_report
+    d = copy.deepcopy(REPORT)
+    d.update(verdict="the model does not fit: the best fit (leak) leaves a residual RMS of 4.6 mm² against a noise "
+                     "of 0.46 mm²; best partial explanation: leak", winner=None, physics=None,
+             fit_check={"fits": False, "ratio": 10.0, "max_ratio": 2.0, "best": "leak"})
+    page = render_diagnosis_report(d, None, "d", None)
+    check_page(page)
+    assert "The model does not fit." in page and "10.0 times" in page and "Missing physics:" not in page
+    d = copy.deepcopy(REPORT)
+    d.update(verdict="the fixed parameters were wrong: freeing eta (held at 3.079) gives dlogZ = 900.00 +- 1.00, "
+                     "residual RMS 60 % lower; no missing physics found", winner=None, physics=None,
+             fit_check={"fits": True, "ratio": 1.1, "max_ratio": 2.0, "best": "base"},
+             material={"freed": ["eta"], "held_at": {"eta": 3.079}, "anchor": "rho", "delta": 900.0, "delta_se": 1.0,
+                       "rms_gain": 0.6, "found": True, "reason": "", "kept": "free",
+                       "pinned": {"log_evidence": -1400.0, "log_evidence_se": 0.5, "residual_rms": 2.5},
+                       "free": {"log_evidence": -500.0, "log_evidence_se": 0.8, "residual_rms": 1.0,
+                                "params": {"eta": {"mean": 6.4, "sd": 0.3}}}})
+    page = render_diagnosis_report(d, None, "d", None)
+    check_page(page)
+    assert "The fixed parameters were wrong." in page and "Material first" in page
+    assert "eta (held at 3.079)" in page and "6.4" in page and "60 % lower" in page
+
+
 def test_cli_writes_index_html(tmp_path, monkeypatch):
     """``vfinfer diagnose`` with the pipeline replaced by a stand-in returning the stored report."""
     pytest.importorskip("vfcore.forward", reason="FE forward model not available")
