@@ -64,7 +64,7 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     out = tmp_path / "out"
     r = _invoke([str(leaky_gaw), "--out", str(out), *TINY, "--estimate", "E_cover", "--particles", "20",
                  "--candidates", "leak", "--max-refits", "1", "--workers", "1", "--seed", "0",
-                 "--no-continuation"])      # the continuation search: tests/vfcore/test_diagnose_search.py
+                 "--no-continuation"])      # the continuation search: tests/vfcore/diagnose/test_diagnose_search.py
     assert r.exit_code == 0, r.output
     d = json.loads((out / "diagnosis.json").read_text())
     assert d["winner"] == "leak", d["verdict"]

@@ -21,7 +21,7 @@ def test_prior_sets_by_name():
 def test_job_spec_carries_the_prior_set():
     import sys
     from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "service"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "service"))
     from svc_helpers import toy_spec
 
     from worker.jobspec import JobSpec

@@ -11,7 +11,7 @@ from vfcore.diagnose.regularity import sensitivity
 from vfcore.inference import Prior
 from vfcore.inference.problem import Problem
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
 from benchmarks.bench_regularity import CFG, FIXED, recording  # noqa: E402  (the suites' window and fixed values)
 
 FPS = 2000.0
