@@ -32,7 +32,7 @@ test-all: install
 	$(PY) -m pytest -q --durations=25 tests
 
 # Regenerates requirements.lock from pyproject.toml (every extra, hashes, all platforms) with a
-# pinned uv in a throwaway venv; tests/test_packaging.py fails while the two disagree.
+# pinned uv in a throwaway venv; tests/packaging/test_packaging.py fails while the two disagree.
 UV_VERSION := 0.13.9
 LOCK_CMD := uv pip compile pyproject.toml --extra dev --universal --fork-strategy fewest --python-version 3.11 --generate-hashes --index-url https://pypi.org/simple -o requirements.lock
 lock:

@@ -43,7 +43,7 @@ noise (``sigma_e``). Noise-sensitive measures (min area, glottal gap index, ampl
 shimmer, SHR) are decided by ``s``: with the likelihood's nominal sigma_e = 1 mm^2 on recordings
 whose noise was 0.5 mm^2, the glottal gap index, the min area and the amplitude were flagged
 (p2 < 0.05) in 40 of 40 recordings of the model itself, the amplitude quotient and SHR in 13
-(``tests/vfcore/test_diagnose.py``); with ``s`` estimated, each measure in 1-6 of 40 (mean 7.5 %
+(``tests/vfcore/diagnose/test_diagnose.py``); with ``s`` estimated, each measure in 1-6 of 40 (mean 7.5 %
 against the nominal 5 %), while a 1.5 mm^2 leak still flags the gap index and the min area in
 20 of 20 and a 15 % scale error the amplitude in 20 of 20.
 ``sigma_e="estimate"`` takes ``s`` from the recording (:func:`noise_sd`): the robust scale of the

@@ -21,7 +21,7 @@ the rows evaluated per stage and per entry, which the diagnosis report carries a
 The stage sequence depends on the data (rescues, mode checks and the nested check run only when
 their triggers fire), so there is no honest "percent done"; ``step`` of ``steps`` is given where
 the count is known in advance. Reporting never changes a result: the batch function and parts
-reach the inner map unchanged (tests/vfcore/test_diagnose_progress.py). A callback that raises is
+reach the inner map unchanged (tests/vfcore/inference/test_memo.py). A callback that raises is
 reported once as a warning and then ignored: an hour of simulation is not lost to a display.
 """
 from __future__ import annotations

@@ -9,7 +9,7 @@ and are written, each atomically (temporary file, then rename), before the call 
 Why this is safe. A forward simulation is a pure function of its batch function and its
 parameters (the samplers pass their seeds explicitly, and no batch function here carries a random
 state), and the key holds both in full, so a stored entry is exactly what the simulation would
-return and a rerun is bit-identical to the uncached run (tests/vfcore/test_memo.py). A batch
+return and a rerun is bit-identical to the uncached run (tests/vfcore/inference/test_memo.py). A batch
 function whose pickle misses something that changes its output would break this; such a function
 must not be cached. A function that cannot be pickled, or a call with a part that is not a
 numeric array, is run uncached. Different bytes for the
