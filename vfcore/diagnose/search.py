@@ -67,10 +67,18 @@ def windows(n: int, frames_per_cycle: float, cycles0: float = 3.0) -> list[int]:
 
 def window_problems(problem: Problem, cycles0: float = 3.0) -> list[Problem]:
     """The problem on the first ``w`` frames of its recording, one per continuation window (the
-    last is ``problem`` itself). Each aligns its own prefix over the whole simulated window."""
+    last is ``problem`` itself). Each aligns its own prefix over the whole simulated window. A
+    prefix that is not a usable recording by itself (no f0 over it: a tremor's quiet stretch, a
+    slow onset) is left out, so the search starts at the first window that is one."""
     y = np.asarray(problem.obs_gaw, dtype=float)
     ws = windows(y.size, problem.fps / estimate_f0(y, problem.fps), cycles0)
-    return [dataclasses.replace(problem, obs_gaw=y[:w]) if w < y.size else problem for w in ws]
+    out = []
+    for w in ws[:-1]:
+        try:
+            out.append(dataclasses.replace(problem, obs_gaw=y[:w]))
+        except ValueError:
+            continue
+    return out + [problem]
 
 
 def model_evaluator(problem: Problem, extension: str | None, integrate: bool = True):

@@ -45,6 +45,20 @@ def test_window_problems_are_prefixes_of_the_recording(scaled_problem):
         np.testing.assert_array_equal(p.obs_gaw, y[: p.obs_gaw.size])
 
 
+def test_a_window_without_an_f0_of_its_own_is_left_out(scaled_problem):
+    """A recording whose first cycles are nearly still (a tremor's quiet stretch): the first window
+    is no usable recording by itself and is left out instead of failing the search."""
+    y = np.asarray(scaled_problem.obs_gaw, dtype=float).copy()
+    y[:60] = y[:60].mean()                       # ~4 cycles without oscillation
+    pb = Problem(y, FPS, scaled_problem.prior, config=CFG, sigma_e=0.3)
+    full = window_problems(scaled_problem, 3.0)
+    probs = window_problems(pb, 3.0)
+    assert probs[-1] is pb and len(probs) < len(full)
+    assert probs[0].obs_gaw.size > full[0].obs_gaw.size
+    for p in probs[:-1]:
+        np.testing.assert_array_equal(p.obs_gaw, y[: p.obs_gaw.size])
+
+
 def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically(scaled_problem):
     """With the scale integrated out, the search over E_cover from a design of 8 points ends
     within 2 % of the truth and above the best of a brute-force grid of 71 points (10 kPa apart)
