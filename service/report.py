@@ -152,8 +152,10 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
     if diag:
         parts.append("<h2>Sampler diagnostics</h2>" + "".join(f"<div class='{c}'>{t}</div>" for c, t in diag))
     if timings:
-        cost = ", ".join(f"{escape(k.replace('_', ' '))} {fmt_num(v, '.1f')}" for k, v in timings.items()
-                         if isinstance(v, (int, float)) and not isinstance(v, bool))
+        cost = ", ".join(
+            f"{escape(k[:-2].replace('_', ' '))} {fmt_num(v, '.1f')} s" if k.endswith("_s")
+            else f"{escape(k.replace('_', ' '))} {fmt_num(v, ',.0f')}"
+            for k, v in timings.items() if isinstance(v, (int, float)) and not isinstance(v, bool))
         parts.append(f"<h2>Cost</h2><p>{cost}</p>")
     if links:
         parts.append(data_section(links, DATA_FILES))

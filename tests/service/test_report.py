@@ -55,7 +55,7 @@ def test_report_folder_reads_offline(tmp_path, post):
     assert "src='gaw_fit.png'" in page and "corner.png" not in page   # only what exists
     assert "href='samples.csv'" in page and "href='samples.json'" in page
     assert "http://" not in page and "https://" not in page and "<script" not in page
-    assert "E_cover" in page and "Pa" in page and "90 % interval" in page and "wall s 12.5" in page
+    assert "E_cover" in page and "Pa" in page and "90 % interval" in page and "wall 12.5 s" in page and "n simulations 60" in page
     assert json.loads(meta)["units"] == {"E_cover": "Pa", "p_sub": "Pa"}
     header = csv_bytes.decode().splitlines()[0]
     assert header == "E_cover,p_sub,log_weight,weight,n_resampled"
