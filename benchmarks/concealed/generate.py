@@ -183,13 +183,13 @@ def draw_truth(rng, material: str = "three") -> Params:
 
 def _forward(label: str, truth: Params, rng, config: SimConfig, sim):
     """A forward-level effect's simulation and its parameters; ``None`` when it does not oscillate."""
+    if not forward_extensions_available().get(label, True):
+        raise NotImplementedError(f"SimConfig has no {label} fields in this vfcore")
     if label == "sep_ratio":
         r = _two_sided(rng, SEP_RATIO_RANGES)
         res = sim(truth, config.replace(sep_ratio=r))
         eff = {"sep_ratio": r}
     elif label == "epithelium":
-        if not forward_extensions_available()["epithelium"]:
-            raise NotImplementedError("SimConfig has no epithelium fields in this vfcore")
         E = _uniform(rng, EPI_E_KPA)
         h = _uniform(rng, EPI_H_MM)
         mr = _uniform(rng, EPI_MEDIAL_RATIO)
@@ -199,8 +199,6 @@ def _forward(label: str, truth: Params, rng, config: SimConfig, sim):
         eff = {"epithelium_E_kpa": E, "epithelium_h_mm": h, "medial_ratio": mr, "medial_width_mm": wd,
                "epithelium_profile": list(prof)}
     elif label == "subglottal":
-        if not forward_extensions_available()["subglottal"]:
-            raise NotImplementedError("SimConfig has no subglottal_modes field in this vfcore")
         tube = _uniform(rng, SUB_TUBE_M)
         z1 = _uniform(rng, SUB_Z1)
         zeta = _uniform(rng, SUB_ZETA1)
