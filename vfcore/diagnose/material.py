@@ -21,13 +21,11 @@ from ..inference.prior import PRIOR_SETS, Prior
 from ..inference.problem import Problem
 from ..params import TABLE3
 
-__all__ = ["ANCHOR", "MATERIAL", "pinned", "freed_problem", "judge", "prior_set_of"]
+__all__ = ["ANCHOR", "pinned", "freed_problem", "judge", "prior_set_of"]
 
 #: The scale anchor when the user gives none: the density, the best known of the six in tissue
 #: (1,000-1,100 kg/m^3 against decades of range in the moduli).
 ANCHOR = "rho"
-#: The name the explanation carries in the report (beside the catalogue's entries).
-MATERIAL = "material"
 
 
 def prior_set_of(prior: Prior) -> str:

@@ -40,7 +40,7 @@ from .adequacy import MAX_RMS_RATIO, check_fit
 from .extensions import CATALOGUE, get
 from .fit import ExtendedEvaluator, fit_extended, null_drops, observe_extended, param_table
 from .locate import PHASES, LocateReport, locate, measure_pvalues, noise_sd
-from .material import ANCHOR, MATERIAL, freed_problem, judge, pinned
+from .material import ANCHOR, freed_problem, judge, pinned
 from .progress import ProgressTracker
 from .rank import (NO_FINDING, RankReport, local_passes, null_consistent, prefer_nested, prefer_parsimonious,
                    promote_local, rank_best_of_base, rank_extensions, residual_removed)
