@@ -482,6 +482,19 @@ def _material_sentence(m: dict) -> str:
             f"{100 * m['rms_gain']:.0f} % lower")
 
 
+def _finish(track, t0, base, before, scr, refits, after, ranking, n_sims, notes, material, max_rms_ratio):
+    """The report of a diagnosis, with its fit check (:mod:`.adequacy`) over the base and every
+    refit not at its null value; the last stage of every way through :func:`diagnose`."""
+    checked = None
+    if max_rms_ratio is not None:
+        checked = check_fit({"base": before, **{n: after[n] for n in after if not after[n].get("null_consistent")}},
+                            max_rms_ratio)
+    track.at("done")
+    return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
+                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes, cost=track.cost(),
+                          material=material, fit_check=checked)
+
+
 def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: int = 0, map=map,
              chunk_size: int = 40, max_refits: int | None = None, screen_min: float | None = None,
              min_gain: float = 3.0,
@@ -713,11 +726,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
                      f"{s_hat:.3g} mm²: no extension could lower it by {100 * min_rms_gain:.0f} % (at most "
                      f"{100 * max(floor, 0.0):.0f} %), so none was screened or refitted")
         ranking = rank_extensions(base, {}, min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
-        checked = None if max_rms_ratio is None else check_fit({"base": before}, max_rms_ratio)
-        track.at("done")
-        return DiagnoseReport(base=base, before=before, screening={}, refits={}, after={}, ranking=ranking,
-                              n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes, cost=track.cost(),
-                              material=material, fit_check=checked)
+        return _finish(track, t0, base, before, {}, {}, {}, ranking, n_sims, notes, material, max_rms_ratio)
     t1 = time.perf_counter()
     track.at("screening", steps=len(cand))
     scr = screen(problem, base, cand, seed=seed, map=map, **(screen_options or {}))
@@ -1056,14 +1065,7 @@ def diagnose(problem: Problem, *, candidates=None, n_particles: int = 60, seed: 
         ranking = nested(ranking, local, rerank)
     ranking = prefer_parsimonious(ranking, parsimony_se)
     notes.extend(ranking.notes)
-    checked = None
-    if max_rms_ratio is not None:
-        checked = check_fit({"base": before, **{n: after[n] for n in after if not after[n].get("null_consistent")}},
-                            max_rms_ratio)
-    track.at("done")
-    return DiagnoseReport(base=base, before=before, screening=scr, refits=refits, after=after, ranking=ranking,
-                          n_simulations=n_sims, wall_s=time.perf_counter() - t0, notes=notes, cost=track.cost(),
-                          material=material, fit_check=checked)
+    return _finish(track, t0, base, before, scr, refits, after, ranking, n_sims, notes, material, max_rms_ratio)
 
 
 def plot_diagnosis(report: DiagnoseReport, problem: Problem, path, level: float = 0.9):
