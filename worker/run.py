@@ -308,8 +308,10 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
             import dataclasses
             cheap = dataclasses.replace(problem, config=problem.config.replace(mesh=s.screen.mesh, dt=s.screen.dt))
             screen = evaluator_for(spec, cheap)
+        from vfcore.inference.symmetry import scale_group
+        # all six scaled parameters estimated: walk their log-ratios, draw the common scale exactly
         sampler = SMCSampler(problem.prior, s.n_particles, spec.seed, delayed=screen is not None,
-                             **s.sampler_options())
+                             symmetry=scale_group(problem), **s.sampler_options())
         b = 0
         while (th := sampler.ask()) is not None:
             if control.cancelled.is_set():

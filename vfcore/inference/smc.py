@@ -19,6 +19,13 @@ Targets the sequence ``pi_phi(theta) ∝ prior(theta) L(theta)^phi`` with ``0 = 
    ``[min_moves, max_moves]``.
 6. Repeat until ``phi = 1``; the final particles are an equally weighted posterior sample.
 
+With ``coords="log"`` the random walk of step 5 runs in ``log theta`` (its covariance is the particles'
+there), and the Metropolis ratio gains the Jacobian ``sum log theta' - sum log theta`` because a
+uniform prior on ``theta`` has density ``prod theta`` in ``log theta``. With ``symmetry=`` (a
+:class:`.symmetry.ScaleGroup`: a direction along which the log-likelihood is exactly invariant, the
+model's common scale) the walk's covariance is projected off that direction and every move step ends
+with an exact group move along it, which needs no simulation (:mod:`.symmetry`).
+
 With ``reference=q`` (:mod:`.reference`) the run starts from draws of ``q`` instead of the prior
 and tempers ``q^(1 - phi) (p L)^phi`` (generalized stepping-stone path, Fan et al. 2011): the
 reweighting uses ``log p + log L - log q`` in place of ``log L`` and the Metropolis ratio gains
@@ -52,9 +59,12 @@ from .diagnostics import DegenerateEnsembleWarning, ess_finite, systematic_resam
 from .importance import map_evaluate, resolve_target
 from .posterior import Posterior
 from .prior import Prior
-from .problem import Evaluation
+from .problem import Evaluation, Problem
 
-_INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL = 0, 1, 2, 3, 4
+_INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
+
+#: Coordinates of the random walk: the parameters themselves, or their logarithms.
+COORDS = ("linear", "log")
 
 DEFAULT_PARTICLES = 300
 
@@ -89,7 +99,7 @@ class SMCSampler:
                  min_moves: int = 2, max_moves: int = 4,
                  max_generations: int = 200, init_scale: float | None = None, kernel: str = "rw",
                  independent_inflation: float = 1.5, init_factor: int = 1, reference=None,
-                 delayed: bool = False):
+                 delayed: bool = False, coords: str | None = None, symmetry=None):
         if not isinstance(prior, Prior):
             raise ValueError("prior must be a Prior")
         if int(n_particles) < 10:
@@ -114,6 +124,20 @@ class SMCSampler:
         if kernel not in ("rw", "independent", "mixture"):
             raise ValueError(f"kernel must be 'rw', 'independent' or 'mixture', got {kernel!r}")
         self.kernel = kernel
+        coords = coords if coords is not None else ("log" if symmetry is not None else "linear")
+        if coords not in COORDS:
+            raise ValueError(f"coords must be one of {COORDS}, got {coords!r}")
+        if coords == "log" and (kernel != "rw" or reference is not None):
+            raise ValueError("log coordinates are implemented for the random-walk kernel without a reference")
+        if coords == "log" and np.any(prior.lo <= 0.0):
+            raise ValueError("log coordinates need every prior lower bound > 0")
+        if symmetry is not None and coords != "log":
+            raise ValueError("moves along a symmetry need the random walk in log coordinates")
+        if symmetry is not None and symmetry.prior.names != prior.names:
+            raise ValueError("the symmetry's prior estimates other parameters than the sampler's")
+        self.coords = coords
+        self.symmetry = symmetry
+        self._log_jac: np.ndarray | None = None
         self.independent_inflation = float(independent_inflation)
         self.prior = prior
         self.n = int(n_particles)
@@ -124,7 +148,8 @@ class SMCSampler:
         self.min_moves, self.max_moves = int(min_moves), int(max_moves)
         self.max_generations = int(max_generations)
         d = prior.ndim
-        self.scale = float(init_scale) if init_scale is not None else 2.38 / math.sqrt(d)
+        d_walk = d - 1 if symmetry is not None else d   # the walk leaves the symmetry's direction to the group move
+        self.scale = float(init_scale) if init_scale is not None else 2.38 / math.sqrt(max(d_walk, 1))
         self.phi = 0.0
         self.generation = 0
         self.theta: np.ndarray | None = None
@@ -228,6 +253,8 @@ class SMCSampler:
                 log_alpha = log_alpha + (1.0 - self.phi) * (lq[idx.size:] - lq[: idx.size])
             if self._log_q_new is not None:  # independence proposal: Hastings correction
                 log_alpha = log_alpha + self._log_q_old - self._log_q_new
+            if self._log_jac is not None:    # a walk in log theta: the prior density there is p(theta) prod theta
+                log_alpha = log_alpha + self._log_jac
         log_alpha = np.where(np.isnan(log_alpha), np.inf, log_alpha)  # old -inf, new finite
         u = self._rng(_ACCEPT, self._step).random(idx.size)
         acc = np.log(u) < log_alpha
@@ -257,6 +284,8 @@ class SMCSampler:
         idx, props = self._pending_idx, self._pending
         with np.errstate(invalid="ignore"):
             log_a1 = np.where(np.isfinite(ll_cheap), self.phi * (ll_cheap - self.ll_cheap[idx]), -np.inf)
+            if self._log_jac is not None:    # the prior's part of the ratio belongs to the first stage
+                log_a1 = log_a1 + self._log_jac
         log_a1 = np.where(np.isnan(log_a1), np.inf, log_a1)       # current cheap -inf, proposal finite
         u = self._rng(_ACCEPT, 2 * self._step + 1).random(idx.size)
         keep = np.log(u) < log_a1
@@ -264,6 +293,8 @@ class SMCSampler:
         self._screen_idx = idx[keep]
         self._screen_props = props[keep]
         self._screen_cheap = ll_cheap[keep]
+        if self._log_jac is not None:
+            self._log_jac = self._log_jac[keep]
         if not np.any(keep):
             self._pending = self._pending_idx = None
             self.stage = "screen"
@@ -312,11 +343,16 @@ class SMCSampler:
         self.log_evidence_var += max(m / (m - 1) * (sw2 - 1.0 / m), 0.0)
         self.last_ess = 1.0 / sw2
         self.generation += 1
-        # covariance of the reweighted particles -> RW proposal
-        mu = w @ self.theta
-        dev = self.theta - mu
+        # covariance of the reweighted particles (in the walk's coordinates) -> RW proposal
+        x = self._walk_coords(self.theta)
+        mu = w @ x
+        dev = x - mu
         cov = (dev * w[:, None]).T @ dev
-        cov += np.diag((1e-9 * self.prior.width) ** 2)
+        if self.symmetry is not None:   # project out the orbit direction: the group move samples along it
+            proj = np.eye(self.prior.ndim) - np.outer(self.symmetry.direction, self.symmetry.direction)
+            cov = proj @ cov @ proj
+        span = np.log(self.prior.hi / self.prior.lo) if self.coords == "log" else self.prior.width
+        cov += np.diag((1e-9 * span) ** 2)
         try:
             self._chol = np.linalg.cholesky(cov)
         except np.linalg.LinAlgError:
@@ -346,6 +382,9 @@ class SMCSampler:
             r = ll + self.prior.logpdf(self.theta) - self.reference.logpdf(self.theta)
         return np.where(np.isfinite(ll), r, -np.inf)
 
+    def _walk_coords(self, theta: np.ndarray) -> np.ndarray:
+        return np.log(theta) if self.coords == "log" else theta
+
     def _independent_step(self) -> bool:
         return self.kernel == "independent" or (self.kernel == "mixture" and self._step % 2 == 1)
 
@@ -360,11 +399,16 @@ class SMCSampler:
         z = rng.standard_normal((self.n, self.prior.ndim))
         if self._independent_step():
             prop = self._mu + self.independent_inflation * z @ self._chol.T
+        elif self.coords == "log":
+            prop = np.exp(np.log(self.theta) + self.scale * z @ self._chol.T)
         else:
             prop = self.theta + self.scale * z @ self._chol.T
         inside = self.prior.contains(prop)
         self._pending_idx = np.flatnonzero(inside)
         self._pending = prop[inside]
+        self._log_jac = None
+        if self.coords == "log":
+            self._log_jac = np.sum(np.log(self._pending) - np.log(self.theta[self._pending_idx]), axis=1)
         if self._independent_step():
             self._log_q_old = self._log_q(self.theta[self._pending_idx])
             self._log_q_new = self._log_q(self._pending)
@@ -374,7 +418,32 @@ class SMCSampler:
     def _independent_step_done(self) -> bool:
         return self.kernel == "independent" or (self.kernel == "mixture" and (self._step - 1) % 2 == 1)
 
+    def _group_move(self) -> None:
+        """Move every particle along the symmetry's orbit by an exact draw (vfcore.inference.symmetry);
+        no simulation: the waveforms stay, the products scale."""
+        from .symmetry import rescale_products
+        fin = np.isfinite(self.ev.loglik)
+        th, t, d = self.symmetry.move(self.theta, self.phi, self._rng(_GROUP, self._step))
+        t = np.where(fin, t, 0.0)
+        d = np.where(fin, d, 0.0)
+        self.theta = np.where(fin[:, None], th, self.theta)
+        self.ev = rescale_products(self.ev, t, d)
+        if self.delayed:
+            self.ll_cheap = np.where(np.isfinite(self.ll_cheap), self.ll_cheap + d, self.ll_cheap)
+
+    def _n_distinct(self) -> int:
+        """Distinct particles, counted along what the walk explores (group moves make every particle's
+        position along the orbit distinct without telling the data anything)."""
+        if self.symmetry is None:
+            return int(np.unique(self.theta, axis=0).shape[0])
+        v = self.symmetry.direction
+        x = np.log(self.theta)
+        x = x - np.outer(x @ v, v)
+        return int(np.unique(np.round(x, 10), axis=0).shape[0])
+
     def _finish_move(self, accepted: np.ndarray) -> None:
+        if self.symmetry is not None:
+            self._group_move()
         a = float(np.mean(accepted))
         self._gen_acc.append(a)
         self._step += 1
@@ -390,7 +459,7 @@ class SMCSampler:
             h = self.history[-1]
             h.update({"moves": self._step, "acceptance": float(np.mean(self._gen_acc)), "scale": self.scale,
                       "n_simulations": self._gen_sims,
-                      "n_unique_after_moves": int(np.unique(self.theta, axis=0).shape[0])})
+                      "n_unique_after_moves": self._n_distinct()})
             self._advance()
 
     # ------------------------------------------------------------------ result
@@ -429,20 +498,28 @@ class SMCSampler:
 
 
 def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *, map: Callable = map,
-        chunk_size: int = 32, screen=None, **options) -> Posterior:
+        chunk_size: int = 32, screen=None, symmetry: str | None = "auto", **options) -> Posterior:
     """Run likelihood-tempered SMC to completion.
 
     ``target``: a ``Problem`` or a callable ``thetas (k, d) -> loglik (k,)`` (then ``prior`` is
     required). ``screen``: a cheaper target of the same kind (e.g. the Problem on a coarser mesh or
     step) for delayed-acceptance moves (``SMCSampler(delayed=True)``); the posterior remains the
-    full target's. Options go to ``SMCSampler``. Returns a Posterior with ``n_simulations`` counted
+    full target's. ``symmetry="auto"``: when ``target`` is a Problem that estimates all six parameters of the
+    common scale, the walk runs in their log-ratios and the scale is drawn exactly by group moves
+    (:mod:`.symmetry`); None turns that off. Options go to ``SMCSampler``. Returns a Posterior with ``n_simulations`` counted
     (full-model simulations; ``info["n_screened"]`` counts the cheap ones) and ``log_evidence`` (its
     ``log_evidence_se`` is the delta-method error summed over generations, ignoring the particle
     dependence: a rough lower bound).
     """
     prior, obs, fps, fn = resolve_target(target, prior)
     cheap = resolve_target(screen, prior)[3] if screen is not None else None
-    sampler = SMCSampler(prior, n_particles, seed, delayed=cheap is not None, **options)
+    if symmetry not in ("auto", None):
+        raise ValueError(f"symmetry must be 'auto' or None, got {symmetry!r}")
+    group = None
+    if symmetry == "auto" and isinstance(target, Problem) and prior.names == target.prior.names:
+        from .symmetry import scale_group
+        group = scale_group(target)
+    sampler = SMCSampler(prior, n_particles, seed, delayed=cheap is not None, symmetry=group, **options)
     while (th := sampler.ask()) is not None:
         f = cheap if sampler.stage == "screen" else fn
         sampler.tell(map_evaluate(f, th, map=map, chunk_size=chunk_size))
