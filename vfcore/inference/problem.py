@@ -18,6 +18,11 @@ measurements of model parameters (paper units), each adding
 ``log N(mean | theta_name, sd^2) = -(theta_name - mean)^2 / (2 sd^2) - log(sd sqrt(2 pi))`` to the GAW
 log-likelihood of a draw. A GAW cannot fix the common scale of E_body, E_cover, E_lig, p_sub, rho and
 eta (docs/inference.md, "The common scale"); a measured p_sub (or density) can.
+
+``Problem(area_scale=(k_lo, k_hi))`` (not in the paper): the recording's areas are ``k`` times the true areas
+with ``k`` unknown (an uncalibrated video; ``k = (true px/mm / assumed px/mm)^2``), uniform on ``[k_lo, k_hi]``
+and integrated out per draw in closed form (:mod:`vfcore.inference.likelihood`; docs/inference.md, "Unknown
+area scale"). It costs no extra simulation. ``None`` (default): the areas are calibrated.
 """
 from __future__ import annotations
 
@@ -31,6 +36,8 @@ from ..config import SimConfig
 from ..measures import estimate_f0
 from ..observe import ALIGNMENTS, LAG_SEARCHES, align, alignment_window
 from ..params import PARAM_NAMES, PARAM_UNITS, Params
+from .likelihood import (gaussian_loglik, marginal_gaussian_loglik,  # noqa: F401 (re-exported)
+                         sample_area_scale, scaled_gaussian_loglik, scaled_marginal_gaussian_loglik)
 from .prior import Prior
 
 
@@ -148,6 +155,8 @@ class Problem:
     ``measurements``: ``{name: (mean, sd)}`` in paper units, independent Gaussian measurements of
     estimated parameters whose log density is added to each draw's GAW log-likelihood (they anchor
     the common scale a GAW cannot determine; docs/inference.md).
+    ``area_scale``: ``(k_lo, k_hi)``, the bounds of the uniform prior of an unknown factor ``k`` between the
+    recorded and the true area (uncalibrated px/mm), integrated out; ``None``: calibrated areas (``k = 1``).
     """
 
     obs_gaw: np.ndarray
@@ -161,6 +170,7 @@ class Problem:
     sigma_bounds: tuple = (0.01, 100.0)
     lag_search: str = "window"
     measurements: dict = field(default_factory=dict)
+    area_scale: tuple | None = None
 
     def __post_init__(self) -> None:
         y = validate_observation(self.obs_gaw, self.fps)
@@ -194,6 +204,7 @@ class Problem:
         if self.model != "fe":
             raise ValueError(f"unknown model {self.model!r}; only 'fe' is available")
         object.__setattr__(self, "measurements", validate_measurements(self.measurements, self.prior))
+        object.__setattr__(self, "area_scale", validate_area_scale(self.area_scale))
         # fails (ValueError) here, before any simulation, if the simulation is too short
         object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config),
                                                              self.lag_search))
@@ -217,7 +228,8 @@ class Problem:
                 "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model,
                 "alignment": self.alignment, "noise": self.noise, "sigma_bounds": list(self.sigma_bounds),
                 "lag_search": self.lag_search,
-                "measurements": {n: [m, sd] for n, (m, sd) in self.measurements.items()}}
+                "measurements": {n: [m, sd] for n, (m, sd) in self.measurements.items()},
+                "area_scale": None if self.area_scale is None else list(self.area_scale)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Problem":
@@ -231,7 +243,8 @@ class Problem:
                    alignment=d.get("alignment", "profile"), noise=d.get("noise", "fixed"),
                    sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))),
                    lag_search=d.get("lag_search", "window"),
-                   measurements=d.get("measurements") or {})
+                   measurements=d.get("measurements") or {},
+                   area_scale=d.get("area_scale"))
 
     def measurement_loglik(self, params) -> float:
         """The measurements' log density at ``params`` (a ``Params``, ``{name: value}`` or a full
@@ -243,8 +256,15 @@ class Problem:
         noise model, Eq. 15 (``fixed``) or :func:`marginal_gaussian_loglik` (``marginal``), plus the
         measurements' term at ``params`` (the draw's full parameters) when ``params`` is given.
         Without ``params`` it is the GAW's term alone, which only differences between waveforms of
-        one draw may use: a draw's score must include the measurements."""
-        if self.noise == "marginal":
+        one draw may use: a draw's score must include the measurements. With ``area_scale`` the
+        unknown scale of the recorded areas is integrated out (:func:`scaled_gaussian_loglik`,
+        :func:`scaled_marginal_gaussian_loglik`); ``seg`` is then the unscaled simulated area."""
+        if self.area_scale is not None:
+            if self.noise == "marginal":
+                ll = scaled_marginal_gaussian_loglik(seg, self.obs_compared, *self.sigma_bounds, *self.area_scale)
+            else:
+                ll = scaled_gaussian_loglik(seg, self.obs_compared, self.sigma_e, *self.area_scale)
+        elif self.noise == "marginal":
             ll = marginal_gaussian_loglik(seg, self.obs_compared, *self.sigma_bounds)
         else:
             ll = gaussian_loglik(seg, self.obs_compared, self.sigma_e)
@@ -252,81 +272,48 @@ class Problem:
             ll += self.measurement_loglik(params)
         return ll
 
+    def sample_area_scale(self, seg, rng: np.random.Generator) -> float:
+        """One draw of the area scale from its conditional posterior given one draw's aligned segment
+        ``seg`` (:func:`vfcore.inference.likelihood.sample_area_scale`); ValueError without ``area_scale``."""
+        if self.area_scale is None:
+            raise ValueError("this problem has no area scale (its areas are calibrated)")
+        if self.noise == "marginal":
+            return sample_area_scale(seg, self.obs_compared, rng, self.area_scale, sigma_bounds=self.sigma_bounds)
+        return sample_area_scale(seg, self.obs_compared, rng, self.area_scale, sigma=self.sigma_e)
 
-# ---------------------------------------------------------------------------- likelihood
-def _residual(sim, obs) -> np.ndarray | None:
-    """``sim - obs`` as float64 (ValueError if their shapes differ); None if it is not finite."""
-    sim = np.asarray(sim, dtype=float)
-    obs = np.asarray(obs, dtype=float)
-    if sim.shape != obs.shape:
-        raise ValueError(f"simulated and observed GAW differ in shape: {sim.shape} vs {obs.shape}")
-    r = sim - obs
-    return r if np.all(np.isfinite(r)) else None
-
-
-def gaussian_loglik(sim, obs, sigma: float) -> float:
-    """Eq. 15 in log space: sum of independent N(obs_k | sim_k, sigma^2) log densities."""
-    r = _residual(sim, obs)
-    if r is None:
-        return -math.inf
-    r = r / sigma
-    return float(-0.5 * np.dot(r, r) - r.size * (math.log(sigma) + 0.5 * math.log(2 * math.pi)))
-
-
-def marginal_gaussian_loglik(sim, obs, sigma_lo: float, sigma_hi: float) -> float:
-    """Eq. 15 with the noise sd integrated out under a log-uniform prior on ``[sigma_lo, sigma_hi]``:
-
-        L = ∫ prod_k N(obs_k | sim_k, s^2) p(s) ds,   p(s) = 1 / (s log(sigma_hi / sigma_lo)),
-
-    which with ``R = sum (obs - sim)^2`` and ``a = n / 2`` is exactly
-
-        log L = -a log(pi R) + log Gamma(a) - log 2 - log log(sigma_hi / sigma_lo)
-                + log[P(a, R / (2 sigma_lo^2)) - P(a, R / (2 sigma_hi^2))],
-
-    ``P`` the regularised lower incomplete gamma function (substitute ``u = R / (2 s^2)``; the
-    scale-invariant prior of Jeffreys, truncated so that the evidence is proper; Bretthorst 1988,
-    "Bayesian Spectrum Analysis and Parameter Estimation", ch. 2; Sivia & Skilling 2006, "Data
-    Analysis", section 3.3). The last term is 0 to double precision unless ``sqrt(R / n)`` lies near
-    or beyond a bound. The noise sd given a draw is then inverse-gamma: ``s^2 | R ~ IG(a, R / 2)``."""
-    from scipy.special import gammainc, gammaincc, gammaln
-    r = _residual(sim, obs)
-    if r is None:
-        return -math.inf
-    n = r.size
-    if n == 0:
-        return 0.0
-    R, a = float(np.dot(r, r)), 0.5 * n
-    log_norm = math.log(math.log(sigma_hi / sigma_lo))
-    if R == 0.0:                     # the integral of s^(-n-1) alone
-        return float(-a * math.log(2 * math.pi) - math.log(n) - n * math.log(sigma_lo)
-                     + math.log1p(-(sigma_lo / sigma_hi) ** n) - log_norm)
-    x_hi, x_lo = R / (2.0 * sigma_lo ** 2), R / (2.0 * sigma_hi ** 2)
-    if x_hi < a:
-        # the fit is closer than sigma_lo: P(a, x) underflows, take its series in logs; the
-        # -a log(pi R) of the general form cancels against P's x^a, leaving -a log(2 pi sigma_lo^2)
-        lp_hi = _log_p_lower_series(a, x_hi) - a * math.log(x_hi)
-        lp_lo = _log_p_lower_series(a, x_lo) - a * math.log(x_lo)
-        ratio = math.exp(lp_lo - lp_hi + a * math.log(x_lo / x_hi))
-        return float(-a * math.log(2 * math.pi * sigma_lo ** 2) + gammaln(a) - math.log(2.0) - log_norm
-                     + lp_hi + math.log1p(-ratio))
-    # P(a, x_hi) - P(a, x_lo), from whichever tail keeps its digits
-    mass = gammaincc(a, x_lo) - gammaincc(a, x_hi) if x_lo >= a else gammainc(a, x_hi) - gammainc(a, x_lo)
-    if not mass > 0.0:
-        return -math.inf
-    return float(-a * math.log(math.pi * R) + gammaln(a) - math.log(2.0) - log_norm + math.log(mass))
+    def align(self, sim, sim_hr=None, oversample=None) -> np.ndarray:
+        """The segment of a simulated GAW ``sim`` (camera rate; ``sim_hr`` its oversampled copy) aligned to the
+        observation over :attr:`window` by :attr:`alignment`, (n_compare,). With ``area_scale`` and the
+        ``"profile"`` alignment the lag is chosen a second time against the observation divided by the first
+        lag's best scale ``k_hat`` (clipped to the prior's box), so that it minimises ``|k_hat sim - obs|``,
+        the residual the likelihood scores, rather than ``|sim - obs|``."""
+        kw = {} if sim_hr is None else {"sim_hr": sim_hr, "oversample": oversample}
+        seg, _, _ = align(sim, self.obs_gaw, self.fps, self.window, method=self.alignment, **kw)
+        if self.area_scale is None or self.alignment != "profile":
+            return seg
+        obs = self.obs_compared
+        ss = float(np.dot(seg, seg))
+        k = float(np.dot(obs, seg)) / ss if ss > 0 else 0.0
+        if not (math.isfinite(k) and k > 0):
+            return seg
+        k = min(max(k, self.area_scale[0]), self.area_scale[1])
+        seg, _, _ = align(sim, self.obs_gaw / k, self.fps, self.window, method=self.alignment, **kw)
+        return seg
 
 
-def _log_p_lower_series(a: float, x: float) -> float:
-    """``log P(a, x)`` for ``0 < x < a`` from ``P = x^a e^-x / Gamma(a+1) sum_k x^k / ((a+1)..(a+k))``
-    (Abramowitz & Stegun 6.5.29), which converges geometrically there."""
-    from scipy.special import gammaln
-    term = total = 1.0
-    k = 0
-    while term > 1e-17 * total and k < 100000:
-        k += 1
-        term *= x / (a + k)
-        total += term
-    return a * math.log(x) - x - float(gammaln(a + 1.0)) + math.log(total)
+def validate_area_scale(area_scale) -> tuple[float, float] | None:
+    """``(k_lo, k_hi)`` as floats with ``0 < k_lo < k_hi`` finite, or None; ValueError (one line) otherwise."""
+    if area_scale is None:
+        return None
+    try:
+        if isinstance(area_scale, (str, bytes)) or len(area_scale) != 2:
+            raise TypeError
+        lo, hi = (float(v) for v in area_scale)
+    except (TypeError, ValueError):
+        raise ValueError(f"area_scale must be two numbers (k_lo, k_hi) or None, got {area_scale!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
+        raise ValueError(f"area_scale must satisfy 0 < k_lo < k_hi (finite), got {area_scale!r}")
+    return lo, hi
 
 
 # ---------------------------------------------------------------------------- evaluation
@@ -506,11 +493,8 @@ def aligned_loglik(hr: np.ndarray, problem: Problem, params=None) -> tuple[float
     xcorr alignment of ``problem.alignment`` over ``problem.window``. For the many waveforms one
     simulation yields (screening, integrated extension parameters). ``params``: the draw's
     parameters, for the measurements' term (:meth:`Problem.loglik`)."""
-    from vfcore.observe import align
     from vfcore.result import HR_OVERSAMPLE
-    max_lag, n_cmp = problem.window
-    seg, _, _ = align(hr[::HR_OVERSAMPLE], problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
-                      oversample=HR_OVERSAMPLE, method=problem.alignment)
+    seg = problem.align(hr[::HR_OVERSAMPLE], sim_hr=hr, oversample=HR_OVERSAMPLE)
     return problem.loglik(seg, params), seg
 
 
@@ -557,11 +541,7 @@ def score_results(results, problem: Problem, observe: Callable | None = None) ->
                 raise RuntimeError(f"simulation yielded {sim.size} frames, {max_lag + n_cmp} needed to align")
             if not np.all(np.isfinite(sim)):
                 raise RuntimeError("simulated GAW is not finite")
-            if has_hr:
-                seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), sim_hr=hr,
-                                  oversample=HR_OVERSAMPLE, method=problem.alignment)
-            else:
-                seg, _, _ = align(sim, problem.obs_gaw, problem.fps, (max_lag, n_cmp), method=problem.alignment)
+            seg = problem.align(sim, sim_hr=hr, oversample=HR_OVERSAMPLE) if has_hr else problem.align(sim)
             ll = problem.loglik(seg, r.params)
         except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble; counted
             messages.append(f"{i}: {type(exc).__name__}: {exc}")

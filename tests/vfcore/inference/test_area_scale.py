@@ -1,0 +1,124 @@
+"""Unknown area scale (uncalibrated px/mm): k integrated out of the likelihood in closed form
+(vfcore.inference.likelihood; docs/inference.md, "Unknown area scale")."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from vfcore.inference import Prior
+from vfcore.inference.likelihood import (gaussian_loglik, marginal_gaussian_loglik, sample_area_scale,
+                                         scaled_gaussian_loglik, scaled_marginal_gaussian_loglik)
+from vfcore.inference.problem import Problem, validate_area_scale
+
+FPS = 4000.0
+
+
+def _pair(n=240, k=1.7, sd=0.5, seed=0):
+    """A half-rectified 150 Hz pulse train (mm^2) and a recording of it at area scale ``k`` plus noise."""
+    t = np.arange(n) / FPS
+    seg = 5.0 * np.maximum(np.sin(2 * math.pi * 150.0 * t + 0.3), 0.0)
+    return seg, k * seg + sd * np.random.default_rng(seed).standard_normal(n)
+
+
+def _by_quadrature(single, seg, obs, k_lo, k_hi, ref):
+    """log of the integral over k of exp(single(k seg)) / (k_hi - k_lo), scaled by exp(-ref)."""
+    k_hat = float(obs @ seg / (seg @ seg))
+    pts = [min(max(k_hat, k_lo), k_hi)]
+    pts = pts if k_lo < pts[0] < k_hi else None
+    v, _ = quad(lambda k: math.exp(single(k * seg) - ref), k_lo, k_hi, points=pts, epsabs=0.0, epsrel=1e-13,
+                limit=400)
+    return ref + math.log(v) - math.log(k_hi - k_lo)
+
+
+CASES = [  # (k_lo, k_hi, noise sd, sigma bounds of the marginal noise)
+    (0.25, 4.0, 0.5, (0.01, 100.0)),      # k_hat deep inside: the closed form alone
+    (1.0, 1.69, 0.5, (0.01, 100.0)),      # the truth just beyond k_hi: the box cuts k's conditional
+    (1.7, 3.0, 1.5, (0.01, 100.0)),       # k_hat at k_lo
+    (0.2, 0.5, 0.5, (0.01, 100.0)),       # k_hat far outside the box
+    (1.0, 2.0, 0.5, (0.45, 0.6)),         # a narrow noise prior: both truncations at once
+    (1.65, 1.75, 2.0, (0.01, 100.0)),     # a box narrower than k's spread
+]
+
+
+@pytest.mark.parametrize("k_lo, k_hi, sd, sb", CASES)
+def test_fixed_noise_marginal_equals_quadrature_over_k(k_lo, k_hi, sd, sb):
+    seg, obs = _pair(sd=sd)
+    a = scaled_gaussian_loglik(seg, obs, sd, k_lo, k_hi)
+    b = _by_quadrature(lambda s: gaussian_loglik(s, obs, sd), seg, obs, k_lo, k_hi, a)
+    assert abs(a - b) <= 1e-8 * max(1.0, abs(b)) and abs(a - b) < 1e-8 * 100
+
+
+@pytest.mark.parametrize("k_lo, k_hi, sd, sb", CASES)
+def test_unknown_noise_marginal_equals_quadrature_over_k(k_lo, k_hi, sd, sb):
+    seg, obs = _pair(sd=sd)
+    a = scaled_marginal_gaussian_loglik(seg, obs, *sb, k_lo, k_hi)
+    b = _by_quadrature(lambda s: marginal_gaussian_loglik(s, obs, *sb), seg, obs, k_lo, k_hi, a)
+    assert abs(a - b) <= 1e-8           # |log L_a - log L_q| <= 1e-8: the likelihoods agree to 1e-8 relative
+
+
+def test_a_narrow_box_gives_the_likelihood_at_that_scale():
+    seg, obs = _pair()
+    k0, h = 1.6, 1e-7
+    narrow = scaled_gaussian_loglik(seg, obs, 0.5, k0 - h, k0 + h)
+    assert narrow == pytest.approx(gaussian_loglik(k0 * seg, obs, 0.5), abs=1e-6)
+
+
+def _problem(**kw):
+    seg, obs = _pair(n=600)
+    prior = Prior(bounds={"p_sub": (700.0, 1300.0)},
+                  fixed={"E_body": 12.15, "E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4})
+    return Problem(obs, FPS, prior, sigma_e=0.5, **kw)
+
+
+@pytest.mark.parametrize("noise", ["fixed", "marginal"])
+def test_calibrated_problems_score_exactly_as_eq15(noise):
+    """area_scale=None leaves the likelihood bit for bit what it is without the option."""
+    pb = _problem(noise=noise)
+    assert pb.area_scale is None
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        seg = pb.obs_compared + rng.normal(size=pb.n_compare)
+        want = (marginal_gaussian_loglik(seg, pb.obs_compared, *pb.sigma_bounds) if noise == "marginal"
+                else gaussian_loglik(seg, pb.obs_compared, pb.sigma_e))
+        assert pb.loglik(seg) == want
+        r = (seg - pb.obs_compared) / pb.sigma_e
+        if noise == "fixed":            # Eq. 15 written out
+            assert want == float(-0.5 * np.dot(r, r) - r.size * (math.log(pb.sigma_e) + 0.5 * math.log(2 * math.pi)))
+
+
+@pytest.mark.parametrize("noise", ["fixed", "marginal"])
+def test_the_area_scale_round_trips_and_is_used(noise):
+    pb = _problem(noise=noise, area_scale=(0.25, 4.0))
+    back = Problem.from_dict(pb.to_dict())
+    assert back.area_scale == (0.25, 4.0) and Problem.from_dict(_problem().to_dict()).area_scale is None
+    seg = pb.obs_compared / 1.7
+    assert pb.loglik(seg) > _problem(noise=noise).loglik(seg) + 100.0
+
+
+@pytest.mark.parametrize("bad", [(1.0,), (0.0, 2.0), (2.0, 1.0), (1.0, math.inf), ("a", 2), "0.5:2"])
+def test_bad_area_scales_are_one_line_errors(bad):
+    with pytest.raises(ValueError, match="area_scale"):
+        validate_area_scale(bad)
+
+
+@pytest.mark.parametrize("noise", ["fixed", "marginal"])
+def test_the_conditional_draws_of_k_match_its_posterior(noise):
+    """Draws of k given a segment against the posterior density by quadrature: mean and sd."""
+    seg, obs = _pair(sd=1.0)
+    box, sb = (1.6, 1.75), (0.01, 100.0)
+    rng = np.random.default_rng(5)
+    kw = {"sigma": 1.0} if noise == "fixed" else {"sigma_bounds": sb}
+    ks = np.array([sample_area_scale(seg, obs, rng, box, **kw) for _ in range(4000)])
+    one = (lambda s: gaussian_loglik(s, obs, 1.0)) if noise == "fixed" else \
+        (lambda s: marginal_gaussian_loglik(s, obs, *sb))
+    ref = one(1.7 * seg)
+    z = quad(lambda k: math.exp(one(k * seg) - ref), *box, epsrel=1e-10)[0]
+    m1 = quad(lambda k: k * math.exp(one(k * seg) - ref), *box, epsrel=1e-10)[0] / z
+    m2 = quad(lambda k: k * k * math.exp(one(k * seg) - ref), *box, epsrel=1e-10)[0] / z
+    sd = math.sqrt(m2 - m1 * m1)
+    assert np.all((ks >= box[0]) & (ks <= box[1]))
+    assert abs(ks.mean() - m1) < 4 * sd / math.sqrt(ks.size)
+    assert ks.std() == pytest.approx(sd, rel=0.06)
