@@ -132,6 +132,11 @@ class JobSpec(_Strict):
         default_factory=dict, description="{name: [mean, sd]} in paper units: independent Gaussian measurements of "
                                           "estimated parameters (e.g. a measured p_sub), added to the likelihood; "
                                           "they anchor the common scale a GAW cannot determine (docs/inference.md)")
+    area_scale: tuple[FiniteFloat, FiniteFloat] | None = Field(
+        default=None, description="[k_lo, k_hi]: the recorded areas are k times the true areas with k unknown (a video "
+                                  "without spatial calibration; k = (true px/mm / assumed px/mm)^2), uniform on "
+                                  "[k_lo, k_hi] and integrated out of the likelihood; null: calibrated areas "
+                                  "(docs/inference.md, 'Unknown area scale')")
     seed: int = Field(ge=0, lt=2**63)
     chunk_size: int | None = Field(default=None, ge=1, le=10_000,
                                    description="simulations per worker task (default: sized to run for seconds)")
@@ -148,6 +153,12 @@ class JobSpec(_Strict):
         if not 0 < lo < hi:
             raise ValueError(f"sigma_bounds must satisfy 0 < lo < hi, got [{lo}, {hi}]")
         return v
+
+    @field_validator("area_scale")
+    @classmethod
+    def _check_area_scale(cls, v):
+        from vfcore.inference.problem import validate_area_scale
+        return validate_area_scale(v)
 
     @field_validator("priors")
     @classmethod
@@ -245,7 +256,8 @@ class JobSpec(_Strict):
         return Problem(obs_gaw=self.observed(), fps=float(self.gaw.fps), prior=prior,
                        sigma_e=float(self.sigma_e), config=self.sim_config(), noise=self.noise,
                        sigma_bounds=tuple(float(b) for b in self.sigma_bounds),
-                       measurements={k: (float(m), float(sd)) for k, (m, sd) in self.measurements.items()})
+                       measurements={k: (float(m), float(sd)) for k, (m, sd) in self.measurements.items()},
+                       area_scale=self.area_scale)
 
     def to_problem(self):
         """The ``vfcore.inference.Problem`` this job solves (the toy test double scores against it too)."""
@@ -260,4 +272,5 @@ class JobSpec(_Strict):
         if self.model != "fe":
             return ReachVerdict("unchecked", f"the model's reach is not checked for model {self.model!r}",
                                 exact=False)
-        return reach_for(self.observed(), float(self.gaw.fps), self.sim_config(), self.to_prior())
+        return reach_for(self.observed(), float(self.gaw.fps), self.sim_config(), self.to_prior(),
+                         area_scale=self.area_scale)

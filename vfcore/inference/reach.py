@@ -21,7 +21,11 @@ Definitions (docs/inference.md, "The model's reach"):
   phonating draws reach it), *outside* beyond every draw;
 * the verdict is *outside* when f0 or the peak area is outside (no draw reaches the recording's frequency
   or size, so a fit can only pile on the prior's bounds); a quotient outside, or no draw near the
-  recording in f0 and peak area together (``NEAR_F0`` and ``NEAR_AREA``), makes it at most *marginal*.
+  recording in f0 and peak area together (``NEAR_F0`` and ``NEAR_AREA``), makes it at most *marginal*;
+* with an unknown area scale ``k`` on ``[k_lo, k_hi]`` (an uncalibrated video, ``area_scale``) the recording's
+  peak area ``A`` stands for a true peak area anywhere in ``[A / k_hi, A / k_lo]``; the area's verdict is then
+  that of the interval's nearest point (it is outside only when the whole interval is), and "near" in area
+  means near some point of it. The other measures do not depend on the scale.
 
 Ensembles are keyed by :func:`reach_key`, a hash of the configuration's physics and numerics (everything in
 ``SimConfig`` but the camera rate and trajectory output) and of the prior (bounds and fixed values). They are
@@ -458,7 +462,8 @@ def _hints(outs: dict[str, str], prior: Mapping | None) -> list[str]:
                      "rate (--fps)")
     area = outs.get("max_area_mm2")
     if area in ("high", "low"):
-        hints.append("check the area calibration (px/mm of the video: areas scale with its square)"
+        hints.append("check the area calibration (px/mm of the video: areas scale with its square), or fit an "
+                     "unknown one (--uncalibrated, --area-scale LO:HI)"
                      + ("; a larger p_sub or smaller x0 opens the model wider" if area == "high"
                         else "; a smaller p_sub or larger x0 opens it less"))
     if hints:
@@ -467,11 +472,14 @@ def _hints(outs: dict[str, str], prior: Mapping | None) -> list[str]:
     return hints
 
 
-def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exact: bool = True) -> ReachVerdict:
+def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exact: bool = True,
+                area_scale: tuple[float, float] | None = None) -> ReachVerdict:
     """Compare a recording's measures ``rec`` (:func:`recording_measures`) with ``ensemble``.
 
     ``exact`` False: the ensemble is of a wider prior (:func:`find_ensemble`); then only "outside" is a
-    verdict, anything else is "unchecked". ``ensemble`` None: "unchecked"."""
+    verdict, anything else is "unchecked". ``ensemble`` None: "unchecked". ``area_scale`` ``(k_lo, k_hi)``:
+    the recorded areas are ``k`` times the true ones with ``k`` unknown in that box; the peak area is then
+    checked as the interval of true areas it may stand for."""
     if ensemble is None:
         return ReachVerdict("unchecked", "the model's reach was not checked: no reach ensemble matches this "
                                          "configuration and prior", exact=False)
@@ -484,13 +492,15 @@ def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exa
         x = float(rec.get(col, math.nan))
         s = st[col]
         u = f" {unit}" if unit else ""
+        # the true values the recorded one may stand for: one point, or an interval under an unknown area scale
+        x_lo, x_hi = (x / area_scale[1], x / area_scale[0]) if (area_scale and col == "max_area_mm2") else (x, x)
         if not math.isfinite(x):
             v = "unknown"
         elif s["n"] == 0:
             v = "outside"
-        elif x < s["min"] or x > s["max"]:
+        elif x_hi < s["min"] or x_lo > s["max"]:
             v = "outside"
-        elif x < s["q05"] or x > s["q95"]:
+        elif x_hi < s["q05"] or x_lo > s["q95"]:
             v = "marginal"
         else:
             v = "inside"
@@ -503,8 +513,11 @@ def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exa
             bound = s["max"] if x > s["q50"] else s["min"]
             text = (f"recording {label} {_fmt(x, fmt)}{u}; this model and prior reach {_fmt(s['q05'], fmt)}-"
                     f"{_fmt(s['q95'], fmt)}{u} (5-95 %), at {side} {_fmt(bound, fmt)}{u}")
+            if x_lo != x_hi:
+                text = text.replace(f"{u};", f"{u} (a true {_fmt(x_lo, fmt)}-{_fmt(x_hi, fmt)}{u} for an area scale "
+                                             f"in [{area_scale[0]:g}, {area_scale[1]:g}]);", 1)
         if v == "outside":
-            outs[col] = "high" if (s["n"] and x > s["max"]) else "low"
+            outs[col] = "high" if (s["n"] and x_lo > s["max"]) else "low"
             parts_out.append(text)
         elif v == "marginal":
             parts_marg.append(text)
@@ -514,8 +527,9 @@ def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exa
     if math.isfinite(f0) and math.isfinite(area) and area > 0:
         mf, ma = ensemble.measures["f0_hz"], ensemble.measures["max_area_mm2"]
         with np.errstate(invalid="ignore", divide="ignore"):
-            near = (ensemble.phonates & (np.abs(mf - f0) <= NEAR_F0 * f0) & (ma >= area / NEAR_AREA)
-                    & (ma <= area * NEAR_AREA))
+            a_lo, a_hi = (area / area_scale[1], area / area_scale[0]) if area_scale else (area, area)
+            near = (ensemble.phonates & (np.abs(mf - f0) <= NEAR_F0 * f0) & (ma >= a_lo / NEAR_AREA)
+                    & (ma <= a_hi * NEAR_AREA))
         n_near = int(np.count_nonzero(near))
     hard_out = any(c in outs for c in HARD_MEASURES)
     if hard_out:
@@ -548,10 +562,12 @@ def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exa
     return ReachVerdict(verdict, msg, per, n, frac, n_near, exact, ensemble.key, hints)
 
 
-def reach_for(gaw, fps: float, config: SimConfig, prior: Prior) -> ReachVerdict:
-    """Find the ensemble for ``config`` and ``prior`` and check the recording ``gaw`` at ``fps`` against it."""
+def reach_for(gaw, fps: float, config: SimConfig, prior: Prior,
+              area_scale: tuple[float, float] | None = None) -> ReachVerdict:
+    """Find the ensemble for ``config`` and ``prior`` and check the recording ``gaw`` at ``fps`` against it
+    (``area_scale``: an unknown area scale's box, :func:`check_reach`)."""
     ens, exact = find_ensemble(config, prior)
-    v = check_reach(recording_measures(gaw, fps), ens, exact=exact)
+    v = check_reach(recording_measures(gaw, fps), ens, exact=exact, area_scale=area_scale)
     if v.verdict == "unchecked":
         v.message += "; " + build_hint(config, prior)
     return v

@@ -122,3 +122,26 @@ def test_the_conditional_draws_of_k_match_its_posterior(noise):
     assert np.all((ks >= box[0]) & (ks <= box[1]))
     assert abs(ks.mean() - m1) < 4 * sd / math.sqrt(ks.size)
     assert ks.std() == pytest.approx(sd, rel=0.06)
+
+
+# ---------------------------------------------------------------------------- the reach check
+def test_an_uncalibrated_recording_is_not_outside_for_its_area_only_for_its_f0(monkeypatch, tmp_path):
+    """Peak areas 10-50 mm^2 in the ensemble: a recording of 200 mm^2 is outside when calibrated, inside
+    with k in [1, 16] (true 12.5-200 mm^2); an f0 beyond the reach stays outside whatever the scale."""
+    import sys
+    from pathlib import Path
+    monkeypatch.setenv("VFINFER_CACHE_DIR", str(tmp_path / "cache"))
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_reach import rec_at, synthetic     # the hand-made ensemble of the reach tests
+    from vfcore.inference import reach as rc
+    ens = synthetic()
+    big = rec_at(ens, max_area_mm2=200.0)
+    assert rc.check_reach(big, ens).verdict == "outside"
+    v = rc.check_reach(big, ens, area_scale=(1.0, 16.0))
+    assert v.verdict == "inside" and v.measures["max_area_mm2"]["verdict"] == "inside", v.message
+    v = rc.check_reach(big, ens, area_scale=(1.0, 1.2))
+    assert v.verdict == "outside" and "a true 167-200 mm^2 for an area scale in [1, 1.2]" in v.message
+    assert "--uncalibrated" in v.message
+    v = rc.check_reach(rec_at(ens, f0_hz=200.0, max_area_mm2=200.0), ens, area_scale=(1.0, 16.0))
+    assert v.verdict == "outside" and v.measures["max_area_mm2"]["verdict"] == "inside"
+    assert v.measures["f0_hz"]["verdict"] == "outside"
