@@ -18,9 +18,9 @@ import typer
 from rich.console import Console
 
 from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
-from .cli_options import (Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise, Out,
-                          Overwrite, Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Workers, parse_fixed,
-                          parse_priors)
+from .cli_options import (AreaScale, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise,
+                          Out, Overwrite, Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Uncalibrated,
+                          Workers, parse_area_scale, parse_fixed, parse_priors)
 from .cli_spec import build_spec, note_is
 from .cli_tables import print_identifiability, print_table  # noqa: F401  (re-exported for callers)
 
@@ -72,6 +72,19 @@ def reach_gate(spec, force_reach: bool) -> None:
         console.print(f"reach: {v.message}", highlight=False, soft_wrap=True)
     elif spec.model == "fe":                      # the toy test double has no reach to check
         warn(w)
+
+
+def with_area_scale(spec, area_scale: list[float] | None):
+    """``spec`` with the area scale of ``--area-scale`` / ``--uncalibrated`` (validated as a whole again)."""
+    if area_scale is None:
+        return spec
+    from pydantic import ValidationError
+
+    from worker.jobspec import JobSpec
+    try:
+        return JobSpec.model_validate({**spec.model_dump(), "area_scale": area_scale})
+    except ValidationError as exc:
+        raise fail("invalid job: " + "; ".join(e["msg"].removeprefix("Value error, ") for e in exc.errors())) from None
 
 
 def print_expected_cost(spec, workers: int) -> None:
@@ -142,7 +155,8 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
           sigma_e: SigmaE = 1.0, seed: Seed = 0, prior: Prior = None, fix: Fix = None, workers: Workers = 2,
           out: Out = Path("vfinfer_output"), overwrite: Overwrite = False, model: Model = "fe",
           noise: Noise = "fixed", measure: Measure = None, force_reach: ForceReach = False,
-          screen: Screen = None, prior_set: PriorSet = "paper") -> None:
+          screen: Screen = None, prior_set: PriorSet = "paper", area_scale: AreaScale = None,
+          uncalibrated: Uncalibrated = False) -> None:
     """Run an inference on this machine (in-process Dask LocalCluster); write the posterior, samples, figures and
     an HTML report (OUT/index.html); print the posterior table and what the data determined. The recording is
     first checked against the model's reach ('vfinfer reach')."""
@@ -150,6 +164,7 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
                       screen=screen, prior_set=prior_set)
+    spec = with_area_scale(spec, parse_area_scale(area_scale, uncalibrated))
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
     for w in warnings:
@@ -159,6 +174,8 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     with staged_output(out) as stage:
         summary = run_local(spec, stage, workers)
     print_table(summary, title=f"Posterior for {gaw.name}")
+    if summary.get("area_scale"):
+        console.print(summary["area_scale"]["formatted"], highlight=False, soft_wrap=True)
     console.print(f"products written to {out}/; report: {out / 'index.html'}", highlight=False)
 
 

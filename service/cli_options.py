@@ -56,6 +56,14 @@ Screen = Annotated[Optional[str], typer.Option(
     "--screen", metavar="MESH[:DT]", help="--sampler smc: delayed acceptance; each proposal is first scored by the "
                                           "model on MESH with time step DT s (default 1e-4) and only the survivors "
                                           "are simulated with the full model, e.g. coarse:1e-4")]
+#: ``--uncalibrated``: the area scale's default box, a px/mm wrong by up to a factor 2 either way (k = 1/4 .. 4)
+UNCALIBRATED_AREA_SCALE = (0.25, 4.0)
+AreaScale = Annotated[Optional[str], typer.Option(
+    "--area-scale", metavar="LO:HI",
+    help="the recording's px/mm is not known: its areas are k times the true ones, k uniform on [LO, HI] (0 < LO < "
+         "HI), integrated out of the likelihood and reported (k = (true px/mm / assumed px/mm)^2)")]
+Uncalibrated = Annotated[bool, typer.Option(
+    "--uncalibrated", help="as --area-scale 0.25:4: a px/mm wrong by up to a factor 2 either way")]
 Workers = Annotated[int, typer.Option(min=1, help="local worker processes")]
 Out = Annotated[Path, typer.Option("--out", "-o", help="output folder (written whole at the end, or not at all)")]
 Overwrite = Annotated[bool, typer.Option("--overwrite", help="replace an existing output folder of an earlier run")]
@@ -150,3 +158,18 @@ def parse_screen(text: str | None) -> dict | None:
             raise fail(f"--screen {text!r}: the time step must lie in (0, 1e-3] s")
         out["dt"] = x
     return out
+
+
+def parse_area_scale(text: str | None, uncalibrated: bool = False) -> list[float] | None:
+    """``--area-scale LO:HI`` / ``--uncalibrated`` -> the job spec's ``area_scale`` (None: calibrated areas)."""
+    if text is None:
+        return list(UNCALIBRATED_AREA_SCALE) if uncalibrated else None
+    if uncalibrated:
+        raise fail("give --area-scale LO:HI or --uncalibrated (= --area-scale 0.25:4), not both")
+    lo, sep, hi = text.partition(":")
+    if not sep:
+        raise fail(f"--area-scale must look like LO:HI (e.g. 0.25:4), got {text!r}")
+    a, b = _number(lo, "--area-scale LO"), _number(hi, "--area-scale HI")
+    if not 0 < a < b:
+        raise fail(f"--area-scale {text!r}: needs 0 < LO < HI")
+    return [a, b]

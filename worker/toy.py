@@ -15,7 +15,6 @@ import time
 import numpy as np
 
 from vfcore.inference.problem import Evaluation, Problem, n_sim_frames
-from vfcore.observe import align
 from vfcore.params import PARAM_NAMES, TABLE3
 
 
@@ -60,7 +59,7 @@ class ToyEvaluator:
             if self.delay_s:
                 time.sleep(self.delay_s)
             g, flow[i], cmean[i], cmax[i] = toy_gaw(full[i], pb.fps, n)
-            seg, _, _ = align(g, pb.obs_gaw, pb.fps, (max_lag, n_cmp), method=pb.alignment)
+            seg = pb.align(g)
             ll[i] = pb.loglik(seg, full[i])
             ok[i] = True
             gaw[i] = seg
