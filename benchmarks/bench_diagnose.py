@@ -13,8 +13,8 @@ settings (``cases.json`` "model": 0.55 s simulated with 0.25 s discarded, the pa
 ``SimConfig``'s default), 2 base SMC runs of 40 particles (larger evidence kept), every catalogue
 entry refitted with 24 particles, a refit that ended far below the base rescued from the base's
 material mode (every entry, without the between-run error in the trigger), the window-continuation
-search, naming rule with min_rms_gain 0.30. The particle counts are ``vfcore.diagnose.defaults``, which the CLI and the
-service default to as well.
+search, naming rule with min_rms_gain 0.30. The particle counts are ``vfcore.diagnose.DiagnoseOptions``'s,
+the defaults of the library, the CLI and the service alike.
 
 Per case it writes ``<out>/case_XX.json`` (the diagnosis report; existing reports are kept, so an
 interrupted run resumes) and a figure ``case_XX.png``. ``--score`` prints the per-case table,
@@ -75,7 +75,8 @@ def _mapper(pool, workers: int, store: Path | None):
 
 
 def run(a) -> None:
-    from vfcore.diagnose.pipeline import diagnose, plot_diagnosis
+    from vfcore.diagnose.figure import plot_diagnosis
+    from vfcore.diagnose.pipeline import diagnose
     from vfcore.inference.memo import account
     cases_dir, out = Path(a.cases), Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -175,12 +176,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True,
                     help="reports directory; with --score, a kept --score table file is read instead of reports")
     ap.add_argument("--score", action="store_true", help="score existing reports against truth.json")
-    from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, CONTINUATION_ENTRIES, REFIT_PARTICLES
-    ap.add_argument("--particles", type=int, default=BASE_PARTICLES)
+    from vfcore.diagnose.options import DiagnoseOptions
+    d = DiagnoseOptions()
+    ap.add_argument("--particles", type=int, default=d.n_particles)
     ap.add_argument("--base-runs", type=int, default=2, help="independent base SMC runs, largest evidence kept")
     ap.add_argument("--max-refits", type=int, default=0,
                     help="observation-level refits, best screened first (0 = every one; forward-level: all)")
-    ap.add_argument("--refit-particles", type=int, default=REFIT_PARTICLES)
+    ap.add_argument("--refit-particles", type=int, default=d.refit_particles)
     ap.add_argument("--min-rms-gain", type=float, default=0.30)
     ap.add_argument("--duration", type=float, default=None,
                     help="simulated time, s (default: the suite's cases.json model setting, 0.55)")
@@ -199,12 +201,12 @@ def main(argv=None) -> int:
     ap.add_argument("--halving", action="store_true",
                     help="continuation search with successive halving of its starts (off by default; "
                          "docs/diagnose.md section 4)")
-    ap.add_argument("--continuation-entries", type=int, default=CONTINUATION_ENTRIES,
+    ap.add_argument("--continuation-entries", type=int, default=d.continuation_entries,
                     help="refitted entries searched by continuation, largest refit evidence first (0: all; "
-                         "default: vfcore.diagnose.defaults.CONTINUATION_ENTRIES)")
-    ap.add_argument("--continuation", action=argparse.BooleanOptionalAction, default=CONTINUATION,
+                         "default: vfcore.diagnose.DiagnoseOptions().continuation_entries)")
+    ap.add_argument("--continuation", action=argparse.BooleanOptionalAction, default=d.continuation,
                     help="search the base and every entry by window continuation and fit from the optimum too "
-                         "(diagnose(continuation=...); default: vfcore.diagnose.defaults.CONTINUATION)")
+                         "(diagnose(continuation=...); default: vfcore.diagnose.DiagnoseOptions().continuation)")
     ap.add_argument("--shared-mode", action="store_true",
                     help="refit every entry from the leading refit's material mode too (diagnose(shared_mode=True))")
     ap.add_argument("--resume-store", default="",

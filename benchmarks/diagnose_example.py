@@ -30,8 +30,8 @@ FPS = 2000.0
 TRUTH = {"eta": 1.5, "E_lig": 2.6, "E_cover": 520.0}
 LEAK_MM2 = 1.2
 NOISE = 0.3
-SETTINGS = dict(n_particles=16, seed=1, candidates=["leak", "scale", "frame_rate", "sep_ratio"], base_runs=1,
-                continuation=False)
+SETTINGS = dict(n_particles=16, refit_particles=None, seed=1, candidates=["leak", "scale", "frame_rate", "sep_ratio"],
+                base_runs=1, continuation=False, continuation_entries=None)
 
 
 def recording():

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from vfcore.diagnose.defaults import BASE_PARTICLES, CONTINUATION, FREE_MATERIAL, MAX_REFITS, REFIT_PARTICLES
+from vfcore.diagnose.options import BOUNDS, OBSERVATION_ENTRIES, DiagnoseOptions
 from worker.jobspec import JobSpec
 
 __all__ = ["JobSpec", "Figure", "Submitted", "JobStatus", "CompareRequest", "LinkOut", "DiagnoseRequest",
@@ -79,9 +79,14 @@ def check_candidates(names) -> list[str]:
     return names
 
 
-#: The observation-level entries of the catalogue (vfcore.diagnose.extensions): more refits than these
-#: cannot be asked for (tests/service/test_cli_diagnose.py checks the count against the catalogue).
-OBSERVATION_ENTRIES = 6
+#: The library's defaults, the only ones (vfcore.diagnose.options).
+DEFAULTS = DiagnoseOptions()
+
+
+def _bounds(name: str) -> dict:
+    """``ge``/``le`` of a setting from the library's one table of bounds."""
+    lo, hi = BOUNDS[name]
+    return {k: v for k, v in (("ge", lo), ("le", hi)) if v is not None}
 
 
 class DiagnoseRequest(BaseModel):
@@ -94,18 +99,17 @@ class DiagnoseRequest(BaseModel):
     candidates: list[str] | None = Field(
         default=None, min_length=1, max_length=50,
         description="catalogued, implemented extensions to screen (default: all implemented ones)")
-    # vfcore's SMC refuses fewer than 10 particles (vfcore.inference.smc.SMCSampler), and every base fit and
-    # refit is one: a smaller count would fail the diagnosis when it reaches that stage
-    n_particles: int = Field(default=BASE_PARTICLES, ge=10, le=400, description="SMC particles of each base fit")
-    refit_particles: int = Field(default=REFIT_PARTICLES, ge=10, le=400,
+    n_particles: int = Field(default=DEFAULTS.n_particles, **_bounds("n_particles"),
+                             description="SMC particles of each base fit")
+    refit_particles: int = Field(default=DEFAULTS.refit_particles, **_bounds("refit_particles"),
                                  description="SMC particles of each extended fit")
-    max_refits: int | None = Field(default=MAX_REFITS, ge=0, le=OBSERVATION_ENTRIES,
+    max_refits: int | None = Field(default=DEFAULTS.max_refits, **_bounds("max_refits"),
                                    description="most observation-level extensions refitted, best screened "
                                                f"first (default: all {OBSERVATION_ENTRIES})")
-    continuation: bool = Field(default=CONTINUATION,
+    continuation: bool = Field(default=DEFAULTS.continuation,
                                description="also search the base model and every extension by window "
                                            "continuation and fit from the optimum (docs/diagnose.md section 4)")
-    free_material: bool = Field(default=FREE_MATERIAL,
+    free_material: bool = Field(default=DEFAULTS.free_material,
                                 description="free the scaled parameters held at Table 3 (all but the anchor rho) "
                                             "before the catalogue is screened, and report whether they explain the "
                                             "mismatch (docs/diagnose.md, 'Material first')")
@@ -114,12 +118,18 @@ class DiagnoseRequest(BaseModel):
                                               "of fitting the base model again (a job that estimated fewer material "
                                               "parameters is the pinned fit that freeing them is judged against); "
                                               "the command line's --base")
-    seed: int = Field(default=0, ge=0, lt=2**63)
+    seed: int = Field(default=DEFAULTS.seed, **_bounds("seed"))
 
     @field_validator("candidates")
     @classmethod
     def _known(cls, v):
         return None if v is None else check_candidates(v)
+
+    def options(self) -> DiagnoseOptions:
+        """The library's settings of this request (``reuse_posterior`` is the caller's business)."""
+        return DEFAULTS.replace(candidates=self.candidates, n_particles=self.n_particles,
+                                refit_particles=self.refit_particles, max_refits=self.max_refits,
+                                continuation=self.continuation, free_material=self.free_material, seed=self.seed)
 
 
 #: The command-line option of each DiagnoseRequest field (error messages name what the user typed).

@@ -16,8 +16,11 @@ from rich.console import Console
 from rich.table import Table
 
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw, warn
-from vfcore.diagnose.defaults import (BASE_PARTICLES, CONTINUATION, DEFAULT_ESTIMATE, DISCARD_S, DURATION_S,
-                                     FREE_MATERIAL, MAX_REFITS, REFIT_PARTICLES)
+from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
+from vfcore.diagnose.options import DiagnoseOptions
+
+#: the library's settings are the command's defaults (one source for library, CLI and service)
+DEFAULTS = DiagnoseOptions()
 
 console = Console()
 
@@ -224,29 +227,29 @@ def diagnose_cmd(
         sigma_e: Annotated[float, typer.Option(parser=POSITIVE, help="observation noise sd, mm^2")] = 1.0,
         noise: Annotated[str, typer.Option(parser=choice("fixed", "marginal"), metavar="[fixed|marginal]",
                                            help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
-        particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = BASE_PARTICLES,
+        particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = DEFAULTS.n_particles,
         refit_particles: Annotated[int, typer.Option(
-            help="SMC particles of each extended fit (10-400)")] = REFIT_PARTICLES,
+            help="SMC particles of each extended fit (10-400)")] = DEFAULTS.refit_particles,
         max_refits: Annotated[Optional[int], typer.Option(
-            help="most observation-level extensions refitted, best screened first (0-6; default: all)")] = MAX_REFITS,
+            help="most observation-level extensions refitted, best screened first (0-6; default: all)")] = DEFAULTS.max_refits,
         candidates: Annotated[Optional[str], typer.Option(
             help="comma-separated extensions to screen (default: every implemented one)")] = None,
         continuation: Annotated[bool, typer.Option(
             help="also search the base model and every extension by window continuation and fit from the "
-                 "optimum (~2,000 simulations each; docs/diagnose.md section 4)")] = CONTINUATION,
+                 "optimum (~2,000 simulations each; docs/diagnose.md section 4)")] = DEFAULTS.continuation,
         base: Annotated[Optional[Path], typer.Option(
             help="a fitted posterior of this recording (posterior.nc of 'vfinfer infer' or of a job) to use as the "
                  "base fit instead of fitting it again; one with fewer estimated parameters is the pinned fit "
                  "that freeing the material parameters is judged against")] = None,
         free_material: Annotated[bool, typer.Option(
             help="free the scaled parameters held at Table 3 (all but the anchor rho) before the catalogue is "
-                 "screened, and report whether they explain the mismatch")] = FREE_MATERIAL,
+                 "screened, and report whether they explain the mismatch")] = DEFAULTS.free_material,
         workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
         resume: Annotated[bool, typer.Option(
             help="store finished simulations in OUT/.resume while running, so the same command run again "
                  "after an interruption reads them back (same result, bit for bit); deleted once the "
                  "diagnosis is written")] = True,
-        seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = 0) -> None:
+        seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
     from .diagnosis import jsonable, plot, run_diagnose
 

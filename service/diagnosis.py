@@ -59,24 +59,22 @@ def jsonable(obj):
 
 # ------------------------------------------------------------------------------------ the one call of vfcore
 def run_diagnose(problem, request, *, map=map, chunk_size: int | None = None, progress=None, base=None):
-    """``vfcore.diagnose`` on ``problem`` with a :class:`~service.api_models.DiagnoseRequest`'s settings: the
-    only place the service and the CLI call it (``chunk_size`` None: the library's). ``base``: a fitted
-    posterior of the recording to start from (the diagnosis' ``base``)."""
-    from vfcore.diagnose.defaults import CONTINUATION_ENTRIES
-    from vfcore.diagnose.pipeline import diagnose
-    kw = {} if chunk_size is None else {"chunk_size": chunk_size}
-    return diagnose(problem, candidates=request.candidates, n_particles=request.n_particles, seed=request.seed,
-                    map=map, max_refits=request.max_refits, refit_particles=request.refit_particles,
-                    continuation=request.continuation, continuation_entries=CONTINUATION_ENTRIES,
-                    free_material=request.free_material, base=base,
-                    progress=progress, **kw)
+    """``vfcore.diagnose`` on ``problem`` with a :class:`~service.api_models.DiagnoseRequest`'s settings
+    (:meth:`~service.api_models.DiagnoseRequest.options`; the rest the library's defaults): the only place the
+    service and the CLI call it (``chunk_size`` None: the library's). ``base``: a fitted posterior of the
+    recording to start from (the diagnosis' ``base``)."""
+    from vfcore.diagnose import pipeline
+    opts = request.options()
+    if chunk_size is not None:
+        opts = opts.replace(chunk_size=chunk_size)
+    return pipeline.diagnose(problem, options=opts, map=map, base=base, progress=progress)
 
 
 def plot(report, problem, path: Path) -> None:
     """The diagnosis figure (``vfcore.diagnose``'s plot) as a PNG file."""
-    from vfcore.diagnose.pipeline import plot_diagnosis
+    from vfcore.diagnose import pipeline
     with _PLOT_LOCK:
-        plot_diagnosis(report, problem, path)
+        pipeline.plot_diagnosis(report, problem, path)
 
 
 def figure_png(report, problem, folder: Path) -> bytes:

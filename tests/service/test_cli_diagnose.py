@@ -93,30 +93,35 @@ def test_tiny_diagnosis_names_the_leak(tmp_path, leaky_gaw):
     assert d["wall_s"] == rs["this_attempt_wall_s"]
 
 
-def test_cli_service_and_benchmark_default_to_the_benchmarked_settings(monkeypatch):
-    """`vfinfer diagnose`, POST /jobs/{id}/diagnose and the benchmark script take their defaults
-    from vfcore.diagnose.defaults, so the benchmark's rates describe the default use."""
+def test_library_cli_service_and_benchmark_share_one_set_of_defaults(monkeypatch):
+    """`vfinfer diagnose`, POST /jobs/{id}/diagnose, the benchmark script and the library itself take their
+    defaults from vfcore.diagnose.DiagnoseOptions, so the benchmark's rates describe the default use and the
+    library runs the same diagnosis as the command line."""
     import inspect
     from pathlib import Path
 
     from service.cli_diagnose import diagnose_cmd
     from service.api_models import DiagnoseRequest
+    from vfcore.diagnose import DiagnoseOptions
     from vfcore.diagnose import defaults as D
+    o = DiagnoseOptions()
     sig = inspect.signature(diagnose_cmd).parameters
     req = DiagnoseRequest()
     assert (sig["particles"].default, sig["refit_particles"].default, sig["max_refits"].default) == \
-        (D.BASE_PARTICLES, D.REFIT_PARTICLES, D.MAX_REFITS)
+        (o.n_particles, o.refit_particles, o.max_refits)
     assert (sig["duration"].default, sig["discard"].default) == (D.DURATION_S, D.DISCARD_S)
-    assert sig["continuation"].default == req.continuation == D.CONTINUATION
-    assert (req.n_particles, req.refit_particles, req.max_refits) == (D.BASE_PARTICLES, D.REFIT_PARTICLES,
-                                                                       D.MAX_REFITS)
+    assert sig["continuation"].default == req.continuation == o.continuation
+    assert sig["free_material"].default == req.free_material == o.free_material
+    assert (req.n_particles, req.refit_particles, req.max_refits) == (o.n_particles, o.refit_particles, o.max_refits)
+    assert req.options() == o                       # a default request is the library's default diagnosis
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2]))     # undone after the test
     from benchmarks import bench_diagnose
     seen = {}
     monkeypatch.setattr(bench_diagnose, "run", lambda a: seen.update(vars(a)))
     bench_diagnose.main(["--cases", "c", "--out", "o"])
-    assert (seen["particles"], seen["refit_particles"]) == (D.BASE_PARTICLES, D.REFIT_PARTICLES)
-    assert seen["continuation"] == D.CONTINUATION
+    assert (seen["particles"], seen["refit_particles"]) == (o.n_particles, o.refit_particles)
+    assert seen["continuation"] == o.continuation
+    assert seen["continuation_entries"] == o.continuation_entries
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
 
 

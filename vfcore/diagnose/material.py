@@ -20,8 +20,9 @@ from ..inference.identify import SCALED
 from ..inference.prior import PRIOR_SETS, Prior
 from ..inference.problem import Problem
 from ..params import TABLE3
+from .summary import fit_summary
 
-__all__ = ["ANCHOR", "pinned", "freed_problem", "judge", "prior_set_of"]
+__all__ = ["ANCHOR", "pinned", "freed_problem", "judge", "prior_set_of", "material_first", "material_sentence"]
 
 #: The scale anchor when the user gives none: the density, the best known of the six in tissue
 #: (1,000-1,100 kg/m^3 against decades of range in the moduli).
@@ -78,3 +79,56 @@ def judge(pinned_fit: dict, free_fit: dict, *, min_gain: float = 3.0, k_se: floa
         reason = ""
     return {"delta": float(d), "delta_se": float(se), "rms_gain": float(gain), "found": not reason,
             "reason": reason}
+
+
+def material_first(problem: Problem, base, fit, *, rule: dict):
+    """Free the material combinations the problem holds at Table 3 before anything else
+    (:mod:`.material`). ``base``: a posterior of ``problem`` or of the problem with fewer estimated
+    parameters (a pinned fit, e.g. an inference job's posterior), or None. ``fit(problem)`` runs a
+    base fit and returns ``(posterior, tau, factor, n_simulations, notes, runs)`` (``runs``: the
+    ``(log Z, se)`` of every run).
+
+    Returns ``(problem, base, fitted, record)``: the problem and base fit the diagnosis goes on
+    with, the base-fit tuple of that fit (every simulation made here counted in it; ``None`` when
+    nothing was pinned and ``base`` is used as it is), and the report's ``material`` record
+    (``None`` when nothing was pinned). The freed model nests the pinned one, so it is kept
+    whenever its evidence is not lower; the record says whether freeing the parameters *explains*
+    the mismatch by the naming rule (``rule``: ``min_gain``, ``k_se``, ``min_rms_gain``)."""
+    names = problem.prior.names
+    if base is not None and tuple(base.names) != tuple(names):
+        extra = [n for n in names if n not in base.names]
+        if set(base.names) - set(names) or not extra:
+            raise ValueError(f"the base posterior estimates {list(base.names)}; the problem estimates {list(names)}")
+        table = problem.prior.to_params(problem.prior.lo)           # Table 3 or fixed values elsewhere
+        pinned_problem = dataclasses.replace(problem, prior=type(problem.prior)(
+            {n: b for n, b in problem.prior.bounds.items() if n not in extra},
+            {**problem.prior.fixed, **{n: float(getattr(table, n)) for n in extra}}))
+        free_problem, freed = problem, extra
+    else:
+        freed = pinned(problem)
+        if not freed:
+            return problem, base, None, None
+        pinned_problem, free_problem = problem, freed_problem(problem, freed)
+    if base is None:
+        pin = fit(pinned_problem)
+    else:
+        pin = (base, 0.0, 1, 0, [], [(float(base.log_evidence), float(base.log_evidence_se))])
+    free = fit(free_problem)
+    s_pin = fit_summary(pin[0], pinned_problem.obs_compared, pinned_problem.fps)
+    s_free = fit_summary(free[0], free_problem.obs_compared, free_problem.fps)
+    verdict = judge(s_pin, s_free, **rule)
+    keep_free = not s_free["log_evidence"] < s_pin["log_evidence"]
+    table = pinned_problem.prior.to_params(pinned_problem.prior.lo)
+    keys = ("log_evidence", "log_evidence_se", "residual_rms", "params")
+    record = {"freed": list(freed), "held_at": {n: float(getattr(table, n)) for n in freed}, "anchor": ANCHOR,
+              **verdict, "kept": "free" if keep_free else "pinned",
+              "pinned": {k: s_pin[k] for k in keys}, "free": {k: s_free[k] for k in keys}}
+    kept, other, pb = (free, pin, free_problem) if keep_free else (pin, free, pinned_problem)
+    return pb, kept[0], (kept[0], kept[1], kept[2], kept[3] + other[3], kept[4], kept[5]), record
+
+
+def material_sentence(m: dict) -> str:
+    """One sentence of the material record: what was freed and what it gained."""
+    held = ", ".join(f"{n} (held at {v:g})" for n, v in m["held_at"].items())
+    return (f"freeing {held} gives dlogZ = {m['delta']:.2f} +- {m['delta_se']:.2f}, residual RMS "
+            f"{100 * m['rms_gain']:.0f} % lower")

@@ -482,14 +482,14 @@ def test_compare_fits_from_posteriors():
 def test_between_run_error_from_independent_base_runs():
     """Two runs of the same model whose evidences differ by far more than their reported errors
     give the unexplained spread as an additive error; runs that agree within their errors give 0."""
-    from vfcore.diagnose.pipeline import _between_run_sd
-    tau = _between_run_sd([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
+    from vfcore.diagnose.baseline import between_run_sd
+    tau = between_run_sd([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
     assert tau == pytest.approx(math.sqrt(5.3 ** 2 / 2 - (0.36 + 0.25) / 2))
-    assert _between_run_sd([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 0.0
-    assert _between_run_sd([_Post(-446.0, 0.6)]) == 0.0
-    assert _between_run_sd([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 0.0
+    assert between_run_sd([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 0.0
+    assert between_run_sd([_Post(-446.0, 0.6)]) == 0.0
+    assert between_run_sd([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 0.0
     # a concealed case with base runs 1,027 nats apart: a 3,515-nat gain still clears 3 combined errors
-    tau = _between_run_sd([_Post(-5121.0, 0.3), _Post(-4093.7, 0.6)])
+    tau = between_run_sd([_Post(-5121.0, 0.3), _Post(-4093.7, 0.6)])
     se = math.hypot(math.hypot(0.6, tau), math.hypot(1.0, tau))
     assert 3 * se < 3515.4 < 5 * se
 
@@ -502,7 +502,7 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
 
     import sys
 
-    from vfcore.diagnose.pipeline import base_fit
+    from vfcore.diagnose.baseline import base_fit
     smc_mod = sys.modules["vfcore.inference.smc"]       # the package re-exports the function under the same name
     calls = []
 

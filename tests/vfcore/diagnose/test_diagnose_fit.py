@@ -1,4 +1,4 @@
-"""Extended fits (vfcore.diagnose.fit) and the diagnosis pipeline (vfcore.diagnose.pipeline)."""
+"""Extended fits (vfcore.diagnose.fit) and the diagnosis (vfcore.diagnose.pipeline and its stages)."""
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -14,6 +14,9 @@ from vfcore.result import HR_OVERSAMPLE
 
 FPS = 2000.0
 CFG = SimConfig(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
+#: The diagnosis these tests check: no continuation search, refits at the base fit's particles
+#: (cheaper than the defaults, which add both).
+SMC_ONLY = dict(continuation=False, continuation_entries=None, refit_particles=None)
 
 
 @pytest.fixture(scope="module")
@@ -112,12 +115,12 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     clean = np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200])
     noise = 0.4 * rng.standard_normal(200)
     with ProcessPoolExecutor(2) as ex:
-        rep = diagnose(Problem(clean + 1.5 + noise, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2,
+        rep = diagnose(Problem(clean + 1.5 + noise, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2, **SMC_ONLY,
                        map=ex.map, chunk_size=12, candidates=["leak", "scale", "sep_ratio"], max_refits=1)
         # floor_stop off: the control's base fit is at the noise and would stop before the catalogue, and
         # this test checks what screening and refits do on it
         ctl = diagnose(Problem(clean + noise, FPS, prior, config=CFG), free_material=False, floor_stop=False,
-                       n_particles=24, seed=2,
+                       n_particles=24, seed=2, **SMC_ONLY,
                        map=ex.map, chunk_size=12, candidates=["leak", "scale", "sep_ratio"], max_refits=1)
     assert rep.winner == "leak", rep.to_dict()["ranking"]
     assert rep.after["leak"]["rms_improvement"] >= 0.3
@@ -193,7 +196,7 @@ def test_box_refit_of_an_extension_recovers_it_and_bounds_its_evidence(base_run)
     from types import SimpleNamespace
 
     from vfcore.diagnose.fit import param_table
-    from vfcore.diagnose.pipeline import base_near
+    from vfcore.diagnose.mode_fits import base_near
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(12)
     y = 1.1 * np.asarray(base_run.gaw_hr[41::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -217,7 +220,8 @@ def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(11)
     y = 1.12 * np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
-    rep = diagnose(Problem(y, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2, candidates=["asymmetry", "scale"],
+    rep = diagnose(Problem(y, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2, **SMC_ONLY,
+                   candidates=["asymmetry", "scale"],
                    max_refits=1, refit_forward=False)
     assert rep.screening["asymmetry"]["score"] > rep.screening["scale"]["score"]
     assert rep.winner == "scale", rep.verdict
@@ -236,12 +240,12 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     import dataclasses as dc
     import math
 
-    from vfcore.diagnose import pipeline
+    from vfcore.diagnose import baseline, fit, mode_fits, pipeline, refits
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(5)
     run = simulate(TABLE3, dc.replace(CFG, sep_ratio=1.1))
     y = np.asarray(run.gaw_hr[41::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
-    real, calls = pipeline.fit_extended, []
+    real, calls = fit.fit_extended, []
 
     def failing_first(problem, extension, **kw):
         post = real(problem, extension, **kw)
@@ -250,10 +254,11 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
             post.log_evidence = float(post.log_evidence) - 5000.0
         return post
 
-    monkeypatch.setattr(pipeline, "fit_extended", failing_first)
+    for module in (refits, mode_fits):              # the first refits and the refits near a mode
+        monkeypatch.setattr(module, "fit_extended", failing_first)
     pb = Problem(y, FPS, prior, config=CFG)
     fail = True
-    rep = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
+    rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
     assert calls == ["sep_ratio", "sep_ratio"], calls
     res = rep.after["sep_ratio"]["rescued"]
     lo, hi = res["boxes"][0]["E_cover"]
@@ -267,7 +272,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     assert rep.after["sep_ratio"]["params"]["sep_ratio"]["mean"] < 1.2     # moved off the model's 1.3
     calls.clear()
     fail = False
-    rep2 = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
+    rep2 = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
     assert calls == ["sep_ratio"] and "rescued" not in rep2.after["sep_ratio"]
     assert abs(rep2.after["sep_ratio"]["params"]["sep_ratio"]["mean"] - 1.1) < 0.05
     # the rescue's value is a lower bound: not above the whole-prior estimate beyond the errors
@@ -287,11 +292,11 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     threshold, a verdict decided by the last bits of the arithmetic; the box is therefore re-centred
     until the posterior is off its edges, and both rescues recover the truth.
     With ``rescue_observation=False`` the failed refit stays and nothing is named."""
-    from vfcore.diagnose import pipeline
+    from vfcore.diagnose import baseline, fit, mode_fits, pipeline, refits
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
-    real, calls = pipeline.fit_extended, []
+    real, calls = fit.fit_extended, []
 
     def failing_first(problem, extension, **kw):
         post = real(problem, extension, **kw)
@@ -300,9 +305,10 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
             post.log_evidence = float(post.log_evidence) - 5000.0
         return post
 
-    monkeypatch.setattr(pipeline, "fit_extended", failing_first)
+    for module in (refits, mode_fits):              # the first refits and the refits near a mode
+        monkeypatch.setattr(module, "fit_extended", failing_first)
     pb = Problem(y, FPS, prior, config=CFG)
-    rep = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1)
+    rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1)
     assert calls == ["scale", "scale"], calls
     res = rep.after["scale"]["rescued"]
     assert res["method"] == "reference"
@@ -313,7 +319,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     assert abs(rep.after["scale"]["params"]["E_cover"]["mean"] - TABLE3.E_cover) < 0.1 * TABLE3.E_cover
     calls.clear()
-    box = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_method="box")
+    box = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_method="box")
     boxes = box.after["scale"]["rescued"]["boxes"]
     assert calls == ["scale"] * (1 + len(boxes)) and box.winner == "scale"      # one refit per box tried
     assert boxes[0]["E_cover"][1] < TABLE3.E_cover                 # the first box cut the mode off
@@ -322,7 +328,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     assert abs(box.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     assert box.after["scale"]["rms_improvement"] > 0.45           # far from the 30 % naming threshold
     calls.clear()
-    off = pipeline.diagnose(pb, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
+    off = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
     assert calls == ["scale"] and "rescued" not in off.after["scale"]
     assert off.winner is None
 
@@ -335,11 +341,11 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     the asymmetry is refitted from the scale fit's material mode: the new fit sits in that mode
     (E_cover within 5 % of the leader's), its evidence is far above the stuck one and replaces it,
     and the report records both. With ``shared_mode=False`` (the default) the stuck fit stays."""
-    from vfcore.diagnose import pipeline
+    from vfcore.diagnose import baseline, fit, mode_fits, pipeline, refits
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
-    real, calls = pipeline.fit_extended, []
+    real, calls = fit.fit_extended, []
     base_z = {}
 
     def stuck_asymmetry(problem, extension, **kw):
@@ -349,17 +355,18 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
             post.log_evidence = base_z["z"] + 1.0
         return post
 
-    real_base_fit = pipeline.base_fit
+    real_base_fit = baseline.base_fit
 
     def base_fit(problem, **kw):
         out = real_base_fit(problem, **kw)
         base_z["z"] = float(out[0].log_evidence)
         return out
 
-    monkeypatch.setattr(pipeline, "fit_extended", stuck_asymmetry)
-    monkeypatch.setattr(pipeline, "base_fit", base_fit)
+    for module in (refits, mode_fits):
+        monkeypatch.setattr(module, "fit_extended", stuck_asymmetry)
+    monkeypatch.setattr(baseline, "base_fit", base_fit)
     pb = Problem(y, FPS, prior, config=CFG)
-    kw = dict(free_material=False, n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
+    kw = dict(SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
     rep = pipeline.diagnose(pb, shared_mode=True, **kw)
     assert rep.before["shared_mode_leader"] == "scale"
     assert sorted(calls) == ["asymmetry", "asymmetry", "scale"], calls
@@ -385,9 +392,9 @@ def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clea
     A hidden 12 % scale error is then not named by the rule with the between-run error (the gain is swamped, and the
     local check counts the roughness), and is named by the best-of-base rule, with its material mode
     re-fitted with the base model first. The same fakery on a clean recording names nothing."""
-    from vfcore.diagnose import pipeline, regularity
+    from vfcore.diagnose import baseline, pipeline, regularity
     from vfcore.diagnose.regularity import Sensitivity
-    real_base_fit = pipeline.base_fit
+    real_base_fit = baseline.base_fit
 
     def scattered(problem, *, runs_out=None, **kw):
         base, tau, factor, n, notes = real_base_fit(problem, runs_out=runs_out, **kw)
@@ -395,13 +402,13 @@ def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clea
         runs_out.extend([(z - 3000.0, s), (z - 9000.0, s)])
         return base, 5000.0, factor, n, notes
 
-    monkeypatch.setattr(pipeline, "base_fit", scattered)
+    monkeypatch.setattr(baseline, "base_fit", scattered)
     monkeypatch.setattr(regularity, "sensitivity", lambda problem, theta, seed=0, **kw: Sensitivity(
         step=1e-6, tol=1.0, loglik=0.0, changes=[10000.0, 50.0], irregular=True, n_simulations=0))
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     clean = np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200])
-    kw = dict(free_material=False, n_particles=16, seed=6, candidates=["scale", "leak"], base_runs=1, refit_forward=False)
+    kw = dict(SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale", "leak"], base_runs=1, refit_forward=False)
     pb = Problem(1.12 * clean + 0.4 * rng.standard_normal(200), FPS, prior, config=CFG)
     old = pipeline.diagnose(pb, best_of_base=False, **kw)
     assert old.winner is None and old.before["regularity"]["irregular"]

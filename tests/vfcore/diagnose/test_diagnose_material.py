@@ -91,7 +91,7 @@ def test_a_recording_with_wrong_fixed_parameters_is_explained_by_freeing_them(cl
     y = np.asarray(r.gaw_hr[37::HR_OVERSAMPLE][:200]) + 0.2 * np.random.default_rng(5).standard_normal(200)
     pb = _problem(y, ("E_body", "E_cover", "p_sub"))
     assert pinned(pb) == ["E_lig", "eta"]
-    rep = diagnose(pb, n_particles=16, seed=1, candidates=["scale"], base_runs=1, continuation=False,
+    rep = diagnose(pb, n_particles=16, refit_particles=None, seed=1, candidates=["scale"], base_runs=1, continuation=False,
                    regularity_check=False, mode_checks=0, local_check=False)
     m = rep.material
     assert m is not None and m["found"], m
@@ -107,7 +107,7 @@ def _one_parameter(y):
                    config=CFG)
 
 
-SMALL = dict(free_material=False, n_particles=12, seed=2, base_runs=1, regularity_check=False, mode_checks=0,
+SMALL = dict(free_material=False, continuation=False, continuation_entries=None, refit_particles=None, n_particles=12, seed=2, base_runs=1, regularity_check=False, mode_checks=0,
              local_check=False, candidates=["scale", "leak"])
 
 

@@ -1,0 +1,76 @@
+"""The refits: every chosen entry fitted by SMC with the base model's likelihood (base + extension
+parameters; docs/diagnose.md section 4, "Refit"), each summarised against the base fit, and the rule by
+which a later fit of an entry (rescue, shared mode, continuation, nested check) replaces its first."""
+from __future__ import annotations
+
+import math
+import time
+
+from ..inference.posterior import Posterior
+from .fit import fit_extended, null_drops, param_table
+from .locate import locate
+from .rank import null_consistent, residual_removed
+from .state import DiagnosisState, Run
+from .summary import predicted_gaws
+
+__all__ = ["refit_chosen", "summarise", "keep_if_higher"]
+
+
+def refit_chosen(run: Run, st: DiagnosisState) -> None:
+    """An SMC fit of every chosen entry (``st.refits``, summaries in ``st.after``)."""
+    o, pb = run.options, st.problem
+    g = predicted_gaws(st.base)
+    st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
+    for i, name in enumerate(st.chosen):
+        t1 = time.perf_counter()
+        run.track.at("refit", name, i + 1, len(st.chosen))
+        post = fit_extended(pb, name, n_particles=st.refit_n, seed=o.seed + 101 * (i + 1), map=run.map,
+                            chunk_size=o.chunk_size, integrate=o.integrate, **run.smc)
+        st.refits[name] = post
+        st.n_simulations += int(post.n_simulations)
+        st.after[name] = summarise(run, st, name, post, t1)
+    if st.tau > 0.0:
+        st.notes.append(f"between-run Monte Carlo error of a log-evidence: {st.tau:.2f} nats (spread of the "
+                        "independent base runs beyond their reported errors), added in quadrature to every fit's "
+                        "error")
+
+
+def summarise(run: Run, st: DiagnosisState, name: str, post: Posterior, t1: float) -> dict:
+    """The summary of a fit of entry ``name`` (:func:`.summary.fit_summary`) with what the naming
+    rule reads: the localised residual removed, the RMS improvement on the base fit, whether its
+    parameters sit at their null value; ``t1``: when the fit started (``time.perf_counter``)."""
+    pb = st.problem
+    s = st.summary(post)
+    g = predicted_gaws(post)
+    s["residual_removed"] = residual_removed(st.base_loc, locate(pb.obs_compared[: g.shape[1]], g, pb.fps))
+    s["rms_improvement"] = 1.0 - s["residual_rms"] / st.before["residual_rms"]
+    s["null_consistent"] = null_consistent(*param_table(post), name, run.options.null_sd, drops=null_drops(post))
+    s["wall_s"] = time.perf_counter() - t1
+    s["n_generations"] = int(post.info.get("n_generations", 0))
+    return s
+
+
+def keep_if_higher(run: Run, st: DiagnosisState, name: str, near: Posterior, zb: float, t1: float,
+                   record: tuple | None = None, **tag) -> dict | None:
+    """A second fit ``near`` of entry ``name`` (log-evidence or its lower bound ``zb``) replaces the
+    first when ``zb`` is higher (or the first has none): its evidence is set to ``zb``, ``tag`` goes
+    into its ``info``, and its summary into ``st.after``. ``record = (key, dict)``: written to the
+    new summary under ``key``, with the first fit's evidence (``"first"``) and its rescue record
+    carried over. Returns the first fit's summary when replaced (``{}`` if there was none), ``None``
+    when the first is kept."""
+    first = st.refits.get(name)
+    z1 = float(first.log_evidence) if first is not None else math.nan
+    if not math.isfinite(zb) or (math.isfinite(z1) and zb <= z1):
+        return None
+    near.log_evidence = zb
+    near.info.update(tag)
+    prev = st.after.get(name, {})
+    st.refits[name] = near
+    st.after[name] = summarise(run, st, name, near, t1)
+    if record is not None:
+        key, extra = record
+        st.after[name][key] = {**extra, "first": None if first is None else {
+            "log_evidence": z1, "log_evidence_se": float(first.log_evidence_se),
+            "n_simulations": int(first.n_simulations)},
+            **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
+    return prev

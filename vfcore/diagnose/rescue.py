@@ -1,0 +1,88 @@
+"""The rescue: a refit that ended far below the base missed the base-like region of its own model
+(every entry is, or comes arbitrarily close to, the base model at its null value), so it is refitted
+near the base's material mode and the new evidence kept when larger (docs/diagnose.md section 4,
+"Rescue"). How it is refitted is a strategy chosen once (:data:`RESCUES`)."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+from .extensions import get
+from .mode_fits import base_near, reference_refit
+from .refits import keep_if_higher
+from .state import DiagnosisState, Run
+
+__all__ = ["BoxRescue", "ReferenceRescue", "RESCUES", "rescue_refits"]
+
+
+@dataclass(frozen=True)
+class ReferenceRescue:
+    """An SMC started from the base posterior (:func:`.mode_fits.reference_refit`): its result
+    estimates the extended model's evidence, with no box and no prior-volume penalty."""
+
+    method: str = "reference"
+    how: str = "from the base posterior (reference-started SMC)"
+    relation: str = "="
+    tag: str = "reference_refit_of"
+
+    def refit(self, run: Run, st: DiagnosisState, name: str, seed: int):
+        o = run.options
+        return reference_refit(st.problem, st.base, name, n_particles=st.refit_n, seed=seed, map=run.map,
+                               chunk_size=o.chunk_size, inflate=o.rescue_inflate, integrate=o.integrate, **run.smc)
+
+    def record(self, near) -> dict:
+        return {}
+
+
+@dataclass(frozen=True)
+class BoxRescue:
+    """An SMC on a box of ``+- rescue_half_width`` of each material parameter's prior width around
+    the base posterior (:func:`.mode_fits.base_near`): a lower bound on the extended evidence."""
+
+    method: str = "box"
+    how: str = "around the base's material mode"
+    relation: str = ">="
+    tag: str = "box_refit_of"
+
+    def refit(self, run: Run, st: DiagnosisState, name: str, seed: int):
+        o = run.options
+        return base_near(st.problem, st.base, n_particles=st.refit_n, seed=seed, map=run.map,
+                         chunk_size=o.chunk_size, half_width=o.rescue_half_width, extension=name,
+                         integrate=o.integrate, **run.smc)
+
+    def record(self, near) -> dict:
+        return {"box": near.info["box"], "boxes": near.info["boxes"],
+                "log_box_probability": near.info["log_box_probability"]}
+
+
+#: The rescue strategy of each ``DiagnoseOptions.rescue_method``.
+RESCUES = {"reference": ReferenceRescue(), "box": BoxRescue()}
+
+
+def rescue_refits(run: Run, st: DiagnosisState) -> None:
+    """Refit every rescuable entry whose refit ended more than ``max(min_gain, k_se se)`` below the
+    base, by the options' rescue strategy. The trigger compares the two fits' delta-method errors
+    without the between-run error: that spread is what the rescue repairs, and a rescue only adds
+    an evidence that must beat the first, so firing more often costs simulations, never a name."""
+    o = run.options
+    strategy = RESCUES[o.rescue_method]
+    rescuable = [n for n in st.chosen if (o.rescue_forward if get(n).kind == "forward" else o.rescue_observation)]
+    z0, s0 = float(st.base.log_evidence), float(st.base.log_evidence_se)
+    for j, name in enumerate(rescuable):
+        z1, s1 = float(st.refits[name].log_evidence), float(st.refits[name].log_evidence_se)
+        if math.isfinite(z1) and z1 >= z0 - max(o.min_gain, o.k_se * math.hypot(s0, s1)):
+            continue
+        t1 = time.perf_counter()
+        run.track.at("rescue", name)
+        first_sims = int(st.refits[name].n_simulations)
+        zb, sb, near = strategy.refit(run, st, name, o.seed + 262147 + j)
+        st.n_simulations += int(near.n_simulations)
+        kept = keep_if_higher(run, st, name, near, zb, t1, **{strategy.tag: "base"}) is not None
+        st.notes.append(f"rescue: the {name} refit ended at log Z {z1:.1f}, below the base's {z0:.1f}; refitted "
+                        f"{strategy.how}: log Z {strategy.relation} {zb:.1f} +- {sb:.1f}"
+                        + ("" if kept else " (not higher; the first refit is kept)"))
+        if kept:
+            st.after[name]["rescued"] = {"method": strategy.method, "first_log_evidence": z1,
+                                         "first_log_evidence_se": s1, "first_n_simulations": first_sims,
+                                         **strategy.record(near)}
