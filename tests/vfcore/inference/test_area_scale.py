@@ -145,3 +145,38 @@ def test_an_uncalibrated_recording_is_not_outside_for_its_area_only_for_its_f0(m
     v = rc.check_reach(rec_at(ens, f0_hz=200.0, max_area_mm2=200.0), ens, area_scale=(1.0, 16.0))
     assert v.verdict == "outside" and v.measures["max_area_mm2"]["verdict"] == "inside"
     assert v.measures["f0_hz"]["verdict"] == "outside"
+
+
+# ---------------------------------------------------------------------------- an FE twin at k = 1.7
+@pytest.mark.slow
+def test_an_fe_twin_recorded_at_area_scale_1p7_recovers_k_and_the_parameters():
+    """The coarse-mesh twin of test_twin_fe (E_body, E_cover free in Table 2, the rest at Table 3, seed 7) recorded
+    with its areas 1.7 times too large plus N(0, 1 mm^2) noise, fitted with k free on [0.25, 4] (SMC, 60
+    particles, about 1,600 simulations, 1 min on one core): k = 1.7 inside its 90 % interval; the parameters
+    recovered as test_twin_fe asks of the calibrated twin (the truth inside the joint 99 % region, every |z| < 3,
+    and the posterior mean fitting at least as well as the truth). Per-parameter 90 % intervals of one twin
+    are not asked for: an exact posterior misses them for 10 % of noise draws each (with this seed both
+    parameters sit 1.6 sd from the mean, along their correlation); coverage is a property of many twins."""
+    from vfcore.config import SimConfig
+    from vfcore.inference import make_twin, smc
+    from vfcore.params import PARAM_NAMES, TABLE3
+    from vfcore.inference.problem import evaluate
+    free = ("E_body", "E_cover")
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in free})
+    cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.45, discard=0.25)
+    tw = make_twin(prior, cfg, seed=7, sigma_e=1.0, n_obs=300)
+    y = 1.7 * tw.clean_gaw + np.random.default_rng(11).standard_normal(tw.clean_gaw.size)
+    pb = Problem(y, cfg.fps, prior, sigma_e=1.0, config=cfg, area_scale=(0.25, 4.0))
+    post = smc(pb, n_particles=60, seed=7, ess_fraction=0.5, min_moves=2, max_moves=4)
+    q = post.quantile([0.05, 0.95])
+    pred = post.resampled_predictive()
+    rng = np.random.default_rng(0)
+    ks = np.array([pb.sample_area_scale(np.asarray(g, dtype=float), rng) for g in pred.gaw])
+    kq = np.quantile(ks, [0.05, 0.95])
+    print(post.format_summary(), "\ntruth", tw.truth_dict, "k 90 %", kq, "mean", ks.mean(), "q", q)
+    assert kq[0] <= 1.7 <= kq[1], kq
+    d = post.mean - tw.truth
+    m2 = float(d @ np.linalg.solve(post.cov, d))          # squared Mahalanobis distance of the truth
+    assert m2 < 9.21 and np.all(np.abs(d) / post.sd < 3.0), (m2, q, tw.truth)
+    ll = evaluate(np.vstack([tw.truth, post.mean]), pb).loglik
+    assert ll[1] > ll[0] - 2.0, ll
