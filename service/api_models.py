@@ -125,11 +125,16 @@ class DiagnoseRequest(BaseModel):
     def _known(cls, v):
         return None if v is None else check_candidates(v)
 
+    def settings(self) -> dict:
+        """The library settings this request gives (:class:`vfcore.diagnose.DiagnoseOptions` fields; the rest
+        keep the library's defaults; ``reuse_posterior`` is the caller's business)."""
+        return dict(candidates=self.candidates, n_particles=self.n_particles, refit_particles=self.refit_particles,
+                    max_refits=self.max_refits, continuation=self.continuation, free_material=self.free_material,
+                    seed=self.seed)
+
     def options(self) -> DiagnoseOptions:
-        """The library's settings of this request (``reuse_posterior`` is the caller's business)."""
-        return DEFAULTS.replace(candidates=self.candidates, n_particles=self.n_particles,
-                                refit_particles=self.refit_particles, max_refits=self.max_refits,
-                                continuation=self.continuation, free_material=self.free_material, seed=self.seed)
+        """The library's options of this request."""
+        return DEFAULTS.replace(**self.settings())
 
 
 #: The command-line option of each DiagnoseRequest field (error messages name what the user typed).

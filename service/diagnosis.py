@@ -60,14 +60,12 @@ def jsonable(obj):
 # ------------------------------------------------------------------------------------ the one call of vfcore
 def run_diagnose(problem, request, *, map=map, chunk_size: int | None = None, progress=None, base=None):
     """``vfcore.diagnose`` on ``problem`` with a :class:`~service.api_models.DiagnoseRequest`'s settings
-    (:meth:`~service.api_models.DiagnoseRequest.options`; the rest the library's defaults): the only place the
-    service and the CLI call it (``chunk_size`` None: the library's). ``base``: a fitted posterior of the
-    recording to start from (the diagnosis' ``base``)."""
+    (:meth:`~service.api_models.DiagnoseRequest.settings`; every other setting the library's default): the only
+    place the service and the CLI call it (``chunk_size`` None: the library's). ``base``: a fitted posterior of
+    the recording to start from (the diagnosis' ``base``)."""
     from vfcore.diagnose import pipeline
-    opts = request.options()
-    if chunk_size is not None:
-        opts = opts.replace(chunk_size=chunk_size)
-    return pipeline.diagnose(problem, options=opts, map=map, base=base, progress=progress)
+    kw = request.settings() | ({} if chunk_size is None else {"chunk_size": chunk_size})
+    return pipeline.diagnose(problem, map=map, base=base, progress=progress, **kw)
 
 
 def plot(report, problem, path: Path) -> None:

@@ -26,7 +26,7 @@ with the largest log Z when it beats the base fit (residual RMS of that fit like
 is then measured against the best base-model fit found by any run, so a refit cannot win by
 finding the material mode alone. ``references`` adds further base-model estimates: the pipeline
 re-runs the base fit on a small box of the prior around the would-be winner's material
-posterior (:func:`.pipeline.base_near`), whose evidence times the box's prior probability is a
+posterior (:func:`.mode_fits.base_near`), whose evidence times the box's prior probability is a
 lower bound on the base evidence (the likelihood is >= 0 outside the box).
 
 Among found extensions the one with the largest ``d`` is named; when none qualifies the verdict
@@ -274,7 +274,7 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
     """``ranking`` with ``name`` found on the *local* comparison (docs/diagnose.md, section 3):
     a candidate that met every criterion except ``d > k_se * se`` with the between-run error
     ``tau`` in ``se`` is named when it beats the base model refitted in its own material mode
-    (:func:`.pipeline.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
+    (:func:`.mode_fits.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
     errors of the two fits, no ``tau``: both sit in one mode, so the mode hopping that ``tau``
     measures is not part of this comparison) and still beats every base-model fit found."""
     return _named(ranking, name, (

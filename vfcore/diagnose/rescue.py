@@ -7,57 +7,58 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Callable
 
+from ..inference.posterior import Posterior
 from .extensions import get
 from .mode_fits import base_near, reference_refit
 from .refits import keep_if_higher
 from .state import DiagnosisState, Run
 
-__all__ = ["BoxRescue", "ReferenceRescue", "RESCUES", "rescue_refits"]
+__all__ = ["Rescue", "RESCUES", "rescue_refits"]
 
 
 @dataclass(frozen=True)
-class ReferenceRescue:
+class Rescue:
+    """How a failed refit is refitted: ``refit(run, state, name, seed) -> (log Z, se, posterior)``, the
+    report's words for it (``how``, and ``relation`` of the new value to the evidence: an estimate or a
+    bound), the ``info`` tag of the new fit, and ``record(posterior)``: what the report keeps of it."""
+
+    method: str
+    how: str
+    relation: str
+    tag: str
+    refit: Callable
+    record: Callable[[Posterior], dict]
+
+
+def _from_reference(run: Run, st: DiagnosisState, name: str, seed: int):
     """An SMC started from the base posterior (:func:`.mode_fits.reference_refit`): its result
     estimates the extended model's evidence, with no box and no prior-volume penalty."""
-
-    method: str = "reference"
-    how: str = "from the base posterior (reference-started SMC)"
-    relation: str = "="
-    tag: str = "reference_refit_of"
-
-    def refit(self, run: Run, st: DiagnosisState, name: str, seed: int):
-        o = run.options
-        return reference_refit(st.problem, st.base, name, n_particles=st.refit_n, seed=seed, map=run.map,
-                               chunk_size=o.chunk_size, inflate=o.rescue_inflate, integrate=o.integrate, **run.smc)
-
-    def record(self, near) -> dict:
-        return {}
+    o = run.options
+    return reference_refit(st.problem, st.base, name, n_particles=st.refit_n, seed=seed, map=run.map,
+                           chunk_size=o.chunk_size, inflate=o.rescue_inflate, integrate=o.integrate, **run.smc)
 
 
-@dataclass(frozen=True)
-class BoxRescue:
-    """An SMC on a box of ``+- rescue_half_width`` of each material parameter's prior width around
-    the base posterior (:func:`.mode_fits.base_near`): a lower bound on the extended evidence."""
+def _on_box(run: Run, st: DiagnosisState, name: str, seed: int):
+    """An SMC on a box of ``+- rescue_half_width`` of each material parameter's prior width around the
+    base posterior (:func:`.mode_fits.base_near`): a lower bound on the extended evidence."""
+    o = run.options
+    return base_near(st.problem, st.base, n_particles=st.refit_n, seed=seed, map=run.map, chunk_size=o.chunk_size,
+                     half_width=o.rescue_half_width, extension=name, integrate=o.integrate, **run.smc)
 
-    method: str = "box"
-    how: str = "around the base's material mode"
-    relation: str = ">="
-    tag: str = "box_refit_of"
 
-    def refit(self, run: Run, st: DiagnosisState, name: str, seed: int):
-        o = run.options
-        return base_near(st.problem, st.base, n_particles=st.refit_n, seed=seed, map=run.map,
-                         chunk_size=o.chunk_size, half_width=o.rescue_half_width, extension=name,
-                         integrate=o.integrate, **run.smc)
-
-    def record(self, near) -> dict:
-        return {"box": near.info["box"], "boxes": near.info["boxes"],
-                "log_box_probability": near.info["log_box_probability"]}
+def _box_record(near: Posterior) -> dict:
+    return {"box": near.info["box"], "boxes": near.info["boxes"],
+            "log_box_probability": near.info["log_box_probability"]}
 
 
 #: The rescue strategy of each ``DiagnoseOptions.rescue_method``.
-RESCUES = {"reference": ReferenceRescue(), "box": BoxRescue()}
+RESCUES = {
+    "reference": Rescue("reference", "from the base posterior (reference-started SMC)", "=", "reference_refit_of",
+                        _from_reference, lambda near: {}),
+    "box": Rescue("box", "around the base's material mode", ">=", "box_refit_of", _on_box, _box_record),
+}
 
 
 def rescue_refits(run: Run, st: DiagnosisState) -> None:
