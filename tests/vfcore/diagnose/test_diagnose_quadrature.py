@@ -101,7 +101,7 @@ def test_integrated_prior_keeps_only_what_needs_a_simulation():
 
 
 def test_delayed_slices_equal_interpolation_with_held_ends():
-    from vfcore.diagnose.fit import _delayed
+    from vfcore.diagnose.observers import _delayed
     rng = np.random.default_rng(2)
     y = rng.standard_normal(500)
     t = np.arange(y.size, dtype=float)
