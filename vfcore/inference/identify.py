@@ -108,7 +108,7 @@ def _unit(exponents: Mapping[str, float]) -> str:
     return ("*".join(num) or "1") + ("/" + "/".join(den) if den else "")
 
 
-def _label(exponents: Mapping[str, float]) -> str:
+def combination_label(exponents: Mapping[str, float]) -> str:
     def part(n, a):
         a = int(round(abs(a)))
         return n if a == 1 else f"{n}^{a}"
@@ -316,7 +316,7 @@ def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]]
             lsd = float(math.sqrt(max(float(w @ (vals - lm) ** 2), 0.0)))
             qsd = prior_sd_along(a)
             q = weighted_quantiles(vals, w, [0.05, 0.95])
-            combinations.append({"label": _label(ex), "exponents": dict(ex), "unit": _unit(ex),
+            combinations.append({"label": combination_label(ex), "exponents": dict(ex), "unit": _unit(ex),
                                  "value": math.exp(lm), "log_mean": lm, "log_sd": lsd, "prior_log_sd": qsd,
                                  "ratio": lsd / qsd if qsd > 0 else math.nan,
                                  "q05": math.exp(float(q[0])), "q95": math.exp(float(q[1]))})
@@ -404,5 +404,5 @@ def format_identifiability(d: Mapping) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["SCALED", "BOUND_FRACTION", "BOUND_MASS_WARN", "Identifiability", "at_bounds", "identify", "format_identifiability", "scale_invariant_combinations",
+__all__ = ["SCALED", "BOUND_FRACTION", "BOUND_MASS_WARN", "Identifiability", "at_bounds", "identify", "format_identifiability", "scale_invariant_combinations", "combination_label",
            "uniform_log_moments"]
