@@ -53,10 +53,12 @@ def replicate_band(gaw: np.ndarray, noise_sd: float, seed: int = 0) -> np.ndarra
     return np.quantile(reps.reshape(-1, gaw.shape[1]), [0.05, 0.5, 0.95], axis=0)
 
 
-def fig_gaw_fit(post, bands, noise_sd: float | None = None, cycles: int = 4) -> bytes:
+def fig_gaw_fit(post, bands, noise_sd: float | None = None, cycles: int = 4, pred=None) -> bytes:
     """Top: the last ``cycles`` cycles of the recording (dots), the model's 90 % posterior band and median, and
     the 90 % band of replicated recordings; bottom: the residual (recording - median) against both bands
-    centred on zero. ``bands``: (3, n) model quantiles; ``noise_sd``: mm^2, None to leave the noise band out."""
+    centred on zero. ``bands``: (3, n) model quantiles; ``noise_sd``: mm^2, None to leave the noise band out;
+    ``pred``: the resampled predictive the bands came from (default ``post.resampled_predictive()``; a job with an
+    unknown area scale passes its draws scaled by ``k``, what the camera records)."""
     plt = _plt()
     fig, (ax, axr) = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
     if post.obs_gaw is None:
@@ -76,7 +78,7 @@ def fig_gaw_fit(post, bands, noise_sd: float | None = None, cycles: int = 4) -> 
         lo = 0
     sl = slice(lo, n)
     rep = None
-    pred = post.resampled_predictive()
+    pred = post.resampled_predictive() if pred is None else pred
     g = _finite_rows(None if pred is None else pred.gaw)
     if noise_sd and g is not None and g.shape[0]:
         rep = replicate_band(g[:, :n], float(noise_sd))

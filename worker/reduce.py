@@ -296,7 +296,8 @@ def publish_posterior(store_path: str, post) -> dict:
         summary["export_errors"] = {"posterior_nc": f"{type(exc).__name__}: {exc}"}
     from .figures import fig_contact, fig_corner, fig_gaw_fit
     noise_sd = None if nc is None else (nc["sigma_e"] if nc["noise"] == "fixed" else nc["residual_rms"]["q50"])
-    for name, fn in (("gaw_fit", lambda p, b: fig_gaw_fit(p, b, noise_sd)), ("corner", fig_corner),
+    for name, fn in (("gaw_fit", lambda p, b: fig_gaw_fit(p, b, noise_sd, pred=resampled)),
+                     ("corner", fig_corner),
                      ("contact_pressure", fig_contact)):
         try:
             st.write_blob(root, name, fn(post, bands))
