@@ -251,7 +251,7 @@ def diagnose_cmd(
                  "diagnosis is written")] = True,
         seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
-    from .diagnosis import jsonable, plot, run_diagnose
+    from .diagnosis import plot
 
     req = diagnose_request(candidates=None if candidates is None else _names(candidates), n_particles=particles,
                            refit_particles=refit_particles, max_refits=max_refits, continuation=continuation,
@@ -267,25 +267,9 @@ def diagnose_cmd(
                   f"candidates {req.candidates or 'all implemented'}, {workers} worker(s)")
     t0 = time.perf_counter()
     store = out / ".resume"
-    from vfcore.inference.memo import CachedMap, account
-    if resume:
-        if store.exists():
-            console.print(f"resuming: reading finished simulations back from {store}")
-    try:
-        with console.status("starting", spinner="dots") as status:
-            if workers == 1:
-                cmap = CachedMap(map, store) if resume else None
-                report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status), base=base_post)
-            else:
-                from concurrent.futures import ProcessPoolExecutor
-                chunk = max(1, math.ceil(req.n_particles / (2 * workers)))
-                with ProcessPoolExecutor(workers) as pool:
-                    cmap = CachedMap(pool.map, store) if resume else None
-                    report = run_diagnose(problem, req, map=cmap or pool.map, chunk_size=chunk,
-                                          progress=StageReporter(status), base=base_post)
-    except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
-        raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
-    d = jsonable(account(report.to_dict(), cmap))      # a resumed run counts its earlier attempts' time
+    if resume and store.exists():
+        console.print(f"resuming: reading finished simulations back from {store}")
+    d, report = run_local(problem, req, workers, store if resume else None, base_post)
     out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis.json").write_text(json.dumps(d, indent=1))
     plot(report, problem, out / "diagnosis.png")
@@ -297,6 +281,30 @@ def diagnose_cmd(
     console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
                   f"({time.perf_counter() - t0:.1f} s)")
     console.print(f"report: {page.resolve()}", highlight=False, soft_wrap=True)
+
+
+def run_local(problem, req, workers: int, store: Path | None, base_post):
+    """The diagnosis on this machine, in this process (``workers`` 1) or a process pool, its finished parts
+    kept in ``store`` (None: not kept). Returns the report as JSON-able dict, with a resumed run's earlier
+    attempts' time counted in, and the report itself; a failure is one ``error:`` line, exit 1."""
+    from vfcore.inference.memo import CachedMap, account
+
+    from .diagnosis import jsonable, run_diagnose
+    try:
+        with console.status("starting", spinner="dots") as status:
+            if workers == 1:
+                cmap = CachedMap(map, store) if store is not None else None
+                report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status), base=base_post)
+            else:
+                from concurrent.futures import ProcessPoolExecutor
+                chunk = max(1, math.ceil(req.n_particles / (2 * workers)))
+                with ProcessPoolExecutor(workers) as pool:
+                    cmap = CachedMap(pool.map, store) if store is not None else None
+                    report = run_diagnose(problem, req, map=cmap or pool.map, chunk_size=chunk,
+                                          progress=StageReporter(status), base=base_post)
+    except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
+        raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
+    return jsonable(account(report.to_dict(), cmap)), report
 
 
 def load_base(path: Path, problem):
