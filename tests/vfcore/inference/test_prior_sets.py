@@ -45,13 +45,18 @@ def test_the_human_set_reaches_human_f0_where_the_papers_cannot():
 @pytest.mark.slow
 def test_a_human_range_twin_is_recovered_with_the_human_prior_set():
     """A twin at f0 ~ 176 Hz (E_body, E_cover and p_sub free in the human box, the rest fixed at the truth):
-    every truth lies within 3 posterior sds of the mean, the estimates within 5 % of the truths. Measured
-    coverage of the 90 % intervals is reported in docs/inference.md, "Prior sets"."""
+    every truth lies within 3 posterior sds of the mean, the estimates within 5 % of the truths.
+
+    The recording is 200 frames (17 cycles) of the 400 the fit simulates, as a real recording is shorter than the
+    simulation. A recording as long as the simulation (34 cycles, lags up to 1.5 periods) makes the likelihood
+    rugged: the simulated GAW changes in steps as p_sub varies (flat over 2.5 Pa, then a phase drift that grows
+    over the cycles), the steps cost 1-7 nats, and the posterior reflects which steps were sampled (p_sub
+    2.2 sd from the truth); docs/inference.md, "Prior sets"."""
     truth = Params(E_body=100.0, E_cover=5000.0, E_lig=15.0, p_sub=1500.0, rho=1050.0, eta=3.0, x0=8.4)
     cfg = SimConfig(mesh="coarse", dt=5e-5, duration=0.3, discard=0.1)
     r = simulate(truth, cfg)
     assert r.f0 >= 150.0
-    y = r.gaw + np.random.default_rng(7).normal(0.0, 0.5, r.gaw.size)
+    y = (r.gaw + np.random.default_rng(7).normal(0.0, 0.5, r.gaw.size))[7:207]
     prior = Prior.default(fixed={k: getattr(truth, k) for k in ("E_lig", "rho", "eta", "x0")}, prior_set="human")
     post = smc(Problem(obs_gaw=y, fps=r.fps, prior=prior, sigma_e=0.5, config=cfg), n_particles=100, seed=0)
     t = np.array([getattr(truth, n) for n in prior.names])
