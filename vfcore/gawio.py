@@ -105,90 +105,129 @@ def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_
     if not p.is_file():
         raise GawFileError(f"cannot read GAW '{p}': no such file")
     meta: dict = {}
-    t = None
     if p.suffix.lower() in (".npy", ".npz"):
-        try:
-            obj = np.load(p, allow_pickle=False)
-        except Exception as e:  # noqa: BLE001
-            raise GawFileError(f"cannot read GAW '{p}': {e}") from e
-        if isinstance(obj, np.lib.npyio.NpzFile):
-            keys = set(obj.files)
-            akey = next((k for k in ("area", "area_mm2", "gaw") if k in keys), None)
-            if akey is None:
-                raise GawFileError(f"{p}: npz needs an 'area' array (found {sorted(keys)})")
-            area = np.asarray(obj[akey], dtype=float)
-            if "t" in keys:
-                t = np.asarray(obj["t"], dtype=float)
-            if "fps" in keys and fps is None:
-                fps = float(obj["fps"])
-            for k in ("area_unit", "time_unit"):
-                if k in keys:
-                    meta[k] = str(obj[k])
-        else:
-            arr = np.asarray(obj, dtype=float)
-            if arr.ndim == 1:
-                area = arr
-            elif arr.ndim == 2 and arr.shape[1] == 2:
-                t, area = arr[:, 0], arr[:, 1]
-            else:
-                raise GawFileError(f"{p}: expected a 1D area array or (n, 2) time/area, got shape {arr.shape}")
+        t, area, fps = _read_numpy(p, fps, meta)
     else:
-        try:
-            text = p.read_text()
-        except Exception as e:  # noqa: BLE001
-            raise GawFileError(f"cannot read GAW '{p}': {e}") from e
-        header = None
-        rows = []
-        for line in text.splitlines():
-            s = line.strip()
-            if not s:
-                continue
-            if s.startswith("#"):
-                m = re.match(r"#\s*([A-Za-z_]+)\s*[:=]\s*(.+)$", s)
-                if m:
-                    meta[m.group(1).strip().lower()] = m.group(2).strip()
-                continue
-            parts = [q.strip() for q in re.split(r"[,;\t]", s) if q.strip() != ""] if re.search(r"[,;\t]", s) \
-                else s.split()
-            try:
-                rows.append([float(q) for q in parts])
-            except ValueError:
-                if header is None and not rows:
-                    header = parts
-                    continue
-                raise GawFileError(f"{p}: non-numeric value in line '{s[:60]}'") from None
-        if not rows:
-            raise GawFileError(f"{p}: no data rows")
-        ncol = len(rows[0])
-        if any(len(r) != ncol for r in rows):
-            raise GawFileError(f"{p}: rows have different numbers of columns")
-        arr = np.asarray(rows, dtype=float)
-        names = [h.lower() for h in header] if header else None
-        if names is not None and len(names) == ncol:
-            ti = next((i for i, nm in enumerate(names) if nm.startswith("t")), None)
-            ai = next((i for i, nm in enumerate(names) if nm.startswith("area") or nm.startswith("gaw")), None)
-            if ai is None:
-                ai = ncol - 1 if ncol <= 2 else None
-            if ai is None:
-                raise GawFileError(f"{p}: no area column among {header}")
-            area = arr[:, ai]
-            if ti is not None and ti != ai:
-                t = arr[:, ti]
-                u = _col_unit(names[ti], "time") or _col_unit(names[ti], "t")
-                if u and "time_unit" not in meta:
-                    meta["time_unit"] = u
-            u = _col_unit(names[ai], "area") or _col_unit(names[ai], "gaw")
-            if u and "area_unit" not in meta:
-                meta["area_unit"] = u
-        elif ncol == 1:
-            area = arr[:, 0]
-        elif ncol == 2:
-            t, area = arr[:, 0], arr[:, 1]
-        else:
-            raise GawFileError(f"{p}: {ncol} columns without a header; expected (time, area) or (area)")
-
+        t, area = _read_text(p, meta)
     area_u = area_unit or meta.get("area_unit", "mm^2")
     time_u = time_unit or meta.get("time_unit", "s")
+    area = _area_in_mm2(p, area, area_u, px_per_mm, meta, allow_negative)
+    t, fps = _times_and_rate(p, t, time_u, fps, meta)
+    if t is None:
+        t = np.arange(area.size) / fps
+    meta["area_unit_in_file"] = area_u
+    return GawData(t=t, area=area, fps=float(fps), meta=meta)
+
+
+def _read_numpy(p: Path, fps: float | None, meta: dict) -> tuple[np.ndarray | None, np.ndarray, float | None]:
+    """``(t, area, fps)`` of a ``.npy`` (1D area or (n, 2) time and area) or ``.npz`` file, in the file's
+    units; an ``fps`` stored in an npz is used only where none was given. Units found go into ``meta``."""
+    try:
+        obj = np.load(p, allow_pickle=False)
+    except Exception as e:  # noqa: BLE001
+        raise GawFileError(f"cannot read GAW '{p}': {e}") from e
+    t = None
+    if isinstance(obj, np.lib.npyio.NpzFile):
+        keys = set(obj.files)
+        akey = next((k for k in ("area", "area_mm2", "gaw") if k in keys), None)
+        if akey is None:
+            raise GawFileError(f"{p}: npz needs an 'area' array (found {sorted(keys)})")
+        area = np.asarray(obj[akey], dtype=float)
+        if "t" in keys:
+            t = np.asarray(obj["t"], dtype=float)
+        if "fps" in keys and fps is None:
+            fps = float(obj["fps"])
+        for k in ("area_unit", "time_unit"):
+            if k in keys:
+                meta[k] = str(obj[k])
+        return t, area, fps
+    arr = np.asarray(obj, dtype=float)
+    if arr.ndim == 1:
+        return None, arr, fps
+    if arr.ndim == 2 and arr.shape[1] == 2:
+        return arr[:, 0], arr[:, 1], fps
+    raise GawFileError(f"{p}: expected a 1D area array or (n, 2) time/area, got shape {arr.shape}")
+
+
+def _read_text(p: Path, meta: dict) -> tuple[np.ndarray | None, np.ndarray]:
+    """``(t, area)`` of a CSV (or whitespace-separated) file in the file's units; its ``# key: value``
+    header lines and the units in its column names go into ``meta``."""
+    try:
+        text = p.read_text()
+    except Exception as e:  # noqa: BLE001
+        raise GawFileError(f"cannot read GAW '{p}': {e}") from e
+    header, rows = _parse_lines(p, text, meta)
+    if not rows:
+        raise GawFileError(f"{p}: no data rows")
+    ncol = len(rows[0])
+    if any(len(r) != ncol for r in rows):
+        raise GawFileError(f"{p}: rows have different numbers of columns")
+    arr = np.asarray(rows, dtype=float)
+    names = [h.lower() for h in header] if header else None
+    if names is not None and len(names) == ncol:
+        return _named_columns(p, arr, header, names, meta)
+    if ncol == 1:
+        return None, arr[:, 0]
+    if ncol == 2:
+        return arr[:, 0], arr[:, 1]
+    raise GawFileError(f"{p}: {ncol} columns without a header; expected (time, area) or (area)")
+
+
+def _parse_lines(p: Path, text: str, meta: dict) -> tuple[list[str] | None, list[list[float]]]:
+    """The column names (a first non-numeric line, or None) and the numeric rows of ``text``; the
+    ``# key: value`` comments go into ``meta`` (keys lower-cased)."""
+    header = None
+    rows = []
+    for line in text.splitlines():
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            m = re.match(r"#\s*([A-Za-z_]+)\s*[:=]\s*(.+)$", s)
+            if m:
+                meta[m.group(1).strip().lower()] = m.group(2).strip()
+            continue
+        parts = [q.strip() for q in re.split(r"[,;\t]", s) if q.strip() != ""] if re.search(r"[,;\t]", s) \
+            else s.split()
+        try:
+            rows.append([float(q) for q in parts])
+        except ValueError:
+            if header is None and not rows:
+                header = parts
+                continue
+            raise GawFileError(f"{p}: non-numeric value in line '{s[:60]}'") from None
+    return header, rows
+
+
+def _named_columns(p: Path, arr: np.ndarray, header: list[str], names: list[str],
+                   meta: dict) -> tuple[np.ndarray | None, np.ndarray]:
+    """``(t, area)`` chosen by column name (``t...``/``time...``; ``area...``/``gaw...``, else the last of at
+    most two columns); units in the names (``area_mm2``, ``time_ms``) go into ``meta`` unless a header
+    comment gave them."""
+    ncol = arr.shape[1]
+    ti = next((i for i, nm in enumerate(names) if nm.startswith("t")), None)
+    ai = next((i for i, nm in enumerate(names) if nm.startswith("area") or nm.startswith("gaw")), None)
+    if ai is None:
+        ai = ncol - 1 if ncol <= 2 else None
+    if ai is None:
+        raise GawFileError(f"{p}: no area column among {header}")
+    area = arr[:, ai]
+    t = None
+    if ti is not None and ti != ai:
+        t = arr[:, ti]
+        u = _col_unit(names[ti], "time") or _col_unit(names[ti], "t")
+        if u and "time_unit" not in meta:
+            meta["time_unit"] = u
+    u = _col_unit(names[ai], "area") or _col_unit(names[ai], "gaw")
+    if u and "area_unit" not in meta:
+        meta["area_unit"] = u
+    return t, area
+
+
+def _area_in_mm2(p: Path, area, area_u: str, px_per_mm: float | None, meta: dict,
+                 allow_negative: bool) -> np.ndarray:
+    """The areas converted from ``area_u`` to mm^2 (pixels with ``px_per_mm``, else the header's) and checked:
+    at least two samples, finite, and non-negative unless ``allow_negative``."""
     if px_per_mm is None and "px_per_mm" in meta:
         try:
             px_per_mm = float(meta["px_per_mm"])
@@ -201,6 +240,12 @@ def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_
         raise GawFileError(f"{p}: area contains NaN or infinite values")
     if not allow_negative and np.any(area < 0):
         raise GawFileError(f"{p}: negative areas")
+    return area
+
+
+def _times_and_rate(p: Path, t, time_u: str, fps: float | None, meta: dict) -> tuple[np.ndarray | None, float]:
+    """The times in s (None without a time column) and the frame rate (Hz): the one given, else the header's,
+    else the time column's, which must be increasing, uniform and agree with a given rate."""
     if fps is None and "fps" in meta:
         try:
             fps = float(meta["fps"])
@@ -223,10 +268,7 @@ def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_
         raise GawFileError(f"{p}: no time column and no fps; give the frame rate")
     if not (math.isfinite(fps) and fps > 0):
         raise GawFileError(f"{p}: frame rate must be > 0, got {fps}")
-    if t is None:
-        t = np.arange(area.size) / fps
-    meta["area_unit_in_file"] = area_u
-    return GawData(t=t, area=area, fps=float(fps), meta=meta)
+    return t, fps
 
 
 def write_gaw_csv(path, t, area, fps: float, meta: dict | None = None, extra: dict | None = None) -> Path:
