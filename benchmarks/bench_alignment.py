@@ -12,7 +12,7 @@ beyond the simulation. Printed:
    their refinement) on a synthetic oscillating record, and the number of alignments that took;
 3. ms per zipper observation (24 delayed strips of a 6,000-sample record): the fused kernel
    (``vfcore.diagnose._kernels.strip_sum``) against shifting and adding each strip with
-   numpy (``vfcore.diagnose.observers._delayed``, the baseline), with their largest difference.
+   numpy (``vfcore.diagnose.observers.delayed_copy``, the baseline), with their largest difference.
 
 Usage: python benchmarks/bench_alignment.py [--repeats 300]
 """
@@ -111,7 +111,7 @@ def main(argv=None) -> int:
 
     # the zipper's strips
     from vfcore.diagnose._kernels import strip_sum
-    from vfcore.diagnose.observers import _delayed
+    from vfcore.diagnose.observers import delayed_copy
     y = _record(600, q, seed=3)
     delays = 40.0 * ((np.arange(24) + 0.5) / 24 - 0.5)        # a lag of 40 samples end to end
     weights = np.full(24, 1 / 24)
@@ -121,7 +121,7 @@ def main(argv=None) -> int:
     def shifted():
         out = np.zeros_like(y)
         for d, w in zip(delays, weights):
-            out += w * _delayed(yp, pad, y.size, d)
+            out += w * delayed_copy(yp, pad, y.size, d)
         return out
     diff = np.max(np.abs(strip_sum(y, delays, weights) - shifted())) / np.max(np.abs(shifted()))
     for label, f in (("numpy shift and add (baseline)", shifted), ("fused kernel (library)", lambda: strip_sum(y, delays, weights))):

@@ -15,7 +15,7 @@ from ..result import HR_OVERSAMPLE
 from ._kernels import strip_sum
 from .extensions import apply_leak
 
-__all__ = ["observe_extended", "observer", "entrain_pair", "pair_observer", "right_fold_params"]
+__all__ = ["observe_extended", "observer", "entrain_pair", "pair_observer", "right_fold_params", "delayed_copy"]
 
 
 def _period_s(hr: np.ndarray, fps: float) -> float:
@@ -75,7 +75,7 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
         pad = int(math.ceil(0.5 * T0 * rate)) + 2        # the longest delay of either model, in samples
         yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
         if name == "asymmetry":
-            return lambda phi: 0.5 * y + 0.5 * phi["lr_amp"] * _delayed(yp, pad, y.size, phi["lr_phase"] * T0 * rate)
+            return lambda phi: 0.5 * y + 0.5 * phi["lr_amp"] * delayed_copy(yp, pad, y.size, phi["lr_phase"] * T0 * rate)
         n = 24
         ys = (np.arange(n) + 0.5) / n                    # strip centres, fraction of length
 
@@ -89,7 +89,7 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
     raise ValueError(f"{name!r} is not an observation-level extension")
 
 
-def _delayed(yp: np.ndarray, pad: int, n: int, d: float) -> np.ndarray:
+def delayed_copy(yp: np.ndarray, pad: int, n: int, d: float) -> np.ndarray:
     """``y(i - d)`` for ``i = 0..n-1`` (``d`` in samples, ``|d| < pad - 1``) by linear
     interpolation, from ``yp`` = ``y`` padded with ``pad`` copies of its end values on each side
     (so the ends are held, as ``np.interp`` holds them): two shifted slices instead of a search."""

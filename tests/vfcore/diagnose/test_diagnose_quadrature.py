@@ -101,14 +101,14 @@ def test_integrated_prior_keeps_only_what_needs_a_simulation():
 
 
 def test_delayed_slices_equal_interpolation_with_held_ends():
-    from vfcore.diagnose.observers import _delayed
+    from vfcore.diagnose.observers import delayed_copy
     rng = np.random.default_rng(2)
     y = rng.standard_normal(500)
     t = np.arange(y.size, dtype=float)
     pad = 40
     yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
     for d in (0.0, 3.25, -7.5, 37.9, -38.0, 12.0, 45.5, -120.0):
-        np.testing.assert_allclose(_delayed(yp, pad, y.size, d), np.interp(t - d, t, y), atol=1e-12)
+        np.testing.assert_allclose(delayed_copy(yp, pad, y.size, d), np.interp(t - d, t, y), atol=1e-12)
 
 
 @pytest.mark.parametrize("lag", [0.0, 0.07])
