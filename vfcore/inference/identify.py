@@ -26,13 +26,14 @@ six, or a measurement (``Problem(measurements=...)``).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
 
 from ..params import PARAM_UNITS, TABLE3, TO_SI
 from .diagnostics import weighted_quantiles
+from .identify_table import Identifiability, format_identifiability
 from .prior import Prior
 
 #: The parameters that scale together (x0 is geometric and does not).
@@ -133,40 +134,6 @@ def scale_invariant_combinations(free: tuple[str, ...]) -> list[dict[str, float]
     return out
 
 
-@dataclass
-class Identifiability:
-    """The identifiability table of one posterior (module docstring); ``to_dict`` is JSON-able."""
-
-    parameters: list[dict]
-    principal: list[dict]
-    scale: dict | None
-    combinations: list[dict]
-    anchors: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    log_names: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict:
-        return _finite(asdict(self))
-
-    def format(self) -> str:
-        return format_identifiability(self.to_dict())
-
-
-def _finite(x):
-    if isinstance(x, dict):
-        return {str(k): _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
-
-
 def _wmean_cov(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     m = w @ X
     d = X - m
@@ -179,6 +146,30 @@ def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]]
     under ``prior``; ``measurements`` ``{name: (mean, sd)}`` are those of the problem (they anchor the
     common scale). ``use``: ``"weighted"`` (every draw with its weight) or ``"resampled"`` (the equally
     weighted resampled ensemble)."""
+    names, X, w = _draws(post, prior, use)
+    measurements = dict(measurements or {})
+    parameters = _parameter_rows(names, X, w, prior)                                  # (a)
+    lv = _LogView.of(names, X, w, prior)
+    free = tuple(n for n in SCALED if n in lv.names)
+    v_scale = None
+    if len(free) >= 2:
+        v_scale = np.array([1.0 / math.sqrt(len(free)) if n in free else 0.0 for n in lv.names])
+    principal = _principal_directions(lv, v_scale)                                   # (b)
+    anchors = _anchors(names, prior, measurements)
+    scale = None
+    combinations: list[dict] = []
+    warnings: list[str] = []
+    if v_scale is not None:
+        scale, piled = _common_scale(lv, w, v_scale, free, names, prior, measurements)   # (c)
+        if scale["set_by_prior"]:
+            warnings.append(_scale_warning(scale, piled, anchors))                       # (d)
+        combinations = _combinations(lv, w, free)
+    return Identifiability(parameters=parameters, principal=principal, scale=scale, combinations=combinations,
+                           anchors=anchors, warnings=warnings, log_names=list(lv.names))
+
+
+def _draws(post, prior: Prior, use: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """``(names, X (n, d), w (n,))``: the draws of positive weight and their weights, normalised."""
     names = tuple(post.names)
     if names != tuple(prior.names):
         raise ValueError(f"posterior parameters {names} differ from the prior's {prior.names}")
@@ -193,50 +184,65 @@ def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]]
     if X.shape != (w.size, len(names)):
         raise ValueError(f"samples of shape {X.shape} do not match {w.size} weights x {len(names)} parameters")
     keep = w > 0
-    X, w = X[keep], w[keep] / np.sum(w[keep])
-    measurements = dict(measurements or {})
-    lo, hi = prior.lo, prior.hi
+    return names, X[keep], w[keep] / np.sum(w[keep])
 
-    # (a) per parameter, in paper units
+
+def _parameter_rows(names, X: np.ndarray, w: np.ndarray, prior: Prior) -> list[dict]:
+    """(a) Per parameter in paper units: posterior mean and sd, the uniform prior's sd and their ratio."""
     mean, cov = _wmean_cov(X, w)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    prior_sd = (hi - lo) / math.sqrt(12.0)
-    parameters = [{"name": n, "unit": PARAM_UNITS[n], "mean": float(mean[i]), "sd": float(sd[i]),
-                   "prior_sd": float(prior_sd[i]), "ratio": float(sd[i] / prior_sd[i])}
-                  for i, n in enumerate(names)]
+    prior_sd = (prior.hi - prior.lo) / math.sqrt(12.0)
+    return [{"name": n, "unit": PARAM_UNITS[n], "mean": float(mean[i]), "sd": float(sd[i]),
+             "prior_sd": float(prior_sd[i]), "ratio": float(sd[i] / prior_sd[i])}
+            for i, n in enumerate(names)]
 
-    # log coordinates of the free parameters whose draws are all > 0
-    cols = [i for i, n in enumerate(names) if np.all(X[:, i] > 0)]
-    log_names = [names[i] for i in cols]
-    L = np.log(X[:, cols])
-    lmom = [uniform_log_moments(lo[i], hi[i]) for i in cols]
-    pvar = np.array([v for _, v in lmom])
-    lmean, lcov = _wmean_cov(L, w)
 
-    def prior_sd_along(v: np.ndarray) -> float:
-        return float(math.sqrt(float(np.sum(v * v * pvar))))
+@dataclass(frozen=True)
+class _LogView:
+    """The draws in log coordinates of the free parameters whose draws are all > 0."""
 
-    # (c) the common-scale direction among the free scaled parameters
-    free = tuple(n for n in SCALED if n in log_names)
-    k = len(free)
-    v_scale = None
-    if k >= 2:
-        v_scale = np.array([1.0 / math.sqrt(k) if n in free else 0.0 for n in log_names])
+    cols: list[int]          # their columns in the parameter vector
+    names: list[str]
+    L: np.ndarray            # (n, len(cols)) log draws
+    pvar: np.ndarray         # (len(cols),) prior variance of each log
+    mean: np.ndarray
+    cov: np.ndarray
 
-    # (b) principal directions of the posterior covariance, least narrowed first
-    evals, evecs = np.linalg.eigh(lcov) if len(cols) else (np.empty(0), np.empty((0, 0)))
+    @classmethod
+    def of(cls, names, X: np.ndarray, w: np.ndarray, prior: Prior) -> "_LogView":
+        cols = [i for i, n in enumerate(names) if np.all(X[:, i] > 0)]
+        L = np.log(X[:, cols])
+        lmom = [uniform_log_moments(prior.lo[i], prior.hi[i]) for i in cols]
+        pvar = np.array([v for _, v in lmom])
+        lmean, lcov = _wmean_cov(L, w)
+        return cls(cols, [names[i] for i in cols], L, pvar, lmean, lcov)
+
+    def prior_sd_along(self, v: np.ndarray) -> float:
+        """The prior's sd of ``v @ log theta`` (the logs independent under the uniform box prior)."""
+        return float(math.sqrt(float(np.sum(v * v * self.pvar))))
+
+
+def _principal_directions(lv: _LogView, v_scale: np.ndarray | None) -> list[dict]:
+    """(b) The eigenvectors of the log posterior covariance with posterior and prior sd along each (and
+    their alignment with the common scale), least narrowed first."""
+    evals, evecs = np.linalg.eigh(lv.cov) if len(lv.cols) else (np.empty(0), np.empty((0, 0)))
     principal = []
     for j in range(evals.size):
         v = evecs[:, j]
         v = v if v[np.argmax(np.abs(v))] > 0 else -v
-        psd, qsd = math.sqrt(max(float(evals[j]), 0.0)), prior_sd_along(v)
+        psd, qsd = math.sqrt(max(float(evals[j]), 0.0)), lv.prior_sd_along(v)
         row = {"sd": psd, "prior_sd": qsd, "ratio": psd / qsd if qsd > 0 else math.nan,
-               "loadings": {n: float(v[i]) for i, n in enumerate(log_names)}}
+               "loadings": {n: float(v[i]) for i, n in enumerate(lv.names)}}
         if v_scale is not None:
             row["scale_alignment"] = float(abs(v @ v_scale))
         principal.append(row)
     principal.sort(key=lambda r: -r["ratio"] if math.isfinite(r["ratio"]) else math.inf)
+    return principal
 
+
+def _anchors(names, prior: Prior, measurements: Mapping) -> list[str]:
+    """What pins each scaled parameter that the fit does not estimate freely: a measurement, a fixed
+    value, or Table 3."""
     anchors = []
     for n in SCALED:
         if n in measurements:
@@ -246,82 +252,93 @@ def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]]
             anchors.append(f"fixed {n} = {prior.fixed[n]:g} {PARAM_UNITS[n]}")
         elif n not in names:
             anchors.append(f"{n} held at Table 3 ({getattr(TABLE3, n):g} {PARAM_UNITS[n]})")
+    return anchors
 
-    scale = None
-    combinations: list[dict] = []
-    warnings: list[str] = []
-    if v_scale is not None:
-        idx = [log_names.index(n) for n in free]
-        rate = math.sqrt(k)
-        with np.errstate(divide="ignore"):   # a lower bound of 0 (p_sub) bounds nothing in log
-            llo = np.log(np.array([lo[names.index(n)] for n in free]))
-        lhi = np.log(np.array([hi[names.index(n)] for n in free]))
 
-        def ray(x):   # extent along the scale direction of the ray through log point(s) x, in s units
-            d_lo = np.max(llo - x[..., idx], axis=-1)
-            d_hi = np.min(lhi - x[..., idx], axis=-1)
-            return rate * d_lo, rate * d_hi
-        s_lo, s_hi = ray(lmean)
-        ray_len = float(s_hi - s_lo)
-        ray_sd = _ray_sd(ray_len, rate)
-        post_sd = float(math.sqrt(max(float(v_scale @ lcov @ v_scale), 0.0)))
-        q_sd = prior_sd_along(v_scale)
-        a_lo, a_hi = ray(L)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u = -a_lo / (a_hi - a_lo)
-        edge = (float(np.sum(w[u < EDGE_FRACTION])), float(np.sum(w[u > 1.0 - EDGE_FRACTION])))
-        edge_expected = _ray_end_mass(rate, ray_len, EDGE_FRACTION)
-        piled = any(e > EDGE_MASS_WARN and e > 2.5 * x for e, x in zip(edge, edge_expected))
-        measured = [n for n in free if n in measurements]
-        exact = k == len(SCALED) and not measured
-        ray_ratio = post_sd / ray_sd if ray_sd > 0 else math.nan
-        set_by_prior = exact or ray_ratio > SCALE_RATIO_WARN or piled
-        scale = {"names": list(free), "direction": {n: float(v_scale[i]) for i, n in enumerate(log_names)
-                                                    if v_scale[i]},
-                 "posterior_sd": post_sd, "prior_sd": q_sd, "ratio": post_sd / q_sd if q_sd > 0 else math.nan,
-                 "ray_prior_sd": ray_sd, "ray_ratio": ray_ratio, "ray_length": ray_len,
-                 "log_c_sd": post_sd / rate, "edge_mass": list(edge), "edge_mass_expected": list(edge_expected),
-                 "exact_symmetry": exact, "measured": measured, "set_by_prior": bool(set_by_prior)}
-        if set_by_prior:
-            how = (f"the posterior sd along it is {ray_ratio:.0%} of what the prior box allows there"
-                   + (f", and {max(edge):.0%} of the posterior lies in the outer {EDGE_FRACTION:.0%} of the box "
-                      "along it" if piled else "")
-                   + "; contact pressure scales with it and flow with its square root")
-            if measured:
-                given = "; ".join(a for a in anchors if a.startswith("measured"))
-                subject = (f"the measurements ({given}) narrow" if len(measured) > 1
-                           else f"the measurement ({given}) narrows")
-                warnings.append(
-                    f"COMMON SCALE: {subject} the common scale of {', '.join(free)} only partly ({how}): absolute moduli, p_sub, contact "
-                    "pressure and flow still rest partly on the prior's box along the common scale; a tighter "
-                    "measurement, or a second one (--measure rho=MEAN:SD), would anchor them "
-                    "(docs/inference.md, 'The common scale')")
-            else:
-                if exact:
-                    why = "a GAW cannot determine the common scale of E_body, E_cover, E_lig, p_sub, rho and eta"
-                elif ray_ratio > SCALE_RATIO_WARN:
-                    why = (f"the data barely determine the common scale of {', '.join(free)}"
-                           + (f" ({'; '.join(anchors)} anchor{'s' if len(anchors) == 1 else ''} it only weakly)"
-                              if anchors else ""))
-                else:
-                    why = f"the posterior is pressed against the prior's box along the common scale of {', '.join(free)}"
-                warnings.append(
-                    f"COMMON SCALE: {why} ({how}): absolute moduli, p_sub, contact pressure and flow are set by the "
-                    f"prior's box along the common scale; {ANCHOR_HINT} (docs/inference.md, 'The common scale')")
-        for ex in scale_invariant_combinations(free):
-            a = np.array([ex.get(n, 0.0) for n in log_names])
-            shift = sum(ex[n] * math.log(TO_SI[n]) for n in ex)
-            vals = L @ a + shift
-            lm = float(w @ vals)
-            lsd = float(math.sqrt(max(float(w @ (vals - lm) ** 2), 0.0)))
-            qsd = prior_sd_along(a)
-            q = weighted_quantiles(vals, w, [0.05, 0.95])
-            combinations.append({"label": combination_label(ex), "exponents": dict(ex), "unit": _unit(ex),
-                                 "value": math.exp(lm), "log_mean": lm, "log_sd": lsd, "prior_log_sd": qsd,
-                                 "ratio": lsd / qsd if qsd > 0 else math.nan,
-                                 "q05": math.exp(float(q[0])), "q95": math.exp(float(q[1]))})
-    return Identifiability(parameters=parameters, principal=principal, scale=scale, combinations=combinations,
-                           anchors=anchors, warnings=warnings, log_names=log_names)
+def _common_scale(lv: _LogView, w: np.ndarray, v_scale: np.ndarray, free: tuple[str, ...], names,
+                  prior: Prior, measurements: Mapping) -> tuple[dict, bool]:
+    """(c) The posterior along the common scale against the prior and against the box's ray through the
+    posterior mean, the mass at the ray's ends, and whether the prior's box sets the scale; and whether the
+    posterior piles against an end of the ray."""
+    k = len(free)
+    idx = [lv.names.index(n) for n in free]
+    rate = math.sqrt(k)
+    with np.errstate(divide="ignore"):   # a lower bound of 0 (p_sub) bounds nothing in log
+        llo = np.log(np.array([prior.lo[names.index(n)] for n in free]))
+    lhi = np.log(np.array([prior.hi[names.index(n)] for n in free]))
+
+    def ray(x):   # extent along the scale direction of the ray through log point(s) x, in s units
+        d_lo = np.max(llo - x[..., idx], axis=-1)
+        d_hi = np.min(lhi - x[..., idx], axis=-1)
+        return rate * d_lo, rate * d_hi
+    s_lo, s_hi = ray(lv.mean)
+    ray_len = float(s_hi - s_lo)
+    ray_sd = _ray_sd(ray_len, rate)
+    post_sd = float(math.sqrt(max(float(v_scale @ lv.cov @ v_scale), 0.0)))
+    q_sd = lv.prior_sd_along(v_scale)
+    a_lo, a_hi = ray(lv.L)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = -a_lo / (a_hi - a_lo)
+    edge = (float(np.sum(w[u < EDGE_FRACTION])), float(np.sum(w[u > 1.0 - EDGE_FRACTION])))
+    edge_expected = _ray_end_mass(rate, ray_len, EDGE_FRACTION)
+    piled = any(e > EDGE_MASS_WARN and e > 2.5 * x for e, x in zip(edge, edge_expected))
+    measured = [n for n in free if n in measurements]
+    exact = k == len(SCALED) and not measured
+    ray_ratio = post_sd / ray_sd if ray_sd > 0 else math.nan
+    set_by_prior = exact or ray_ratio > SCALE_RATIO_WARN or piled
+    return ({"names": list(free), "direction": {n: float(v_scale[i]) for i, n in enumerate(lv.names) if v_scale[i]},
+            "posterior_sd": post_sd, "prior_sd": q_sd, "ratio": post_sd / q_sd if q_sd > 0 else math.nan,
+            "ray_prior_sd": ray_sd, "ray_ratio": ray_ratio, "ray_length": ray_len,
+            "log_c_sd": post_sd / rate, "edge_mass": list(edge), "edge_mass_expected": list(edge_expected),
+            "exact_symmetry": exact, "measured": measured, "set_by_prior": bool(set_by_prior)}, piled)
+
+
+def _scale_warning(scale: dict, piled: bool, anchors: list[str]) -> str:
+    """(d) The plain warning of a common scale that the prior's box sets (``scale``, ``piled`` from
+    :func:`_common_scale`)."""
+    free, measured, ray_ratio = scale["names"], scale["measured"], scale["ray_ratio"]
+    edge = scale["edge_mass"]
+    how = (f"the posterior sd along it is {ray_ratio:.0%} of what the prior box allows there"
+           + (f", and {max(edge):.0%} of the posterior lies in the outer {EDGE_FRACTION:.0%} of the box "
+              "along it" if piled else "")
+           + "; contact pressure scales with it and flow with its square root")
+    if measured:
+        given = "; ".join(a for a in anchors if a.startswith("measured"))
+        subject = (f"the measurements ({given}) narrow" if len(measured) > 1
+                   else f"the measurement ({given}) narrows")
+        return (f"COMMON SCALE: {subject} the common scale of {', '.join(free)} only partly ({how}): absolute "
+                "moduli, p_sub, contact pressure and flow still rest partly on the prior's box along the common "
+                "scale; a tighter measurement, or a second one (--measure rho=MEAN:SD), would anchor them "
+                "(docs/inference.md, 'The common scale')")
+    if scale["exact_symmetry"]:
+        why = "a GAW cannot determine the common scale of E_body, E_cover, E_lig, p_sub, rho and eta"
+    elif ray_ratio > SCALE_RATIO_WARN:
+        why = (f"the data barely determine the common scale of {', '.join(free)}"
+               + (f" ({'; '.join(anchors)} anchor{'s' if len(anchors) == 1 else ''} it only weakly)"
+                  if anchors else ""))
+    else:
+        why = f"the posterior is pressed against the prior's box along the common scale of {', '.join(free)}"
+    return (f"COMMON SCALE: {why} ({how}): absolute moduli, p_sub, contact pressure and flow are set by the "
+            f"prior's box along the common scale; {ANCHOR_HINT} (docs/inference.md, 'The common scale')")
+
+
+def _combinations(lv: _LogView, w: np.ndarray, free: tuple[str, ...]) -> list[dict]:
+    """The scale-invariant combinations of ``free`` (SI units): geometric mean, sd of the log, prior sd of
+    the log, 90 % interval."""
+    combinations = []
+    for ex in scale_invariant_combinations(free):
+        a = np.array([ex.get(n, 0.0) for n in lv.names])
+        shift = sum(ex[n] * math.log(TO_SI[n]) for n in ex)
+        vals = lv.L @ a + shift
+        lm = float(w @ vals)
+        lsd = float(math.sqrt(max(float(w @ (vals - lm) ** 2), 0.0)))
+        qsd = lv.prior_sd_along(a)
+        q = weighted_quantiles(vals, w, [0.05, 0.95])
+        combinations.append({"label": combination_label(ex), "exponents": dict(ex), "unit": _unit(ex),
+                             "value": math.exp(lm), "log_mean": lm, "log_sd": lsd, "prior_log_sd": qsd,
+                             "ratio": lsd / qsd if qsd > 0 else math.nan,
+                             "q05": math.exp(float(q[0])), "q95": math.exp(float(q[1]))})
+    return combinations
 
 
 #: Per parameter: the outer fraction of the prior box (each end) and the posterior weight in it that counts
@@ -366,42 +383,6 @@ def at_bounds(post, prior: Prior) -> list[dict]:
                                  "the recording against the model's reach (vfinfer reach --check; "
                                  "docs/inference.md, \"The model's reach\")")})
     return rows
-
-
-def format_identifiability(d: Mapping) -> str:
-    """Plain-text rendering of :meth:`Identifiability.to_dict` (also of a stored job summary's entry)."""
-    def f(x, fmt=".4g"):
-        return "-" if x is None else format(x, fmt)
-
-    lines = ["identifiability: posterior sd / prior sd (1 = the data said nothing, 0 = fully determined)",
-             f"{'parameter':<9} {'unit':<7} {'mean':>11} {'sd':>10} {'prior sd':>10} {'sd/prior':>8}"]
-    for r in d.get("parameters", []):
-        lines.append(f"{r['name']:<9} {r['unit']:<7} {f(r['mean'], '11.5g')} {f(r['sd'], '10.4g')} "
-                     f"{f(r['prior_sd'], '10.4g')} {f(r['ratio'], '8.3f')}")
-    names = d.get("log_names", [])
-    if d.get("principal"):
-        lines.append("principal directions of the posterior in log coordinates, least narrowed first:")
-        lines.append("  " + f"{'sd':>8} {'prior sd':>8} {'ratio':>6}  " + " ".join(f"{n:>7}" for n in names))
-        for r in d["principal"]:
-            lines.append("  " + f"{f(r['sd'], '8.3g')} {f(r['prior_sd'], '8.3g')} {f(r['ratio'], '6.3f')}  "
-                         + " ".join(f"{r['loadings'].get(n, 0.0):7.3f}" for n in names))
-    s = d.get("scale")
-    if s:
-        lines.append(f"common scale of {', '.join(s['names'])}: posterior sd {f(s['posterior_sd'], '.3g')} "
-                     f"(log units), prior sd {f(s['prior_sd'], '.3g')} (ratio {f(s['ratio'], '.2f')}), "
-                     f"the box along the ray {f(s['ray_prior_sd'], '.3g')} (ratio {f(s['ray_ratio'], '.2f')}); "
-                     f"sd of the common factor {f(s['log_c_sd'], '.3g')} in log"
-                     + ("; exact symmetry, not anchored" if s.get("exact_symmetry") else ""))
-    if d.get("combinations"):
-        lines.append("scale-invariant combinations (SI units): geometric mean, sd of the log, prior sd of the log:")
-        for c in d["combinations"]:
-            lines.append(f"  {c['label']:<20} {f(c['value'], '11.5g')} {c['unit']:<8} sd(log) {f(c['log_sd'], '.3g')} "
-                         f"prior {f(c['prior_log_sd'], '.3g')} ratio {f(c['ratio'], '.3f')} "
-                         f"(90%: {f(c['q05'], '.4g')} .. {f(c['q95'], '.4g')})")
-    if d.get("anchors"):
-        lines.append("anchors of the scale: " + "; ".join(d["anchors"]))
-    lines += [f"WARNING: {w}" for w in d.get("warnings", [])]
-    return "\n".join(lines)
 
 
 __all__ = ["SCALED", "BOUND_FRACTION", "BOUND_MASS_WARN", "Identifiability", "at_bounds", "identify", "format_identifiability", "scale_invariant_combinations", "combination_label",
