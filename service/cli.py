@@ -74,19 +74,6 @@ def reach_gate(spec, force_reach: bool) -> None:
         warn(w)
 
 
-def with_area_scale(spec, area_scale: list[float] | None):
-    """``spec`` with the area scale of ``--area-scale`` / ``--uncalibrated`` (validated as a whole again)."""
-    if area_scale is None:
-        return spec
-    from pydantic import ValidationError
-
-    from worker.jobspec import JobSpec
-    try:
-        return JobSpec.model_validate({**spec.model_dump(), "area_scale": area_scale})
-    except ValidationError as exc:
-        raise fail("invalid job: " + "; ".join(e["msg"].removeprefix("Value error, ") for e in exc.errors())) from None
-
-
 def print_expected_cost(spec, workers: int) -> None:
     """The run's expected cost, before it starts: simulations (exact for IS, the measured range for SMC) and
     minutes on this machine from a short timed probe of the job's own model."""
@@ -163,8 +150,7 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
-                      screen=screen, prior_set=prior_set)
-    spec = with_area_scale(spec, parse_area_scale(area_scale, uncalibrated))
+                      screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated))
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
     for w in warnings:

@@ -15,8 +15,9 @@ from rich.console import Console
 from rich.table import Table
 
 from .cli_common import check_out, choice, fail, human_duration, human_time, staged_output, warn
-from .cli_options import (Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise, Out, Overwrite,
-                          Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Token, Url)
+from .cli_options import (AreaScale, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise, Out, Overwrite,
+                          Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Token, Uncalibrated, Url,
+                          parse_area_scale)
 
 console = Console()
 JobId = Annotated[str, typer.Argument(help="job id printed by 'vfinfer submit' (32 characters)")]
@@ -99,13 +100,14 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
            dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25, sigma_e: SigmaE = 1.0,
            seed: Seed = 0, prior: Prior = None, fix: Fix = None, model: Model = "fe",
            noise: Noise = "fixed", measure: Measure = None,
-           force_reach: ForceReach = False, screen: Screen = None, prior_set: PriorSet = "paper") -> None:
+           force_reach: ForceReach = False, screen: Screen = None, prior_set: PriorSet = "paper",
+           area_scale: AreaScale = None, uncalibrated: Uncalibrated = False) -> None:
     """Submit an inference job to a running service; prints the job id (and the service's warnings)."""
     from .cli_spec import build_spec, note_is
     warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
-                      screen=screen, prior_set=prior_set)
+                      screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated))
     with Service(url, token) as svc:
         d = svc.json("POST", "/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"})
     for w in warnings + list(d.get("warnings", [])):

@@ -16,9 +16,10 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
                measure: list[str] | None = None, force_reach: bool = False, warnings: list[str] | None = None,
-               screen: str | None = None, prior_set: str = "paper"):
+               screen: str | None = None, prior_set: str = "paper", area_scale: list[float] | None = None):
     """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2. Warnings about
-    the input (clipped samples) are appended to ``warnings`` for the caller to print once all is checked."""
+    the input (clipped samples) are appended to ``warnings`` for the caller to print once all is checked.
+    ``area_scale``: the job's ``area_scale`` box (``parse_area_scale``; None: calibrated areas)."""
     from pydantic import ValidationError
 
     from worker.jobspec import JobSpec
@@ -46,6 +47,8 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
             "priors": priors or None, "fixed": fixed, "prior_set": prior_set, "sampler": smp, "mesh": mesh, "dt": dt,
             "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
             "chunk_size": chunk_size, "measurements": measurements, "force_reach": bool(force_reach)}
+    if area_scale is not None:
+        body["area_scale"] = list(area_scale)
     try:
         return JobSpec.model_validate(body)
     except ValidationError as exc:

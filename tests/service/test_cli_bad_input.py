@@ -116,7 +116,14 @@ def _fit_options(cmd: str) -> list[tuple]:
             ("model", ["--model", "cfd"], "model"), ("screen-mesh", ["--screen", "huge"], "--screen"),
             ("screen-dt", ["--screen", "coarse:abc"], "not a number"),
             ("screen-dt-range", ["--screen", "coarse:0.01"], "time step"),
-            ("screen-with-is", ["--sampler", "is", "--screen", "coarse"], "--sampler smc")]
+            ("screen-with-is", ["--sampler", "is", "--screen", "coarse"], "--sampler smc"),
+            ("area-scale-text", ["--area-scale", "a:2"], "not a number"),
+            ("area-scale-one", ["--area-scale", "2"], "LO:HI"),
+            ("area-scale-reversed", ["--area-scale", "4:0.25"], "0 < LO < HI"),
+            ("area-scale-zero", ["--area-scale", "0:4"], "0 < LO < HI"),
+            ("area-scale-negative", ["--area-scale", "-1:4"], "0 < LO < HI"),
+            ("area-scale-inf", ["--area-scale", "1:inf"], "finite"),
+            ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both")]
     cases = [(n, [*base, *a], nd) for n, a, nd in opts]
     cases += [(f"gaw-{n}", [cmd, f, *TOY], nd) for n, f, nd in GAW_FILES]
     cases += [("gaw-constant", [cmd, "{d}/constant.csv", *TOY], "gaw")]
@@ -130,15 +137,7 @@ INFER = _fit_options("infer") + [
     ("out-is-file", ["infer", "{d}/good.csv", *TOY, "--out", "{d}/afile.txt"], "not a folder"),
     ("out-foreign", ["infer", "{d}/good.csv", *TOY, "--out", "{d}/other", "--overwrite"], "refusing"),
     ("out-exists", ["infer", "{d}/good.csv", *TOY, "--out", "{d}/earlier"], "--overwrite"),
-    ("out-no-parent", ["infer", "{d}/good.csv", *TOY, "--out", "{d}/nowhere/o"], "does not exist")] + [
-    (n, ["infer", "{d}/good.csv", *TOY, *a], nd) for n, a, nd in [
-        ("area-scale-text", ["--area-scale", "a:2"], "not a number"),
-        ("area-scale-one", ["--area-scale", "2"], "LO:HI"),
-        ("area-scale-reversed", ["--area-scale", "4:0.25"], "0 < LO < HI"),
-        ("area-scale-zero", ["--area-scale", "0:4"], "0 < LO < HI"),
-        ("area-scale-negative", ["--area-scale", "-1:4"], "0 < LO < HI"),
-        ("area-scale-inf", ["--area-scale", "1:inf"], "finite"),
-        ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both")]]
+    ("out-no-parent", ["infer", "{d}/good.csv", *TOY, "--out", "{d}/nowhere/o"], "does not exist")]
 SUBMIT = _fit_options("submit") + _client(["submit", "{d}/good.csv", *TOY], job=False)
 SIMULATE = [(n, ["simulate", *a, "-o", "{out}.csv"], nd) for n, a, nd in [
     ("param-text", ["--param", "p_sub=abc"], "not a number"), ("param-unknown", ["--param", "foo=1"], "unknown"),
