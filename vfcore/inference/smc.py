@@ -7,24 +7,21 @@ Targets the sequence ``pi_phi(theta) ∝ prior(theta) L(theta)^phi`` with ``0 = 
    sees more of a rugged likelihood's basins; the first reweighting resamples it down to ``N``,
    and the first evidence increment is the mean over all of them, so ``log Z`` stays unbiased).
 2. Next temperature by bisection so that the effective sample size of the incremental
-   weights ``L^(phi' - phi)`` equals ``ess_fraction * N`` (adaptive tempering, Jasra et al.
-   2011; with equal weights this is the conditional ESS of Zhou, Johansen & Aston 2016).
-3. Evidence increment ``log mean_i L_i^(phi' - phi)``; ``log Z = sum`` of the increments.
-4. Systematic resampling to equal weights.
-5. Random-walk Metropolis moves targeting ``pi_phi'`` with Gaussian proposals whose
-   covariance is ``scale^2 * Cov(particles)``; proposals outside the prior box are rejected
+   weights ``L^(phi' - phi)`` equals ``ess_fraction * N``; evidence increment
+   ``log mean_i L_i^(phi' - phi)``, ``log Z = sum`` of the increments (:mod:`.tempering`).
+3. Systematic resampling to equal weights.
+4. Metropolis moves targeting ``pi_phi'`` (:mod:`.moves`): a random walk (in ``theta`` or, with
+   ``coords="log"``, in ``log theta``) with covariance ``scale^2 * Cov(particles)``, an independence
+   proposal from the fitted Gaussian, or both alternating; proposals outside the prior box are rejected
    without a simulation. The scale is adapted towards ``target_acceptance`` and the number of
    moves per generation is chosen from the observed acceptance rate ``a`` so that a particle
    has moved with probability ``p_move``: ``n = ceil(log(1 - p_move) / log(1 - a))`` clipped to
    ``[min_moves, max_moves]``.
-6. Repeat until ``phi = 1``; the final particles are an equally weighted posterior sample.
+5. Repeat until ``phi = 1``; the final particles are an equally weighted posterior sample.
 
-With ``coords="log"`` the random walk of step 5 runs in ``log theta`` (its covariance is the particles'
-there), and the Metropolis ratio gains the Jacobian ``sum log theta' - sum log theta`` because a
-uniform prior on ``theta`` has density ``prod theta`` in ``log theta``. With ``symmetry=`` (a
-:class:`.symmetry.ScaleGroup`: a direction along which the log-likelihood is exactly invariant, the
-model's common scale) the walk's covariance is projected off that direction and every move step ends
-with an exact group move along it, which needs no simulation (:mod:`.symmetry`).
+With ``symmetry=`` (a :class:`.symmetry.ScaleGroup`: a direction along which the log-likelihood is exactly
+invariant, the model's common scale) the walk runs in log coordinates projected off that direction and every
+move step ends with an exact group move along it, which needs no simulation (:mod:`.symmetry`).
 
 With ``reference=q`` (:mod:`.reference`) the run starts from draws of ``q`` instead of the prior
 and tempers ``q^(1 - phi) (p L)^phi`` (generalized stepping-stone path, Fan et al. 2011): the
@@ -32,14 +29,10 @@ reweighting uses ``log p + log L - log q`` in place of ``log L`` and the Metropo
 ``(1 - phi) (log q' - log q)``; ``log Z`` is still the evidence ``∫ p L`` (``q`` is normalised).
 A ``q`` near the posterior starts the sampler in its mode instead of making it find the mode.
 
-With ``delayed=True`` each Metropolis move is a two-stage delayed-acceptance move (Christen & Fox 2005):
-a proposal is first screened with a cheap log-likelihood ``l~`` (``SMCSampler.stage == "screen"``; a
-coarser mesh, a larger step), accepted there with probability ``min(1, exp(phi (l~' - l~)))``, and only
-the survivors are simulated with the full model and accepted with
-``min(1, exp(phi ((l' - l) - (l~' - l~))))``. The product of the two stages satisfies detailed balance for
-``pi_phi`` exactly, so the sampler's target, its reweighting and its evidence are the full model's; the
-cheap model only decides which proposals are worth a full simulation (a proposal the cheap model rejects
-costs a cheap simulation instead of a full one). The initial population is evaluated with both.
+With ``delayed=True`` each Metropolis move is a two-stage delayed-acceptance move (Christen & Fox 2005;
+:mod:`.moves`): a proposal is first screened with a cheap log-likelihood (``SMCSampler.stage == "screen"``; a
+coarser mesh, a larger step) and only the survivors are simulated with the full model; the sampler's target,
+its reweighting and its evidence stay the full model's. The initial population is evaluated with both.
 
 The sampler is an ask/tell state machine (``SMCSampler.ask() -> thetas or None``,
 ``SMCSampler.tell(evaluation)``) so a distributed worker evaluates each batch itself; all
@@ -52,14 +45,14 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy.linalg import solve_triangular
-from scipy.special import logsumexp
 
-from .diagnostics import DegenerateEnsembleWarning, ess_finite, systematic_resample
+from .diagnostics import DegenerateEnsembleWarning, systematic_resample
 from .importance import map_evaluate, resolve_target
+from .moves import delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
 from .posterior import Posterior
 from .prior import Prior
 from .problem import Evaluation, Problem
+from .tempering import next_temperature, reweight
 
 _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
 
@@ -67,22 +60,6 @@ _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
 COORDS = ("linear", "log")
 
 DEFAULT_PARTICLES = 300
-
-
-def next_temperature(loglik: np.ndarray, phi: float, target_ess: float, tol: float = 1e-10) -> float:
-    """Largest ``phi' in (phi, 1]`` with ``ESS(L^(phi' - phi)) >= target_ess`` (bisection)."""
-    ll = np.asarray(loglik, dtype=float)
-    if ess_finite((1.0 - phi) * ll) >= target_ess:
-        return 1.0
-    lo, hi = 0.0, 1.0 - phi
-    while hi - lo > tol * max(1.0, hi):
-        mid = 0.5 * (lo + hi)
-        if ess_finite(mid * ll) >= target_ess:
-            lo = mid
-        else:
-            hi = mid
-    # lo may be 0 if even an infinitesimal step fails (can't happen for finite ll); ensure progress
-    return phi + max(lo, 1e-12)
 
 
 class SMCSampler:
@@ -137,6 +114,7 @@ class SMCSampler:
             raise ValueError("the symmetry's prior estimates other parameters than the sampler's")
         self.coords = coords
         self.symmetry = symmetry
+        self._moves = moves_for(kernel, coords, independent_inflation)   # the proposals of even and odd steps
         self._log_jac: np.ndarray | None = None
         self.independent_inflation = float(independent_inflation)
         self.prior = prior
@@ -175,8 +153,6 @@ class SMCSampler:
         self.stage = "screen" if self.delayed else "full"
         self.ll_cheap: np.ndarray | None = None
         self._cheap_pending: np.ndarray | None = None
-        self._screen_idx: np.ndarray | None = None
-        self._screen_props: np.ndarray | None = None
         self.n_screened = 0
         self.n_screen_rejected = 0
 
@@ -244,18 +220,14 @@ class SMCSampler:
         # Metropolis accept/reject; uniform prior => ratio is the tempered likelihood ratio
         idx = self._pending_idx
         props = self._pending
-        ll_old = self.ev.loglik[idx]
-        ll_new = ev.loglik
-        with np.errstate(invalid="ignore"):
-            log_alpha = np.where(np.isfinite(ll_new), self.phi * (ll_new - ll_old), -np.inf)
-            if self.reference is not None:  # pi_phi ∝ q^(1 - phi) (p L)^phi; p is flat on the box
-                lq = self.reference.logpdf(np.concatenate([self.theta[idx], props]))
-                log_alpha = log_alpha + (1.0 - self.phi) * (lq[idx.size:] - lq[: idx.size])
-            if self._log_q_new is not None:  # independence proposal: Hastings correction
-                log_alpha = log_alpha + self._log_q_old - self._log_q_new
-            if self._log_jac is not None:    # a walk in log theta: the prior density there is p(theta) prod theta
-                log_alpha = log_alpha + self._log_jac
-        log_alpha = np.where(np.isnan(log_alpha), np.inf, log_alpha)  # old -inf, new finite
+        ref = None
+        if self.reference is not None:  # pi_phi ∝ q^(1 - phi) (p L)^phi; p is flat on the box
+            lq = self.reference.logpdf(np.concatenate([self.theta[idx], props]))
+            with np.errstate(invalid="ignore"):
+                ref = (1.0 - self.phi) * (lq[idx.size:] - lq[: idx.size])
+        hastings = (self._log_q_old, self._log_q_new) if self._log_q_new is not None else None
+        log_alpha = log_acceptance(self.phi, ev.loglik, self.ev.loglik[idx], reference=ref, log_q=hastings,
+                                   log_jac=self._log_jac)
         u = self._rng(_ACCEPT, self._step).random(idx.size)
         acc = np.log(u) < log_alpha
         self._finish_move(self._accept(idx, props, acc, ev))
@@ -282,16 +254,11 @@ class SMCSampler:
             self.stage = "full"
             return
         idx, props = self._pending_idx, self._pending
-        with np.errstate(invalid="ignore"):
-            log_a1 = np.where(np.isfinite(ll_cheap), self.phi * (ll_cheap - self.ll_cheap[idx]), -np.inf)
-            if self._log_jac is not None:    # the prior's part of the ratio belongs to the first stage
-                log_a1 = log_a1 + self._log_jac
-        log_a1 = np.where(np.isnan(log_a1), np.inf, log_a1)       # current cheap -inf, proposal finite
+        # the prior's part of the ratio (a log walk's Jacobian) belongs to the first stage
+        log_a1 = log_acceptance(self.phi, ll_cheap, self.ll_cheap[idx], log_jac=self._log_jac)
         u = self._rng(_ACCEPT, 2 * self._step + 1).random(idx.size)
         keep = np.log(u) < log_a1
         self.n_screen_rejected += int(idx.size - keep.sum())
-        self._screen_idx = idx[keep]
-        self._screen_props = props[keep]
         self._screen_cheap = ll_cheap[keep]
         if self._log_jac is not None:
             self._log_jac = self._log_jac[keep]
@@ -307,12 +274,7 @@ class SMCSampler:
     def _tell_full_delayed(self, ev) -> None:
         """Stage 2: the full model decides with the ratio corrected by the cheap one (exact target)."""
         idx, props, lc_new = self._pending_idx, self._pending, self._screen_cheap
-        ll_old = self.ev.loglik[idx]
-        ll_new = ev.loglik
-        with np.errstate(invalid="ignore"):
-            log_a2 = np.where(np.isfinite(ll_new),
-                              self.phi * ((ll_new - ll_old) - (lc_new - self.ll_cheap[idx])), -np.inf)
-        log_a2 = np.where(np.isnan(log_a2), np.inf, log_a2)
+        log_a2 = delayed_log_acceptance(self.phi, ev.loglik, self.ev.loglik[idx], lc_new, self.ll_cheap[idx])
         u = self._rng(_ACCEPT, 2 * self._step + 2).random(idx.size)
         acc = np.log(u) < log_a2
         lc = self.ll_cheap.copy()
@@ -329,40 +291,21 @@ class SMCSampler:
             return
         if self.generation >= self.max_generations:
             raise RuntimeError(f"SMC did not reach phi = 1 in {self.max_generations} generations (phi={self.phi:.3g})")
-        ll = self._bridge_loglik()
-        n_fin = int(np.count_nonzero(np.isfinite(ll)))
-        phi_new = next_temperature(ll, self.phi, self.ess_fraction * n_fin)
-        dphi = phi_new - self.phi
-        logw = np.where(np.isfinite(ll), dphi * ll, -np.inf)  # previous weights are equal (resampled)
-        lse = logsumexp(logw)
-        m = ll.size                  # the population: init_factor * N in the first generation, N after
-        inc = float(lse - math.log(m))
-        w = np.exp(logw - lse)
+        rw = reweight(self._bridge_loglik(), self.phi, self.ess_fraction)
+        phi_new, w, inc = rw.phi, rw.weights, rw.log_evidence_increment
         self.log_evidence += inc
-        sw2 = float(np.sum(w * w))
-        self.log_evidence_var += max(m / (m - 1) * (sw2 - 1.0 / m), 0.0)
-        self.last_ess = 1.0 / sw2
+        self.log_evidence_var += rw.log_evidence_var
+        self.last_ess = rw.ess
         self.generation += 1
-        # covariance of the reweighted particles (in the walk's coordinates) -> RW proposal
-        x = self._walk_coords(self.theta)
-        mu = w @ x
-        dev = x - mu
-        cov = (dev * w[:, None]).T @ dev
-        if self.symmetry is not None:   # project out the orbit direction: the group move samples along it
-            proj = np.eye(self.prior.ndim) - np.outer(self.symmetry.direction, self.symmetry.direction)
-            cov = proj @ cov @ proj
+        # the reweighted particles' Gaussian (in the walk's coordinates) -> the proposals
         span = np.log(self.prior.hi / self.prior.lo) if self.coords == "log" else self.prior.width
-        cov += np.diag((1e-9 * span) ** 2)
-        try:
-            self._chol = np.linalg.cholesky(cov)
-        except np.linalg.LinAlgError:
-            self._chol = np.diag(np.sqrt(np.clip(np.diag(cov), 1e-30, None)))
+        direction = self.symmetry.direction if self.symmetry is not None else None
+        self._mu, self._chol = walk_cholesky(self._walk_coords(self.theta), w, direction, span)
         idx = systematic_resample(w, self.n, self._rng(_RESAMPLE))
         self.theta = self.theta[idx]
         self.ev = self.ev.take(idx)
         if self.delayed:
             self.ll_cheap = self.ll_cheap[idx]
-        self._mu = mu
         self.history.append({"generation": self.generation, "phi": phi_new, "ess": self.last_ess,
                              "log_evidence_increment": inc, "n_unique_after_resample": int(np.unique(idx).size)})
         self.phi = phi_new
@@ -385,38 +328,20 @@ class SMCSampler:
     def _walk_coords(self, theta: np.ndarray) -> np.ndarray:
         return np.log(theta) if self.coords == "log" else theta
 
-    def _independent_step(self) -> bool:
-        return self.kernel == "independent" or (self.kernel == "mixture" and self._step % 2 == 1)
-
-    def _log_q(self, x: np.ndarray) -> np.ndarray:
-        # Gaussian N(mu, c^2 Sigma) log density up to a constant (the box truncation cancels)
-        c = self.independent_inflation
-        z = solve_triangular(self._chol, (x - self._mu).T, lower=True)
-        return -0.5 * np.sum(z * z, axis=0) / (c * c)
-
     def _propose(self) -> None:
         rng = self._rng(_MOVE, self._step)
         z = rng.standard_normal((self.n, self.prior.ndim))
-        if self._independent_step():
-            prop = self._mu + self.independent_inflation * z @ self._chol.T
-        elif self.coords == "log":
-            prop = np.exp(np.log(self.theta) + self.scale * z @ self._chol.T)
-        else:
-            prop = self.theta + self.scale * z @ self._chol.T
+        move = self._moves[self._step % 2]
+        prop = move.propose(self.theta, z, self.scale, self._chol, self._mu)
         inside = self.prior.contains(prop)
         self._pending_idx = np.flatnonzero(inside)
         self._pending = prop[inside]
-        self._log_jac = None
-        if self.coords == "log":
-            self._log_jac = np.sum(np.log(self._pending) - np.log(self.theta[self._pending_idx]), axis=1)
-        if self._independent_step():
-            self._log_q_old = self._log_q(self.theta[self._pending_idx])
-            self._log_q_new = self._log_q(self._pending)
+        self._log_jac = move.log_jacobian(self._pending, self.theta[self._pending_idx])
+        if move.independent:
+            self._log_q_old = move.log_q(self.theta[self._pending_idx], self._mu, self._chol)
+            self._log_q_new = move.log_q(self._pending, self._mu, self._chol)
         else:
             self._log_q_old = self._log_q_new = None
-
-    def _independent_step_done(self) -> bool:
-        return self.kernel == "independent" or (self.kernel == "mixture" and (self._step - 1) % 2 == 1)
 
     def _group_move(self) -> None:
         """Move every particle along the symmetry's orbit by an exact draw (vfcore.inference.symmetry);
@@ -447,7 +372,7 @@ class SMCSampler:
         a = float(np.mean(accepted))
         self._gen_acc.append(a)
         self._step += 1
-        if not self._independent_step_done():
+        if not self._moves[(self._step - 1) % 2].independent:
             # adapt the random-walk scale towards the target acceptance rate
             self.scale *= math.exp(2.0 * (a - self.target_acceptance))
             self.scale = min(max(self.scale, 1e-3), 10.0)
