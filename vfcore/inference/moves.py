@@ -26,7 +26,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import solve_triangular
 
-__all__ = ["Independence", "RandomWalk", "delayed_log_acceptance", "log_acceptance", "moves_for", "walk_cholesky"]
+__all__ = ["COORDS", "Independence", "RandomWalk", "check_moves", "delayed_log_acceptance", "log_acceptance",
+           "moves_for", "walk_cholesky"]
+
+#: Coordinates of the random walk: the parameters themselves, or their logarithms.
+COORDS = ("linear", "log")
 
 
 class RandomWalk:
@@ -71,6 +75,27 @@ class Independence:
         c = self.inflation
         z = solve_triangular(chol, (x - mu).T, lower=True)
         return -0.5 * np.sum(z * z, axis=0) / (c * c)
+
+
+def check_moves(kernel: str, coords: str | None, prior, reference, delayed: bool, symmetry) -> str:
+    """Check that the move options go together; returns the walk's coordinates (``coords``, by default
+    "log" with a symmetry and "linear" without)."""
+    if delayed and (reference is not None or kernel != "rw"):
+        raise ValueError("delayed acceptance is implemented for the random-walk kernel without a reference")
+    if kernel not in ("rw", "independent", "mixture"):
+        raise ValueError(f"kernel must be 'rw', 'independent' or 'mixture', got {kernel!r}")
+    coords = coords if coords is not None else ("log" if symmetry is not None else "linear")
+    if coords not in COORDS:
+        raise ValueError(f"coords must be one of {COORDS}, got {coords!r}")
+    if coords == "log" and (kernel != "rw" or reference is not None):
+        raise ValueError("log coordinates are implemented for the random-walk kernel without a reference")
+    if coords == "log" and np.any(prior.lo <= 0.0):
+        raise ValueError("log coordinates need every prior lower bound > 0")
+    if symmetry is not None and coords != "log":
+        raise ValueError("moves along a symmetry need the random walk in log coordinates")
+    if symmetry is not None and symmetry.prior.names != prior.names:
+        raise ValueError("the symmetry's prior estimates other parameters than the sampler's")
+    return coords
 
 
 def moves_for(kernel: str, coords: str, inflation: float) -> tuple:

@@ -46,18 +46,16 @@ from typing import Callable
 
 import numpy as np
 
-from .diagnostics import DegenerateEnsembleWarning, systematic_resample
+from .diagnostics import systematic_resample
 from .importance import map_evaluate, resolve_target
-from .moves import delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
+from .moves import COORDS, check_moves, delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
 from .posterior import Posterior
 from .prior import Prior
 from .problem import Evaluation, Problem
+from .smc_posterior import posterior_of
 from .tempering import next_temperature, reweight
 
 _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
-
-#: Coordinates of the random walk: the parameters themselves, or their logarithms.
-COORDS = ("linear", "log")
 
 DEFAULT_PARTICLES = 300
 
@@ -96,25 +94,10 @@ class SMCSampler:
             raise ValueError("the reference's prior has another number of dimensions than the sampler's")
         self.reference = reference
         self.delayed = bool(delayed)
-        if self.delayed and (reference is not None or kernel != "rw"):
-            raise ValueError("delayed acceptance is implemented for the random-walk kernel without a reference")
-        if kernel not in ("rw", "independent", "mixture"):
-            raise ValueError(f"kernel must be 'rw', 'independent' or 'mixture', got {kernel!r}")
         self.kernel = kernel
-        coords = coords if coords is not None else ("log" if symmetry is not None else "linear")
-        if coords not in COORDS:
-            raise ValueError(f"coords must be one of {COORDS}, got {coords!r}")
-        if coords == "log" and (kernel != "rw" or reference is not None):
-            raise ValueError("log coordinates are implemented for the random-walk kernel without a reference")
-        if coords == "log" and np.any(prior.lo <= 0.0):
-            raise ValueError("log coordinates need every prior lower bound > 0")
-        if symmetry is not None and coords != "log":
-            raise ValueError("moves along a symmetry need the random walk in log coordinates")
-        if symmetry is not None and symmetry.prior.names != prior.names:
-            raise ValueError("the symmetry's prior estimates other parameters than the sampler's")
-        self.coords = coords
+        self.coords = check_moves(kernel, coords, prior, reference, self.delayed, symmetry)
         self.symmetry = symmetry
-        self._moves = moves_for(kernel, coords, independent_inflation)   # the proposals of even and odd steps
+        self._moves = moves_for(kernel, self.coords, independent_inflation)   # the proposals of even and odd steps
         self._log_jac: np.ndarray | None = None
         self.independent_inflation = float(independent_inflation)
         self.prior = prior
@@ -125,8 +108,7 @@ class SMCSampler:
         self.p_move = float(p_move)
         self.min_moves, self.max_moves = int(min_moves), int(max_moves)
         self.max_generations = int(max_generations)
-        d = prior.ndim
-        d_walk = d - 1 if symmetry is not None else d   # the walk leaves the symmetry's direction to the group move
+        d_walk = prior.ndim - 1 if symmetry is not None else prior.ndim   # the group move samples the last one
         self.scale = float(init_scale) if init_scale is not None else 2.38 / math.sqrt(max(d_walk, 1))
         self.phi = 0.0
         self.generation = 0
@@ -346,13 +328,9 @@ class SMCSampler:
     def _group_move(self) -> None:
         """Move every particle along the symmetry's orbit by an exact draw (vfcore.inference.symmetry);
         no simulation: the waveforms stay, the products scale."""
-        from .symmetry import rescale_products
-        fin = np.isfinite(self.ev.loglik)
-        th, t, d = self.symmetry.move(self.theta, self.phi, self._rng(_GROUP, self._step))
-        t = np.where(fin, t, 0.0)
-        d = np.where(fin, d, 0.0)
-        self.theta = np.where(fin[:, None], th, self.theta)
-        self.ev = rescale_products(self.ev, t, d)
+        from .symmetry import move_particles
+        self.theta, self.ev, d = move_particles(self.symmetry, self.theta, self.ev, self.phi,
+                                                self._rng(_GROUP, self._step))
         if self.delayed:
             self.ll_cheap = np.where(np.isfinite(self.ll_cheap), self.ll_cheap + d, self.ll_cheap)
 
@@ -361,10 +339,7 @@ class SMCSampler:
         position along the orbit distinct without telling the data anything)."""
         if self.symmetry is None:
             return int(np.unique(self.theta, axis=0).shape[0])
-        v = self.symmetry.direction
-        x = np.log(self.theta)
-        x = x - np.outer(x @ v, v)
-        return int(np.unique(np.round(x, 10), axis=0).shape[0])
+        return self.symmetry.n_distinct(self.theta)
 
     def _finish_move(self, accepted: np.ndarray) -> None:
         if self.symmetry is not None:
@@ -389,37 +364,11 @@ class SMCSampler:
 
     # ------------------------------------------------------------------ result
     def result(self, *, obs_gaw=None, fps: float | None = None) -> Posterior:
+        """The final particles as an equally weighted :class:`.posterior.Posterior` (:mod:`.smc_posterior`)."""
         if not self.done:
             raise RuntimeError("SMC has not finished (keep calling ask/tell)")
-        import warnings
-
-        msgs = []
-        last = self.history[-1] if self.history else {}
-        acc = last.get("acceptance", 1.0)
-        uniq = last.get("n_unique_after_moves", self.n)
-        if uniq < 0.5 * self.n or acc < 0.05:
-            msgs.append(f"DEGENERATE ENSEMBLE (smc): final generation acceptance {acc:.3f}, {uniq} distinct "
-                        f"particles of {self.n}; increase max_moves or n_particles.")
-            warnings.warn(msgs[-1], DegenerateEnsembleWarning, stacklevel=2)
-        logw = np.full(self.n, -math.log(self.n))
         rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(self.generation + 1, 0, _FINAL)))
-        post = Posterior.from_weighted(self.prior.names, self.theta, logw, rng=rng,
-                                       log_evidence=self.log_evidence,
-                                       log_evidence_se=math.sqrt(self.log_evidence_var),
-                                       n_simulations=self.n_simulations, n_failed=self.n_failed, method="smc",
-                                       check=False, warnings=msgs, obs_gaw=obs_gaw, fps=fps)
-        post.ess = self.last_ess
-        post.pareto_k = float("nan")
-        if self.ev is not None and self.ev.gaw is not None:
-            post.predictive = self.ev
-            post.predictive_index = np.arange(self.n)
-        post.info.update({"generations": self.history, "n_generations": self.generation,
-                          "n_particles": self.n, "temperatures": [h["phi"] for h in self.history],
-                          "reference": self.reference is not None})
-        if self.delayed:
-            post.info.update({"delayed_acceptance": True, "n_screened": self.n_screened,
-                              "n_screen_rejected": self.n_screen_rejected})
-        return post
+        return posterior_of(self, rng, obs_gaw=obs_gaw, fps=fps)
 
 
 def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *, map: Callable = map,

@@ -116,6 +116,15 @@ class ScaleGroup:
             return self.scaled(theta, t), t, np.zeros(n)
         return self._move_measured(theta, phi, rng, k, t_lo, t_hi)
 
+    def n_distinct(self, theta: np.ndarray) -> int:
+        """Distinct particles of ``theta`` (n, d) counted off the orbits (in log coordinates projected off
+        :attr:`direction`): group moves make every particle's position along its orbit distinct without
+        telling the data anything."""
+        v = self.direction
+        x = np.log(theta)
+        x = x - np.outer(x @ v, v)
+        return int(np.unique(np.round(x, 10), axis=0).shape[0])
+
     def _move_measured(self, theta, phi, rng, k, t_lo, t_hi):
         """Independence Metropolis–Hastings on ``t`` with a piecewise-constant proposal fitted to the
         conditional on a grid: exact for any proposal, and accepting nearly always because the
@@ -171,6 +180,17 @@ def rescale_products(ev, t: np.ndarray, d_offset: np.ndarray):
     if ev.mean_flow is not None:
         kw["mean_flow"] = ev.mean_flow * np.sqrt(c)
     return replace(ev, **kw)
+
+
+def move_particles(group: ScaleGroup, theta: np.ndarray, ev, phi: float, rng: np.random.Generator):
+    """One exact group move of every particle ``theta`` (n, d) whose log-likelihood in ``ev`` is finite
+    (a failed one stays). Returns ``(theta, ev, d)``: the moved particles, their evaluation with the
+    products rescaled (:func:`rescale_products`) and the change (n,) of the log-likelihood."""
+    fin = np.isfinite(ev.loglik)
+    th, t, d = group.move(theta, phi, rng)
+    t = np.where(fin, t, 0.0)
+    d = np.where(fin, d, 0.0)
+    return np.where(fin[:, None], th, theta), rescale_products(ev, t, d), d
 
 
 def scale_group(problem) -> ScaleGroup | None:
