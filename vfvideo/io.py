@@ -95,49 +95,66 @@ def read_frames(source, max_frames: int | None = None) -> Frames:
         Unreadable file, no frames, frames of different sizes.
     """
     if isinstance(source, np.ndarray) or isinstance(source, (list, tuple)):
-        if isinstance(source, (list, tuple)):
-            it = source
-        else:
-            arr = source
-            if arr.ndim == 2:
-                raise VideoError("array input must be a stack of frames (n, h, w), got one 2D image")
-            it = arr
-        it = list(it)[:max_frames] if max_frames else it
-        data, color = _stack(it, "array")
-        return Frames(data=data, source="array", color=color)
-
+        return _frames_of_array(source, max_frames)
     path = Path(source)
     src = str(path)
     if not path.exists():
         raise VideoError(f"cannot read '{src}': no such file or directory")
     if path.is_dir():
-        files = sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS),
-                       key=lambda p: _natural_key(p.name))
-        if not files:
-            raise VideoError(f"{src}: folder contains no frames (no {'/'.join(IMAGE_EXTENSIONS)} files)")
-        if max_frames:
-            files = files[:max_frames]
-        import imageio.v3 as iio
-
-        def gen():
-            for f in files:
-                try:
-                    yield iio.imread(f)
-                except Exception as e:  # noqa: BLE001 - report which file
-                    raise VideoError(f"cannot read frame file '{f}': {e}") from e
-        data, color = _stack(gen(), src)
-        return Frames(data=data, source=src, color=color)
-
+        return _frames_of_folder(path, src, max_frames)
     if path.suffix.lower() == ".npy":
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except Exception as e:  # noqa: BLE001
-            raise VideoError(f"cannot read '{src}': {e}") from e
-        if arr.ndim not in (3, 4):
-            raise VideoError(f"{src}: expected a frame stack (n, h, w) or (n, h, w, 3), got shape {arr.shape}")
-        data, color = _stack(arr[:max_frames] if max_frames else arr, src)
-        return Frames(data=data, source=src, color=color)
+        return _frames_of_npy(path, src, max_frames)
+    return _frames_of_video(path, src, max_frames)
 
+
+def _frames_of_array(source, max_frames: int | None) -> Frames:
+    """Frames from an array (n, h, w) / (n, h, w, 3) or a list of frames."""
+    if isinstance(source, (list, tuple)):
+        it = source
+    else:
+        arr = source
+        if arr.ndim == 2:
+            raise VideoError("array input must be a stack of frames (n, h, w), got one 2D image")
+        it = arr
+    it = list(it)[:max_frames] if max_frames else it
+    data, color = _stack(it, "array")
+    return Frames(data=data, source="array", color=color)
+
+
+def _frames_of_folder(path: Path, src: str, max_frames: int | None) -> Frames:
+    """Frames from a folder of image files, in natural order of their names."""
+    files = sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS),
+                   key=lambda p: _natural_key(p.name))
+    if not files:
+        raise VideoError(f"{src}: folder contains no frames (no {'/'.join(IMAGE_EXTENSIONS)} files)")
+    if max_frames:
+        files = files[:max_frames]
+    import imageio.v3 as iio
+
+    def gen():
+        for f in files:
+            try:
+                yield iio.imread(f)
+            except Exception as e:  # noqa: BLE001 - report which file
+                raise VideoError(f"cannot read frame file '{f}': {e}") from e
+    data, color = _stack(gen(), src)
+    return Frames(data=data, source=src, color=color)
+
+
+def _frames_of_npy(path: Path, src: str, max_frames: int | None) -> Frames:
+    """Frames from a ``.npy`` stack (n, h, w) or (n, h, w, 3)."""
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except Exception as e:  # noqa: BLE001
+        raise VideoError(f"cannot read '{src}': {e}") from e
+    if arr.ndim not in (3, 4):
+        raise VideoError(f"{src}: expected a frame stack (n, h, w) or (n, h, w, 3), got shape {arr.shape}")
+    data, color = _stack(arr[:max_frames] if max_frames else arr, src)
+    return Frames(data=data, source=src, color=color)
+
+
+def _frames_of_video(path: Path, src: str, max_frames: int | None) -> Frames:
+    """Frames from a video or multi-page image file (imageio), with the frame rate of its metadata if any."""
     if path.stat().st_size == 0:
         raise VideoError(f"cannot read '{src}': the file is empty")
     import imageio.v3 as iio

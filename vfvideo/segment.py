@@ -260,28 +260,8 @@ def segment_frames(frames: np.ndarray, roi=None, max_grow: int = 3) -> Segmentat
     area = masks.sum(axis=(1, 2)).astype(float)
     if area.max() <= 0:
         raise VideoError("no visible opening: the segmented glottal area is zero in every frame")
-    # an opening is darker than the tissue around it in the same frame (a pulsing
-    # highlight only looks dark relative to its own brightest state)
-    im = int(np.argmax(area))
-    m = masks[im]
-    ring = ndimage.binary_dilation(m, iterations=4) & ~m
-    crop = frames[im, roi[0]:roi[1], roi[2]:roi[3]]
-    inside, around = float(np.median(crop[m])), float(np.median(crop[ring])) if ring.any() else float("inf")
-    if not inside < 0.8 * around:
-        raise VideoError("no visible opening: the segmented region is not darker than the tissue around it "
-                         f"(median grey {inside:.3g} inside vs {around:.3g} around)")
-
-    # quality flags
-    border = (masks[:, 0, :].any(1) | masks[:, -1, :].any(1) | masks[:, :, 0].any(1) | masks[:, :, -1].any(1))
-    # area jump: residual against the mean of the two neighbouring frames
-    pad = np.concatenate([[area[0]], area, [area[-1]]])
-    res = area - 0.5 * (pad[:-2] + pad[2:])
-    mad = 1.4826 * float(np.median(np.abs(res - np.median(res))))
-    jump = (np.abs(res) > 5.0 * mad) & (np.abs(res) > 0.2 * area.max())
-    expo = np.abs(gain / np.median(gain) - 1.0) > 0.3
-    ok = ~(border | jump | expo)
-    flags = [",".join(name for name, f in (("roi_border", border[i]), ("area_jump", jump[i]),
-                                           ("exposure", expo[i])) if f) for i in range(n)]
+    _check_darker(frames, masks, area, roi)
+    ok, flags = _quality_flags(masks, area, gain)
 
     left, right = _edges(masks, c0)
     a, b = _axis(masks, r0, c0)
@@ -294,3 +274,32 @@ def segment_frames(frames: np.ndarray, roi=None, max_grow: int = 3) -> Segmentat
     return Segmentation(masks=masks, roi=tuple(int(v) for v in roi), area_px=area, ok=ok, flags=flags,
                         left_edge=left, right_edge=right, axis=(a, b), left_px=left_px, right_px=right_px,
                         threshold=thr, dark_level=dark, tissue_level=tissue, motion=motion, notes=notes)
+
+
+def _check_darker(frames: np.ndarray, masks: np.ndarray, area: np.ndarray, roi) -> None:
+    """VideoError unless the opening, in the frame where it is largest, is darker than the tissue around it
+    in that frame (a pulsing highlight only looks dark relative to its own brightest state)."""
+    im = int(np.argmax(area))
+    m = masks[im]
+    ring = ndimage.binary_dilation(m, iterations=4) & ~m
+    crop = frames[im, roi[0]:roi[1], roi[2]:roi[3]]
+    inside, around = float(np.median(crop[m])), float(np.median(crop[ring])) if ring.any() else float("inf")
+    if not inside < 0.8 * around:
+        raise VideoError("no visible opening: the segmented region is not darker than the tissue around it "
+                         f"(median grey {inside:.3g} inside vs {around:.3g} around)")
+
+
+def _quality_flags(masks: np.ndarray, area: np.ndarray, gain: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per frame: ok (n,) and the flags that are set ("roi_border", "area_jump", "exposure", comma-separated)."""
+    n = masks.shape[0]
+    border = (masks[:, 0, :].any(1) | masks[:, -1, :].any(1) | masks[:, :, 0].any(1) | masks[:, :, -1].any(1))
+    # area jump: residual against the mean of the two neighbouring frames
+    pad = np.concatenate([[area[0]], area, [area[-1]]])
+    res = area - 0.5 * (pad[:-2] + pad[2:])
+    mad = 1.4826 * float(np.median(np.abs(res - np.median(res))))
+    jump = (np.abs(res) > 5.0 * mad) & (np.abs(res) > 0.2 * area.max())
+    expo = np.abs(gain / np.median(gain) - 1.0) > 0.3
+    ok = ~(border | jump | expo)
+    flags = [",".join(name for name, f in (("roi_border", border[i]), ("area_jump", jump[i]),
+                                           ("exposure", expo[i])) if f) for i in range(n)]
+    return ok, flags

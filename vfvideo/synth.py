@@ -126,8 +126,7 @@ def render_video(area_mm2: np.ndarray, fps: float, px_per_mm: float = 24.4, shap
     if area.ndim != 1 or np.any(area < 0):
         raise ValueError("area_mm2 must be a 1D array of non-negative areas")
     rng = np.random.default_rng(seed)
-    h, w = shape
-    n = area.size
+    (h, w), n = shape, area.size
     L = int(round(length_mm * px_per_mm))
     r0 = int(round(center[0] - L / 2))
     if r0 < 2 or r0 + L > h - 2:
@@ -143,23 +142,12 @@ def render_video(area_mm2: np.ndarray, fps: float, px_per_mm: float = 24.4, shap
     W = (area - chink_mm2) / px_area / (2.0 * s.sum())            # half-width scale per frame (px)
     kl, kr = 1.0 + asymmetry, 1.0 - asymmetry
 
-    yy, xx = np.mgrid[0:h, 0:w].astype(float)
-    tissue = 0.78 * (1 + texture * _smooth_noise(rng, shape, 3.0)) * (1 + 0.5 * texture * _smooth_noise(rng, shape, 12.0))
-    dark = 0.08 * (1 + 0.3 * _smooth_noise(rng, shape, 4.0))
-    cy, cx = h * 0.45, w * 0.55
-    illum = (1 - illumination) + illumination * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * (0.45 * max(h, w)) ** 2))
-    illum = illum * (1 + 0.3 * illumination * (xx / w - 0.5))
-
-    half_max = W.max() * max(kl, kr) + G * g.max() + 3
-    c_lo = max(0, int(np.floor(xc.min() - half_max)))
-    c_hi = min(w, int(np.ceil(xc.max() + half_max)) + 1)
-    if c_lo == 0 or c_hi == w:
-        raise ValueError("glottis does not fit into the frame")
+    tissue, dark, illum = _background(rng, shape, texture, illumination)
+    c_lo, c_hi = _column_window(xc, W.max() * max(kl, kr) + G * g.max() + 3, w)
     cols = np.arange(c_lo, c_hi, dtype=float)[None, :]
 
     frames = np.empty((n, h, w), dtype=np.uint8)
-    left = np.empty(n)
-    right = np.empty(n)
+    left, right = np.empty(n), np.empty(n)
     for i in range(n):
         hl = kl * W[i] * s + G * g
         hr = kr * W[i] * s + G * g
@@ -169,12 +157,42 @@ def render_video(area_mm2: np.ndarray, fps: float, px_per_mm: float = 24.4, shap
         img = tissue.copy()
         sub = img[r0:r0 + L, c_lo:c_hi]
         img[r0:r0 + L, c_lo:c_hi] = sub * (1 - cov) + dark[r0:r0 + L, c_lo:c_hi] * cov
-        img *= illum
-        if blur_sigma > 0:
-            img = ndimage.gaussian_filter(img, blur_sigma)
-        img = img * 255.0 + rng.normal(0.0, noise_sigma, size=shape)
-        frames[i] = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        frames[i] = _expose(img, illum, blur_sigma, noise_sigma, rng)
         left[i] = hl.sum() * px_area
         right[i] = hr.sum() * px_area
     return SyntheticVideo(frames=frames, area_mm2=left + right, area_left_mm2=left, area_right_mm2=right,
                           fps=float(fps), px_per_mm=float(px_per_mm), center=(float(center[0]), float(center[1])))
+
+
+def _background(rng: np.random.Generator, shape, texture: float,
+                illumination: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The tissue's and the glottis' brightness (0..1) and the multiplicative illumination, each (h, w)."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(float)
+    tissue = 0.78 * (1 + texture * _smooth_noise(rng, shape, 3.0)) * (1 + 0.5 * texture * _smooth_noise(rng, shape, 12.0))
+    dark = 0.08 * (1 + 0.3 * _smooth_noise(rng, shape, 4.0))
+    cy, cx = h * 0.45, w * 0.55
+    illum = (1 - illumination) + illumination * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * (0.45 * max(h, w)) ** 2))
+    illum = illum * (1 + 0.3 * illumination * (xx / w - 0.5))
+    return tissue, dark, illum
+
+
+def _column_window(xc: np.ndarray, half_max: float, w: int) -> tuple[int, int]:
+    """Columns ``[c_lo, c_hi)`` that hold the glottis at its widest (``half_max`` px either side of the axis
+    ``xc``); ValueError when that reaches the frame's edge."""
+    c_lo = max(0, int(np.floor(xc.min() - half_max)))
+    c_hi = min(w, int(np.ceil(xc.max() + half_max)) + 1)
+    if c_lo == 0 or c_hi == w:
+        raise ValueError("glottis does not fit into the frame")
+    return c_lo, c_hi
+
+
+def _expose(img: np.ndarray, illum: np.ndarray, blur_sigma: float, noise_sigma: float,
+            rng: np.random.Generator) -> np.ndarray:
+    """The camera's view of the scene ``img`` (h, w; 0..1, changed in place): illumination, optical blur,
+    sensor noise, 8-bit grey levels."""
+    img *= illum
+    if blur_sigma > 0:
+        img = ndimage.gaussian_filter(img, blur_sigma)
+    img = img * 255.0 + rng.normal(0.0, noise_sigma, size=img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
