@@ -125,7 +125,7 @@ def _measure_text(x: float, x_lo: float, x_hi: float, s: Mapping, label: str, un
     bound = s["max"] if x > s["q50"] else s["min"]
     text = (f"recording {label} {_fmt(x, fmt)}{u}; this model and prior reach {_fmt(s['q05'], fmt)}-"
             f"{_fmt(s['q95'], fmt)}{u} (5-95 %), at {side} {_fmt(bound, fmt)}{u}")
-    if x_lo != x_hi:
+    if area_scale and not x_lo == x_hi:       # an interval of true values (a NaN measure has none)
         text = text.replace(f"{u};", f"{u} (a true {_fmt(x_lo, fmt)}-{_fmt(x_hi, fmt)}{u} for an area scale "
                                      f"in [{area_scale[0]:g}, {area_scale[1]:g}]);", 1)
     return text

@@ -102,6 +102,15 @@ def test_no_draw_near_in_f0_and_area_together_is_marginal():
     assert v.n_near == 0 and v.verdict == "marginal" and "together" in v.message
 
 
+@pytest.mark.parametrize("area_scale", [None, (0.25, 4.0)])
+def test_a_measure_the_recording_lacks_is_no_verdict_and_no_error(area_scale):
+    """A recording whose speed quotient could not be measured (NaN) is judged on the rest, with or
+    without an unknown area scale."""
+    ens = synthetic()
+    v = rc.check_reach(rec_at(ens, speed_quotient=math.nan), ens, area_scale=area_scale)
+    assert v.verdict == "inside" and v.measures["speed_quotient"]["verdict"] != "outside"
+
+
 def test_unchecked_without_ensemble_and_only_outside_from_a_wider_prior():
     ens = synthetic()
     assert rc.check_reach(rec_at(ens), None).verdict == "unchecked"
