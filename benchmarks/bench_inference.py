@@ -147,7 +147,8 @@ def main(argv=None) -> int:
 
 def toy_comparison(a) -> int:
     """IS (a.draws) vs SMC (a.particles) on a 7-D linear-Gaussian problem with a closed form."""
-    from vfcore.inference.toy import LinearGaussianToy
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from linear_gaussian import LinearGaussianToy
     prior = Prior.default()
     toy = LinearGaussianToy(prior, n_obs=12, noise=0.3, seed=0)
     t0 = time.perf_counter()

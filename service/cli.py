@@ -70,7 +70,7 @@ def reach_gate(spec, force_reach: bool) -> None:
     w = v.warning("--force-reach")
     if w is None:
         console.print(f"reach: {v.message}", highlight=False, soft_wrap=True)
-    elif spec.model == "fe":                      # the toy test double has no reach to check
+    elif spec.model == "fe":                      # only the FE model has a reach to check
         warn(w)
 
 

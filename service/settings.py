@@ -27,7 +27,8 @@ class Settings(BaseModel):
     max_body_bytes: int = Field(default=8_000_000, ge=1_000)
     max_running_jobs: int = Field(default=4, ge=1, le=64, description="jobs driven concurrently")
     max_active_jobs_per_user: int = Field(default=50, ge=1)
-    allow_toy_model: bool = Field(default=False, description="accept model='toy' (test double) jobs")
+    allow_toy_model: bool = Field(default=False,
+                                  description="accept jobs for models registered as test doubles (worker.models)")
     link_secret: SecretStr | None = Field(default=None,
                                           description="HMAC key of signed page links; None = random per process")
     link_ttl_s: int = Field(default=300, ge=10, le=3600, description="how long a signed page link stays valid (s)")

@@ -6,10 +6,10 @@ re-run from its store alone.  Validation errors name the offending field (pydant
 """
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError, field_validator, model_validator
 
 from vfcore.config import MESHES
 from vfcore.params import PARAM_NAMES
@@ -96,19 +96,13 @@ class SMCSettings(_Strict):
 SamplerSettings = Annotated[Union[ISSettings, SMCSettings], Field(discriminator="kind")]
 
 
-class ToyOptions(_Strict):
-    """Options of the analytic test double (``model="toy"``); see worker/toy.py."""
-
-    delay_s: float = Field(default=0.0, ge=0, le=5.0, description="artificial cost per simulation, s")
-
-
 class JobSpec(_Strict):
     """Everything that defines one inference job."""
 
     version: Literal[1] = SCHEMA_VERSION
-    model: Literal["fe", "toy"] = Field(
-        default="fe", description='"fe": the vfcore finite-element model; "toy": analytic test double '
-                                  "(accepted only when the service enables it)")
+    model: str = Field(
+        default="fe", description='"fe": the vfcore finite-element model; or another registered model '
+                                  "(worker.models; a test double is accepted only when the service enables it)")
     gaw: GAWSpec
     priors: dict[str, tuple[FiniteFloat, FiniteFloat]] | None = Field(
         default=None, description="{name: [lo, hi]} in paper units; omitted names keep the default "
@@ -140,11 +134,43 @@ class JobSpec(_Strict):
     seed: int = Field(ge=0, lt=2**63)
     chunk_size: int | None = Field(default=None, ge=1, le=10_000,
                                    description="simulations per worker task (default: sized to run for seconds)")
-    toy: ToyOptions | None = None
+    model_options: dict[str, Any] | None = Field(
+        default=None, description="options of a registered model that takes some (its defaults when omitted)")
     force_reach: bool = Field(
         default=False, description="fit even when the recording lies outside the model's reach (its GAW measures "
                                    "beyond every prior-predictive draw; docs/inference.md, \"The model's reach\"): "
                                    "the job is accepted with a warning instead of a 422")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _stored_options_name(cls, data):
+        # a stored schema-1 spec may name the model options after the one model that had some
+        if isinstance(data, dict) and "toy" in data and "model_options" not in data:
+            data = {**data, "model_options": data["toy"]}
+            del data["toy"]
+        return data
+
+    @field_validator("model")
+    @classmethod
+    def _known_model(cls, v):
+        from .models import model_named
+        model_named(v)
+        return v
+
+    def _check_model_options(self) -> None:
+        """Validate ``model_options`` against the model's options type and store them with defaults filled in."""
+        from .models import model_named
+        kind = model_named(self.model).options_type
+        if kind is None:
+            if self.model_options is not None:
+                raise ValueError(f"model_options: options given but model {self.model!r} takes none")
+            return
+        try:
+            opts = kind.model_validate(self.model_options or {})
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            raise ValueError(f"model_options.{'.'.join(map(str, err['loc']))}: {err['msg']}") from None
+        object.__setattr__(self, "model_options", opts.model_dump())
 
     @field_validator("sigma_bounds")
     @classmethod
@@ -200,10 +226,7 @@ class JobSpec(_Strict):
             raise ValueError(f"dt: camera fps {self.gaw.fps} exceeds the simulation rate 1/dt={1 / self.dt:.0f}")
         if self.mesh not in MESHES:  # pragma: no cover - Literal already enforces it
             raise ValueError(f"mesh must be one of {MESHES}")
-        if self.model == "toy" and self.toy is None:
-            object.__setattr__(self, "toy", ToyOptions())
-        if self.model != "toy" and self.toy is not None:
-            raise ValueError("toy: options given but model is not 'toy'")
+        self._check_model_options()
         try:
             prior = self.to_prior()
         except ValueError as exc:
@@ -260,14 +283,14 @@ class JobSpec(_Strict):
                        area_scale=self.area_scale)
 
     def to_problem(self):
-        """The ``vfcore.inference.Problem`` this job solves (the toy test double scores against it too)."""
+        """The ``vfcore.inference.Problem`` this job solves (every registered model is scored against it)."""
         return self._problem(self.to_prior())
 
     def reach(self):
         """The reach check of this job's recording (``vfcore.inference.reach.reach_for``): a
         :class:`~vfcore.inference.reach.ReachVerdict`, "unchecked" where no ensemble matches the configuration
-        and prior (none is built here: that takes minutes) and for the toy test double, which is not the
-        model the ensembles describe."""
+        and prior (none is built here: that takes minutes) and for a model other than "fe", which is not
+        the model the ensembles describe."""
         from vfcore.inference.reach import ReachVerdict, reach_for
         if self.model != "fe":
             return ReachVerdict("unchecked", f"the model's reach is not checked for model {self.model!r}",

@@ -24,17 +24,15 @@ from scipy.special import logsumexp
 
 from vfcore.inference.diagnostics import ess_from_logsums
 from vfcore.inference.importance import draw_prior
-from vfcore.inference.problem import Evaluation, Problem, ProblemEvaluator
+from vfcore.inference.problem import Evaluation, Problem
 
 from . import store as st
 from .jobspec import ISSettings, JobSpec, SMCSettings
+from .models import job_device, model_named
 
 #: Wall time one chunk should take (seconds): long enough that scheduling overhead (~ms per
 #: task) is < 1 %, short enough that a lost worker costs little and progress stays live.
 TARGET_CHUNK_SECONDS = 4.0
-#: Single-core seconds per time step of the FE model, per mesh (sizing only), measured on the
-#: 2-core CI machine with the JIT warm: coarse 0.062 s (dt=1e-4, 0.45 s), medium 0.125 s (dt=5e-5, 0.4 s).
-FE_SECONDS_PER_STEP = {"coarse": 1.4e-5, "medium": 1.6e-5, "fine": 2.1e-5}
 MIN_CHUNKS = 16
 
 
@@ -82,9 +80,7 @@ def register_warm_up(client) -> None:
 
 
 def estimated_seconds_per_sim(spec: JobSpec) -> float:
-    if spec.model == "toy":
-        return (spec.toy.delay_s if spec.toy else 0.0) + 2e-4
-    return (spec.duration / spec.dt) * FE_SECONDS_PER_STEP[spec.mesh]
+    return model_named(spec.model).seconds_per_sim(spec)
 
 
 #: The FE evaluator's lock-step block (vfcore.batch.simulate_many): a chunk smaller than it runs narrower
@@ -126,11 +122,6 @@ def expected_simulations(spec: JobSpec) -> tuple[int, int]:
 GPU_CHUNK = 4096
 
 
-def job_device(spec: JobSpec) -> str:
-    """The job's forward-model device ("cpu", "cuda" or "auto"; "cpu" for a spec without the field)."""
-    return getattr(spec, "device", None) or "cpu"
-
-
 def chunk_size_for(spec: JobSpec) -> int:
     """Simulations per task; a function of the spec only (it fixes the store's chunking). At least one
     lock-step block of the FE model unless the batch is smaller: a narrower chunk costs more per
@@ -148,13 +139,8 @@ def chunk_size_for(spec: JobSpec) -> int:
 
 
 def evaluator_for(spec: JobSpec, problem: Problem) -> Callable[[np.ndarray], Evaluation]:
-    if spec.model == "toy":
-        from .toy import ToyEvaluator
-        return ToyEvaluator(problem, spec.toy.delay_s if spec.toy else 0.0)
-    if job_device(spec) != "cpu":
-        from vfcore.inference.device_eval import DeviceEvaluator
-        return DeviceEvaluator(problem, job_device(spec))
-    return ProblemEvaluator(problem)
+    """The job's model as a picklable batch function ``thetas (k, d) -> Evaluation`` (worker.models)."""
+    return model_named(spec.model).evaluator(spec, problem)
 
 
 def run_chunk(c: int, lo: int, thetas: np.ndarray, *, store_path: str, b: int, evaluator) -> np.ndarray:

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from vfcore.inference.problem import Evaluation
+from vfcore.inference.evaluation import Evaluation
 
 LAYOUT_VERSION = 1
 EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "contact_impulse",

@@ -10,6 +10,7 @@ from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from fastapi.responses import HTMLResponse, JSONResponse
 
 from worker import store as st
+from worker.models import model_named
 from worker.reduce import compare_posteriors
 
 from ..access import done_job, own_job, page_reader
@@ -54,17 +55,17 @@ def reach_gate(spec: JobSpec) -> tuple[JSONResponse | None, dict]:
             "loc": ["body", "gaw"], "type": "value_error",
             "msg": v.message + "; send force_reach: true to fit anyway", "reach": v.to_dict()}]}), {}
     w = v.warning("force_reach")
-    warnings = [f"REACH: {w}"] if w is not None and spec.model == "fe" else []   # the toy has no reach
+    warnings = [f"REACH: {w}"] if w is not None and spec.model == "fe" else []   # only the FE model has a reach
     return None, {"reach": v.to_dict(), "warnings": warnings}
 
 
 @router.post("/jobs", status_code=status.HTTP_202_ACCEPTED, response_model=Submitted,
              summary="Submit an inference job (a GAW and the sampler's settings); answers its id")
 def submit(spec: JobSpec, user: UserDep, manager: ManagerDep, settings: SettingsDep) -> Submitted:
-    if spec.model == "toy" and not settings.allow_toy_model:
+    if model_named(spec.model).test_double and not settings.allow_toy_model:
         return JSONResponse(status_code=422, content={"detail": [{
             "loc": ["body", "model"], "type": "value_error",
-            "msg": "model 'toy' is a test double and is disabled on this service"}]})
+            "msg": f"model {spec.model!r} is a test double and is disabled on this service"}]})
     if manager.db.count_active(user) >= settings.max_active_jobs_per_user:
         raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS,
                             f"at most {settings.max_active_jobs_per_user} queued/running jobs per user")

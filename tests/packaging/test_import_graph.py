@@ -145,32 +145,19 @@ def test_no_module_imports_another_modules_private_names():
     assert not bad, bad
 
 
-def _top_level_imports(path: Path) -> set[int]:
-    """Line numbers of the import statements that run when the module is imported (not in a function)."""
-    lines, todo = set(), list(ast.parse(path.read_text(), str(path)).body)
-    while todo:
-        node = todo.pop()
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            continue
-        if isinstance(node, (ast.Import, ast.ImportFrom)):
-            lines.add(node.lineno)
-        todo.extend(ast.iter_child_nodes(node))
-    return lines
+DOUBLES = {p.stem for p in (ROOT / "tests" / "doubles").glob("*.py")}
 
 
-def test_test_doubles_are_reached_only_through_the_toy_model_switch():
-    """The analytic stand-ins (``vfcore.inference.toy``, ``worker.toy``) are not physics: the only product
-    code that loads one is the worker's evaluator for a ``model="toy"`` job (which the service refuses
-    unless started with ``VFINFER_ALLOW_TOY``), and it does so only when such a job runs."""
-    doubles = {"vfcore.inference.toy", "worker.toy"}
+def test_the_product_ships_no_test_doubles():
+    """The analytic stand-ins (``tests/doubles``) are not physics: they plug into the worker and the service
+    through ``worker.models``, so no product module imports them and the only model the product registers is
+    the finite-element one."""
     mods = _modules(PRODUCT)
-    users = {}
-    for m, path in mods.items():
-        if m in doubles:
-            continue
-        for line, module, names in _imports(m, path):
-            hit = {module} | {f"{module}.{n}" for n in names}
-            if hit & doubles:
-                users.setdefault(m, []).append(line)
-    assert set(users) <= {"worker.run"}, users
-    assert not set(users.get("worker.run", [])) & _top_level_imports(mods["worker.run"])
+    users = [f"{path.relative_to(ROOT)}:{line}" for m, path in mods.items()
+             for line, module, _ in _imports(m, path) if module.split(".")[0] in DOUBLES]
+    assert not users, users
+    registered = {node.args[0].value for path in mods.values() for node in ast.walk(ast.parse(path.read_text()))
+                  if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "register_model"
+                  and node.args and isinstance(node.args[0], ast.Constant)}
+    assert registered == {"fe"}, registered
+

@@ -1,4 +1,4 @@
-"""Helpers shared by the service tests (imported by name: tests/ has no packages)."""
+"""Helpers shared by the service tests (imported by name: the test folders are not packages)."""
 from __future__ import annotations
 
 import os
@@ -12,7 +12,10 @@ from pathlib import Path
 
 import uvicorn
 
-from worker.toy import toy_observation
+_DOUBLES = str(Path(__file__).resolve().parents[1] / "doubles")
+if _DOUBLES not in sys.path:        # benchmarks/bench_service.py imports this module by name, outside pytest
+    sys.path.insert(0, _DOUBLES)
+from toy_model import PLUGIN_ENV, toy_observation  # noqa: E402
 
 TOKENS = {"alice": "alice-token-0123456789", "bob": "bob-token-0123456789", "carol": "carol-token-0123456789"}
 
@@ -22,8 +25,8 @@ def auth(user: str) -> dict:
 
 
 def toy_spec(n: int = 400, seed: int = 1, delay: float = 0.0, sampler: dict | None = None, **kw) -> dict:
-    """A valid toy-model job (the analytic test double; see worker/toy.py)."""
-    spec = {"model": "toy", "toy": {"delay_s": delay},
+    """A valid toy-model job (the analytic test double; see tests/doubles/toy_model.py)."""
+    spec = {"model": "toy", "model_options": {"delay_s": delay},
             "gaw": {"areas": toy_observation(noise=0.5, seed=7), "fps": 4000.0, "units": "mm2"},
             "priors": {"E_cover": [450.0, 850.0], "p_sub": [700.0, 1300.0]},
             "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
@@ -42,7 +45,8 @@ def start_service(data_dir: Path, port: int, script: list[str] | None = None, en
     process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir``; returns once both
     workers answer."""
     env = {**os.environ, "VFINFER_DATA_DIR": str(data_dir), "VFINFER_ALLOW_TOY": "1", "VFINFER_N_WORKERS": "2",
-           "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1", **(env or {})}
+           "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1", **PLUGIN_ENV,
+           **(env or {})}
     log = data_dir.parent / f"serve_{port}_{time.time_ns()}.log"       # kept for the error message
     argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", str(port)]
     with open(log, "wb") as fh:

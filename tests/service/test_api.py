@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.jobspec import JobSpec
-from worker.toy import ToyEvaluator
+from toy_model import ToyEvaluator
 
 from svc_helpers import auth, toy_spec, wait_done
 

@@ -72,7 +72,7 @@ def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, mon
     import service.cli as cli
     from vfcore.inference import importance_sample
     from worker.reduce import identifiability_of, posterior_summary
-    from worker.toy import ToyEvaluator
+    from toy_model import ToyEvaluator
     seen = {}
 
     def fake_run_local(spec, out, workers, job_id="local"):

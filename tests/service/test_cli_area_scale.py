@@ -21,7 +21,7 @@ ARGS = ["--model", "toy", "--duration", "0.35", "--discard", "0.2", "--noise", "
 def _scaled_gaw_file(tmp_path):
     """The toy model at Table 3 recorded with areas TRUE_K times too large, plus noise."""
     from vfvideo.io import write_gaw_csv
-    from worker.toy import toy_observation
+    from toy_model import toy_observation
     a = TRUE_K * np.array(toy_observation()) + 0.3 * np.random.default_rng(3).standard_normal(400)
     return write_gaw_csv(tmp_path / "gaw.csv", np.arange(a.size) / 4000.0, a, 4000.0)
 
@@ -32,7 +32,7 @@ def test_infer_fits_the_area_scale_and_prints_it(tmp_path, monkeypatch, opts, bo
     import service.cli as cli
     from vfcore.inference import importance_sample
     from worker.reduce import area_scale_of, posterior_summary
-    from worker.toy import ToyEvaluator
+    from toy_model import ToyEvaluator
     seen = {}
 
     def fake_run_local(spec, out, workers, job_id="local"):

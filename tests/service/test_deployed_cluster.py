@@ -22,6 +22,7 @@ import yaml
 import zarr
 
 from svc_helpers import TOKENS, auth, free_port, toy_spec, wait_done
+from toy_model import PLUGIN_ENV
 
 from worker import store as st
 
@@ -117,7 +118,8 @@ def _local(cmd: list[str], values: dict[str, str], replace: dict[str, str] | Non
 
 
 def _env(compose_env: dict, **local) -> dict[str, str]:
-    env = {**os.environ, **{k: str(v) for k, v in compose_env.items()}, **local}
+    # the test double's module for the workers (unpickling its evaluator) and the API (its registry)
+    env = {**os.environ, **{k: str(v) for k, v in compose_env.items()}, **PLUGIN_ENV, **local}
     env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
     return env
 

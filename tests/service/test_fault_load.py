@@ -58,7 +58,7 @@ def test_worker_killed_mid_job_bit_identical(service):
 def test_twenty_concurrent_submissions_and_fast_status(service):
     from vfcore.inference.importance import importance_sample
     from worker.jobspec import JobSpec
-    from worker.toy import ToyEvaluator
+    from toy_model import ToyEvaluator
 
     http_url = service.url
     users = list(TOKENS)

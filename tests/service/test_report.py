@@ -15,7 +15,7 @@ from svc_helpers import toy_spec
 def post():
     from vfcore.inference.smc import smc
     from worker.jobspec import JobSpec
-    from worker.toy import ToyEvaluator
+    from toy_model import ToyEvaluator
     pb = JobSpec.model_validate(toy_spec(sigma_e=0.5)).to_problem()
     p = smc(ToyEvaluator(pb), pb.prior, n_particles=60, seed=1)
     p.obs_gaw, p.fps = pb.obs_compared, pb.fps

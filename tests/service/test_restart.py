@@ -14,7 +14,7 @@ from svc_helpers import auth, free_port, kill_service, start_service, toy_spec, 
 def test_service_restart_resumes_without_recomputing(tmp_path):
     from vfcore.inference.importance import importance_sample
     from worker.jobspec import JobSpec
-    from worker.toy import ToyEvaluator
+    from toy_model import ToyEvaluator
 
     data = tmp_path / "data"
     port = free_port()

@@ -78,11 +78,11 @@ def test_marginal_noise_job_runs_through_the_worker(tmp_path, client):
 
 
 def test_chunk_size_is_a_function_of_the_spec():
-    fe = JobSpec.model_validate({**toy_spec(n=50_000), "model": "fe", "toy": None, "mesh": "coarse"})
+    fe = JobSpec.model_validate({**toy_spec(n=50_000), "model": "fe", "model_options": None, "mesh": "coarse"})
     assert 1 <= chunk_size_for(fe) <= 50_000 // 16
     assert chunk_size_for(JobSpec.model_validate(toy_spec(n=100, chunk_size=7))) == 7
     # an FE SMC batch (200 particles) is cut into whole lock-step blocks, not 16 narrow chunks
-    smc = JobSpec.model_validate({**toy_spec(), "model": "fe", "toy": None, "mesh": "medium",
+    smc = JobSpec.model_validate({**toy_spec(), "model": "fe", "model_options": None, "mesh": "medium",
                                   "sampler": {"kind": "smc", "n_particles": 200}})
     assert chunk_size_for(smc) == 32
 
@@ -161,7 +161,7 @@ def test_expected_cost_is_measured_on_the_jobs_own_model():
     """The probe times the job's FE model here (positive, finite, and longer for a longer simulation);
     IS knows its count exactly, SMC gives the measured range per particle."""
     from worker.run import expected_simulations, probe_seconds_per_sim
-    base = {**toy_spec(n=300), "model": "fe", "toy": None, "mesh": "coarse", "dt": 1e-4}
+    base = {**toy_spec(n=300), "model": "fe", "model_options": None, "mesh": "coarse", "dt": 1e-4}
     short = JobSpec.model_validate({**base, "duration": 0.3, "discard": 0.1})
     long = JobSpec.model_validate({**base, "duration": 1.2, "discard": 0.1})
     t_short, t_long = probe_seconds_per_sim(short), probe_seconds_per_sim(long)

@@ -221,7 +221,7 @@ class ExtendedEvaluator:
 
     def _integrated(self, results, phis) -> Evaluation:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
-        from ..inference.problem import aligned_loglik, contact_means, cycle_means
+        from ..inference.scoring import aligned_loglik, contact_means, cycle_means
         from . import quadrature as _q
         pb = self.problem
         ext = self.extension

@@ -1,7 +1,6 @@
 """Bayesian inference of vocal-fold parameters (Hadwin et al. 2019, Section 4).
 
-Free of Dask/FastAPI: parallelism is passed in as a ``map``-like callable. The linear-Gaussian test
-problem (``vfcore.inference.toy``) is imported by the sampler checks that use it, not from here.
+Free of Dask/FastAPI: parallelism is passed in as a ``map``-like callable.
 """
 from .diagnostics import (PARETO_K_THRESHOLD, DegenerateEnsembleWarning, ess, log_evidence_is,
                           normalize_log_weights, pareto_k, systematic_resample, weighted_quantiles)

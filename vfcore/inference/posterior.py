@@ -18,7 +18,7 @@ import numpy as np
 from ..params import PARAM_UNITS
 from .diagnostics import (degeneracy_warnings, ess as _ess, normalize_log_weights, pareto_k as _pareto_k,
                           systematic_resample, weighted_quantiles)
-from .problem import Evaluation
+from .evaluation import Evaluation
 
 QUANTILE_LEVELS = (0.025, 0.05, 0.25, 0.5, 0.75, 0.95, 0.975)
 

@@ -9,7 +9,7 @@ import pytest
 from vfcore.config import SimConfig
 from vfcore.inference import Prior, importance_sample
 from vfcore.inference.problem import Problem, gaussian_loglik, marginal_gaussian_loglik
-from worker.toy import ToyEvaluator, toy_observation
+from toy_model import ToyEvaluator, toy_observation
 
 
 def _numeric(sim, obs, lo, hi, m=2_000_001):
@@ -75,7 +75,7 @@ def test_problem_validates_and_round_trips_the_noise_model():
 
 @pytest.mark.slow
 def test_intervals_are_calibrated_when_the_noise_level_is_unknown():
-    """The toy model (worker/toy.py, scored by vfcore's own likelihood) at the truth, with noise of
+    """The toy model (tests/doubles/toy_model.py, scored by vfcore's own likelihood) at the truth, with noise of
     sd 3 mm^2 where Problem assumes sigma_e = 1: with the fixed sigma_e the 90 % intervals are about
     three times too narrow and cover the truth in roughly 40 % of the replicates; with the noise
     integrated out they cover it at the nominal rate (40 replicates; importance sampling with

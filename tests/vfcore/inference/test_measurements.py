@@ -13,7 +13,7 @@ from vfcore.config import SimConfig
 from vfcore.inference import Prior, Problem, ProblemEvaluator, evaluate, importance_sample
 from vfcore.inference.problem import aligned_loglik, validate_measurements
 from vfcore.params import TABLE3
-from worker.toy import ToyEvaluator, toy_observation
+from toy_model import ToyEvaluator, toy_observation
 
 from inf_helpers import FakeSimulator
 

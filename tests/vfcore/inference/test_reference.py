@@ -9,7 +9,7 @@ from scipy import stats
 
 from vfcore.inference import Prior, smc
 from vfcore.inference.reference import GaussianReference, reference_from_posterior
-from vfcore.inference.toy import LinearGaussianToy
+from linear_gaussian import LinearGaussianToy
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from vfcore.inference import Prior, SMCSampler, draw_prior, importance_sample, reduce_importance, smc
-from vfcore.inference.toy import LinearGaussianToy
+from linear_gaussian import LinearGaussianToy
 
 Z = 4.0  # standard errors allowed (two-sided p ~ 6e-5 per comparison)
 

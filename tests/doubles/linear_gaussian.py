@@ -16,7 +16,7 @@ import math
 import numpy as np
 from scipy import stats
 
-from .prior import Prior
+from vfcore.inference.prior import Prior
 
 
 class LinearGaussianToy:

@@ -1,7 +1,9 @@
-"""TEST DOUBLE: a cheap analytic stand-in for the finite-element forward model.
+"""TEST DOUBLE: a cheap analytic stand-in for the finite-element forward model, registered as ``model="toy"``.
 
-This is *not* physics and never runs unless a job says ``model="toy"`` and the service was
-started with ``allow_toy_model`` (tests, benchmarks of the distributed machinery).  It maps the
+This is *not* physics. Importing this module registers it with ``worker.models`` as a test double, which
+the service accepts only when started with ``allow_toy_model`` (tests, benchmarks of the distributed
+machinery); a process of its own loads it through :data:`PLUGIN_ENV` (``VFINFER_MODEL_PLUGINS=toy_model``
+with this folder on its ``PYTHONPATH``). It maps the
 seven parameters to a smooth half-rectified, slowly growing sinusoid (a "damped oscillator"
 GAW) so the queue, store, fault-tolerance and resume logic can be exercised in milliseconds
 per simulation.  Scoring (alignment window, Gaussian log-likelihood) is vfcore's, so the
@@ -10,12 +12,33 @@ worker code path is identical to the FE one apart from the function that makes a
 from __future__ import annotations
 
 import math
+import os
 import time
+from pathlib import Path
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from vfcore.inference.problem import Evaluation, Problem, n_sim_frames
 from vfcore.params import PARAM_NAMES, TABLE3
+from worker.models import register_model
+
+_HERE = Path(__file__).resolve().parent
+
+#: Environment of a process of its own (``vfinfer serve``, a Dask worker) that must know this model: the
+#: registry imports ``toy_model`` on its first look-up, and unpickling the evaluator imports it too. The
+#: repository comes first on the path so that the test folders never shadow the packages.
+PLUGIN_ENV = {"PYTHONPATH": os.pathsep.join(p for p in (str(_HERE.parents[1]), str(_HERE),
+                                                         os.environ.get("PYTHONPATH")) if p),
+              "VFINFER_MODEL_PLUGINS": "toy_model"}
+
+
+class ToyOptions(BaseModel):
+    """``model_options`` of a ``model="toy"`` job."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    delay_s: float = Field(default=0.0, ge=0, le=5.0, description="artificial cost per simulation, s")
 
 
 def toy_gaw(full_params: np.ndarray, fps: float, n_frames: int) -> tuple[np.ndarray, float, float, float]:
@@ -77,3 +100,14 @@ def toy_observation(params: dict | None = None, fps: float = 4000.0, duration: f
     if noise:
         g = g + np.random.default_rng(seed).normal(0.0, noise, g.size)
     return np.maximum(g, 0.0).tolist()
+
+
+def _evaluator(spec, problem: Problem) -> ToyEvaluator:
+    return ToyEvaluator(problem, spec.model_options["delay_s"])
+
+
+def _seconds_per_sim(spec) -> float:
+    return spec.model_options["delay_s"] + 2e-4
+
+
+register_model("toy", _evaluator, _seconds_per_sim, ToyOptions, test_double=True)
