@@ -14,7 +14,8 @@ from .continuation import SEED_OFFSET, search_base
 from .extensions import get
 from .fit import null_drops, param_table
 from .mode_fits import base_near
-from .rank import RankReport, local_passes, null_consistent, prefer_nested, promote_local
+from .amend import local_passes, prefer_nested, promote_local
+from .rank import RankReport, null_consistent
 from .refits import keep_if_higher
 from .state import DiagnosisState, Run
 

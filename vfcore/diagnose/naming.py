@@ -7,7 +7,8 @@ import dataclasses
 
 from .checks import local_check, mode_check, nested_check
 from .extensions import get
-from .rank import RankReport, prefer_parsimonious, rank_best_of_base, rank_extensions
+from .amend import prefer_parsimonious
+from .rank import RankReport, rank_best_of_base, rank_extensions
 from .state import DiagnosisState, Run
 
 __all__ = ["rank_state", "best_of_base_from_summaries", "rank_best_of_base_state", "name_winner"]

@@ -308,7 +308,7 @@ def test_one_standard_error_rule_names_the_simpler_of_two_indistinguishable_fits
     """Two found extensions whose evidence differs by less than one standard error: the one with
     fewer parameters is named (the richer one stays a rival); a gap beyond one se, equal
     parameter counts, or a simpler fit that was not found leave the winner alone."""
-    from vfcore.diagnose.rank import prefer_parsimonious
+    from vfcore.diagnose.amend import prefer_parsimonious
     base = _Post(-1000.0, 0.5)
     nx = {"subglottal": 2, "epithelium": 1, "zipper": 2, "leak": 1}
 
@@ -528,7 +528,7 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
 
 
 def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
-    from vfcore.diagnose.rank import promote_local
+    from vfcore.diagnose.amend import promote_local
     # a 6,585-nat gain with 82 % RMS gain, but base runs 1,760 nats apart: not found globally
     tau = 1760.0
     r = rank_extensions((-7175.4, math.hypot(0.5, tau)), {"epithelium": (-590.0, math.hypot(1.0, tau)),
@@ -578,7 +578,7 @@ def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred(
     A (1 + lr_amp) / 2 exactly; prefer_nested names the simpler entry with a note."""
     from vfcore.diagnose.extensions import get
     from vfcore.diagnose.fit import observe_extended
-    from vfcore.diagnose.rank import prefer_nested
+    from vfcore.diagnose.amend import prefer_nested
     assert get("asymmetry").nests == (("scale", ("lr_phase",)),)
     t = np.arange(6000) / 20000.0
     y = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0)

@@ -50,7 +50,7 @@ def test_local_check_counts_the_roughness_as_an_error():
     named on the local comparison; the base fit's vibration was irregular (a 1e-6 relative change
     moved the log-likelihood by up to 81,000 nats). With the roughness in the error it is not
     named; at a regular base's roughness (0.01 nats) it is."""
-    from vfcore.diagnose.rank import local_passes
+    from vfcore.diagnose.amend import local_passes
     ok, se = local_passes(1426.0, 0.7, 0.4, 80994.6)
     assert not ok and se > 80000
     ok, se = local_passes(1426.0, 0.7, 0.4, 0.01)
