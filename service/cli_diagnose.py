@@ -289,7 +289,9 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
     attempts' time counted in, and the report itself; a failure is one ``error:`` line, exit 1."""
     from vfcore.inference.memo import CachedMap, account
 
-    from .diagnosis import jsonable, run_diagnose
+    from vfcore.strict_json import jsonable
+
+    from .diagnosis import run_diagnose
     try:
         with console.status("starting", spinner="dots") as status:
             if workers == 1:

@@ -18,8 +18,7 @@ import secrets
 import threading
 from pathlib import Path
 
-import numpy as np
-
+from vfcore.strict_json import jsonable
 from worker import store as st
 from worker.run import JobCancelled
 
@@ -35,26 +34,6 @@ RUN_KEYS = ("cost", "resume_store")
 class DiagnosisCancelled(JobCancelled):
     """Raised inside a running diagnosis once it is cancelled or the service stops (within a poll,
     :func:`dask_map`); the manager tells the two apart."""
-
-
-def jsonable(obj):
-    """A strict-JSON copy of a report: numpy scalars/arrays to Python, non-finite floats to None."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        x = float(obj)
-        return x if math.isfinite(x) else None
-    if obj is None or isinstance(obj, str):
-        return obj
-    return str(obj)
 
 
 # ------------------------------------------------------------------------------------ the one call of vfcore

@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from vfcore.strict_json import jsonable
 from worker.jobspec import JobSpec
 from worker.run import JobCancelled, JobControl, Progress, register_warm_up, run_job
 from worker.store import create_diagnosis_store
@@ -242,7 +243,7 @@ class JobManager:
         flush = self._flusher(job_id, lv)
 
         def progress(ev: dict) -> None:
-            lv.event = dg.jsonable(ev)
+            lv.event = jsonable(ev)
             flush(Progress(n_done=int(ev.get("simulations") or 0), phase=str(ev.get("stage"))))
 
         base = dg.job_posterior(self.store_path(spec.job)) if spec.request.reuse_posterior else None

@@ -9,7 +9,8 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError, field_validator, model_validator
+from pydantic import (BaseModel, ConfigDict, Field, FiniteFloat, PrivateAttr, ValidationError, field_validator,
+                      model_validator)
 
 from vfcore.config import MESHES
 from vfcore.params import PARAM_NAMES
@@ -21,6 +22,28 @@ SCHEMA_VERSION = 1
 MAX_FRAMES = 200_000
 MAX_SIMULATIONS = 1_000_000
 MAX_SMC_GENERATIONS = 100
+
+
+class _Derived:
+    """What a spec derives from its fields at validation and keeps (the ``Problem``, whose construction
+    estimates the recording's f0): not part of the spec's value, so equal specs compare equal whatever
+    either has built, and a copy or a pickle starts empty."""
+
+    __slots__ = ("problem",)
+
+    def __init__(self) -> None:
+        self.problem = None
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _Derived)
+
+    __hash__ = None
+
+    def __reduce__(self):
+        return _Derived, ()
+
+    def __deepcopy__(self, memo) -> "_Derived":
+        return _Derived()
 
 
 class _Strict(BaseModel):
@@ -140,6 +163,7 @@ class JobSpec(_Strict):
         default=False, description="fit even when the recording lies outside the model's reach (its GAW measures "
                                    "beyond every prior-predictive draw; docs/inference.md, \"The model's reach\"): "
                                    "the job is accepted with a warning instead of a 422")
+    _derived: _Derived = PrivateAttr(default_factory=_Derived)
 
     @model_validator(mode="before")
     @classmethod
@@ -237,12 +261,18 @@ class JobSpec(_Strict):
         except ValueError as exc:
             raise ValueError(f"measurements: {exc}") from None
         try:
-            self._problem(prior)
+            self._derived.problem = self._problem(prior)
         except ValueError as exc:
             raise ValueError(f"gaw/duration/discard: {exc}") from None
         return self
 
     # ------------------------------------------------------------------ derived quantities
+    def __copy__(self) -> "JobSpec":
+        # model_copy(update=...) makes a spec with other fields: it must not keep this spec's Problem
+        m = super().__copy__()
+        m.__pydantic_private__["_derived"] = _Derived()
+        return m
+
     @property
     def n_simulations(self) -> int:
         """Simulations of the first (IS: only) stage, known up front."""
@@ -283,8 +313,11 @@ class JobSpec(_Strict):
                        area_scale=self.area_scale)
 
     def to_problem(self):
-        """The ``vfcore.inference.Problem`` this job solves (every registered model is scored against it)."""
-        return self._problem(self.to_prior())
+        """The ``vfcore.inference.Problem`` this job solves (every registered model is scored against it): the
+        one built when the spec was validated, so every stage of a run that holds this spec shares it."""
+        if self._derived.problem is None:
+            self._derived.problem = self._problem(self.to_prior())
+        return self._derived.problem
 
     def reach(self):
         """The reach check of this job's recording (``vfcore.inference.reach.reach_for``): a

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from vfcore.params import PARAM_UNITS
+from vfcore.strict_json import jsonable
 
 from . import store as st
 from .jobspec import JobSpec
@@ -28,24 +29,6 @@ SUMMARY_QUANTITIES = {"mean_flow": "m^3/s", "contact_impulse": "N s/m", "contact
                       "mean_contact": "Pa", "max_contact": "Pa"}
 #: Summaries that depend on the time step and mesh: their entries carry ``"converged": False``.
 UNCONVERGED = frozenset({"mean_contact", "max_contact"})
-
-
-def _clean(x):
-    """JSON-safe copy: non-finite floats -> None, numpy scalars -> Python."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    return x
 
 
 def reduce_is_job(store_path: str) -> dict:
@@ -61,7 +44,7 @@ def reduce_is_job(store_path: str) -> dict:
     post = reduce_importance(thetas, ev, problem.prior.names, spec.seed, obs_gaw=problem.obs_compared,
                              fps=problem.fps)
     post.info["n_draws"] = int(thetas.shape[0])
-    return publish_posterior(store_path, post)
+    return publish_posterior(store_path, post, spec)
 
 
 def _finite_gaw(pred) -> np.ndarray | None:
@@ -103,7 +86,7 @@ def posterior_summary(post, pred: dict | None = None) -> dict:
     info = {k: v for k, v in post.info.items() if k in (
         "generations", "n_generations", "n_particles", "temperatures", "max_loglik", "n_draws",
         "failure_messages")}
-    return _clean({
+    return jsonable({
         "method": post.method, "names": list(post.names), "units": {n: PARAM_UNITS[n] for n in post.names},
         "table": post.summary_table(), "ess": post.ess, "pareto_k": post.pareto_k,
         "log_evidence": post.log_evidence, "log_evidence_se": post.log_evidence_se,
@@ -116,7 +99,7 @@ def posterior_summary(post, pred: dict | None = None) -> dict:
 def regularity_of(spec: JobSpec, post) -> dict | None:
     """The regularity check (vfcore.diagnose.regularity; 3 simulations) at the posterior's heaviest
     sample of an FE job: is the fitted vibration regular, so that the waveform likelihood is a
-    smooth function of the parameters? ``None`` for a toy job; an error is reported, not raised
+    smooth function of the parameters? ``None`` for another model; an error is reported, not raised
     (docs/inference.md, "Irregular vibration")."""
     if spec.model != "fe":
         return None
@@ -207,7 +190,7 @@ def area_scale_of(spec: JobSpec, pred) -> dict | None:
 
 
 def reach_of(spec: JobSpec) -> dict | None:
-    """The reach check of the job's recording (``JobSpec.reach``) as a dict, ``None`` for the toy model; an
+    """The reach check of the job's recording (``JobSpec.reach``) as a dict, ``None`` for a model other than "fe"; an
     error is reported, not raised."""
     if spec.model != "fe":
         return None
@@ -233,10 +216,12 @@ def edge_warnings(spec: JobSpec, post, nc: dict | None) -> list[str]:
     return out
 
 
-def publish_posterior(store_path: str, post) -> dict:
-    """Write the posterior arrays, summary, CSV and figures into the store; return the summary."""
+def publish_posterior(store_path: str, post, spec: JobSpec | None = None) -> dict:
+    """Write the posterior arrays, summary, CSV and figures into the store; return the summary. ``spec``: the
+    job's, when the caller has parsed it (its Problem is then shared by every check); else read from the store."""
     root = st.open_store(Path(store_path))
-    spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
+    if spec is None:
+        spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
     resampled = post.resampled_predictive()
     scale = area_scale_of(spec, resampled)
     if scale is not None and scale.get("warning"):
@@ -268,16 +253,16 @@ def publish_posterior(store_path: str, post) -> dict:
     pred, bands = _predictive_summary(resampled)
     summary = posterior_summary(post, pred)
     if scale is not None:
-        summary["area_scale"] = _clean(scale)
+        summary["area_scale"] = jsonable(scale)
         summary["formatted"] = summary["formatted"] + "\n" + scale["formatted"]
     if reg is not None:
-        summary["regularity"] = _clean(reg)
+        summary["regularity"] = jsonable(reg)
     if nc is not None:
-        summary["noise_check"] = _clean(nc)
+        summary["noise_check"] = jsonable(nc)
     if ident is not None:
-        summary["identifiability"] = _clean(ident)
+        summary["identifiability"] = jsonable(ident)
     if reach is not None:
-        summary["reach"] = _clean(reach)
+        summary["reach"] = jsonable(reach)
     pg = root.require_group("posterior")
     for name, arr in (("samples", np.asarray(post.samples, dtype=float)),
                       ("log_weights", np.asarray(post.log_weights, dtype=float)),
@@ -324,7 +309,7 @@ def samples_csv(post) -> tuple[bytes, bytes]:
         lw = float(post.log_weights[i])
         wr.writerow([repr(float(v)) for v in post.samples[i]]
                     + [repr(lw) if math.isfinite(lw) else "", repr(float(w[i])), int(counts[i])])
-    meta = _clean({
+    meta = jsonable({
         "format": "vfinfer samples v2", "names": list(post.names),
         "units": {n: PARAM_UNITS[n] for n in post.names},
         "columns": {"log_weight": "normalised log importance weight (empty: weight 0)",
@@ -368,4 +353,4 @@ def compare_posteriors(named_paths: dict[str, Path]) -> dict:
                 t, p = stats.ttest_ind(va, vb, equal_var=False)
                 out.append({"job_a": ids[a], "job_b": ids[b], "parameter": name, "mean_a": float(va.mean()),
                             "mean_b": float(vb.mean()), "t": float(t), "p_value": float(p)})
-    return _clean({"tests": out, "method": "Welch two-sample t-test on resampled posterior ensembles"})
+    return jsonable({"tests": out, "method": "Welch two-sample t-test on resampled posterior ensembles"})

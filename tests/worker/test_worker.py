@@ -169,3 +169,18 @@ def test_expected_cost_is_measured_on_the_jobs_own_model():
     assert expected_simulations(short) == (300, 300)
     smc = JobSpec.model_validate({**base, "sampler": {"kind": "smc", "n_particles": 50}})
     assert expected_simulations(smc) == (1000, 4500)
+
+
+def test_a_spec_builds_its_problem_once(monkeypatch):
+    """Validation builds the job's Problem (it checks the recording against the simulated window); every
+    stage that holds the spec shares that one (run, reducer checks), and it is not part of the spec's value."""
+    import vfcore.inference.problem as P
+    built = []
+    post_init = P.Problem.__post_init__
+    monkeypatch.setattr(P.Problem, "__post_init__", lambda self: (built.append(self), post_init(self))[1])
+    spec = JobSpec.model_validate(toy_spec())
+    assert len(built) == 1 and spec.to_problem() is built[0] and spec.to_problem() is built[0]
+    again = JobSpec.from_json(spec.to_json())
+    assert again == spec and len(built) == 2
+    moved = spec.model_copy(update={"sigma_e": 3.0})
+    assert moved.to_problem().sigma_e == 3.0 and spec.to_problem().sigma_e == 10.0

@@ -5,11 +5,10 @@ summary's entry renders the same as a fresh table; :mod:`.identify` re-exports b
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from typing import Mapping
 
-import numpy as np
+from ..strict_json import jsonable
 
 __all__ = ["Identifiability", "format_identifiability"]
 
@@ -27,25 +26,10 @@ class Identifiability:
     log_names: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return _finite(asdict(self))
+        return jsonable(asdict(self))
 
     def format(self) -> str:
         return format_identifiability(self.to_dict())
-
-
-def _finite(x):
-    if isinstance(x, dict):
-        return {str(k): _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 
 def format_identifiability(d: Mapping) -> str:
