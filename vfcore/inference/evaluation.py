@@ -81,28 +81,26 @@ class Evaluation:
         kw = {n: (None if getattr(self, n) is None else getattr(self, n)[idx]) for n in self._ARRAYS}
         return Evaluation(**kw)
 
+    def _combine(self, other: "Evaluation", rows) -> "Evaluation":
+        """Per array, ``rows(mine, others)``; None where either side lacks the array."""
+        kw = {}
+        for n in self._ARRAYS:
+            a, b = getattr(self, n), getattr(other, n)
+            kw[n] = None if a is None or b is None else rows(a, b)
+        return Evaluation(**kw)
+
     def where(self, mask, other: "Evaluation") -> "Evaluation":
         """Rows of ``other`` where ``mask`` else rows of ``self`` (same length)."""
         mask = np.asarray(mask, dtype=bool)
-        kw = {}
-        for n in self._ARRAYS:
-            a, b = getattr(self, n), getattr(other, n)
-            if a is None or b is None:
-                kw[n] = None
-            else:
-                m = mask.reshape((-1,) + (1,) * (a.ndim - 1))
-                kw[n] = np.where(m, b, a).astype(a.dtype, copy=False)
-        return Evaluation(**kw)
+        return self._combine(other, lambda a, b: np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
+                             .astype(a.dtype, copy=False))
 
     def scatter(self, idx, other: "Evaluation") -> "Evaluation":
         """Copy of self with rows ``idx`` replaced by the rows of ``other``."""
-        kw = {}
-        for n in self._ARRAYS:
-            a, b = getattr(self, n), getattr(other, n)
-            if a is None or b is None:
-                kw[n] = None
-            else:
-                a = a.copy()
-                a[np.asarray(idx)] = b
-                kw[n] = a
-        return Evaluation(**kw)
+        idx = np.asarray(idx)
+
+        def put(a, b):
+            a = a.copy()
+            a[idx] = b
+            return a
+        return self._combine(other, put)
