@@ -147,7 +147,7 @@ def main(argv=None) -> int:
 
 def toy_comparison(a) -> int:
     """IS (a.draws) vs SMC (a.particles) on a 7-D linear-Gaussian problem with a closed form."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "doubles"))   # the test problem
     from linear_gaussian import LinearGaussianToy
     prior = Prior.default()
     toy = LinearGaussianToy(prior, n_obs=12, noise=0.3, seed=0)
