@@ -68,7 +68,7 @@ class DiagnoseOptions:
         (:func:`.mode_fits.base_near`), at most this many times (0: off).
     local_check : bool
         A candidate failing only because the between-run error swamps its gain is compared with
-        the base model refitted in its own mode (:func:`.rank.promote_local`).
+        the base model refitted in its own mode (:func:`.amend.promote_local`).
     smc_options : dict or None
         Further keyword arguments of every SMC run.
     screen_options : dict or None
@@ -89,10 +89,10 @@ class DiagnoseOptions:
         likelihood by quadrature (:func:`.fit.fit_extended`); False: the SMC is joint.
     nested_check : bool
         A winner sitting where it reduces to a simpler entry is compared with that entry refitted
-        in its mode (:func:`.rank.prefer_nested`).
+        in its mode (:func:`.amend.prefer_nested`).
     parsimony_se : float
         A found entry with fewer parameters within this many standard errors of the winner is named
-        instead (:func:`.rank.prefer_parsimonious`; 0: off, the evidence has its own Occam factor).
+        instead (:func:`.amend.prefer_parsimonious`; 0: off, the evidence has its own Occam factor).
     rescue_forward, rescue_observation : bool
         Refit a forward- / observation-level refit that ended more than ``max(min_gain, k_se se)``
         below the base (it missed the base-like region of its own model) near the base's mode.
