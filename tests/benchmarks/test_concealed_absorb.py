@@ -29,6 +29,7 @@ def test_bad_clean_waveform_is_refused():
         A.continued_unabsorbed_rms(np.array([1.0, np.nan, 2.0, 3.0, 4.0]), CFG, CFG.fps)
 
 
+@pytest.mark.slow   # two continuation searches (about a minute on 2 cores)
 def test_continuation_absorbs_a_base_waveform_from_an_exact_and_from_a_distant_start():
     """A waveform the base model produces exactly (at `hidden`) is fully absorbable: from a start
     at `hidden` the search returns it (the start is scored on the whole window, RMS ~ 0); from a

@@ -111,6 +111,7 @@ def test_leak_shape_power_moves_the_gap_posteriorly():
 SMALL = {"leak": 1, "sep_ratio": 1, "control": 1}
 
 
+@pytest.mark.slow   # a whole small suite generated twice (about a minute on 2 cores)
 def test_determinism_and_public_files(tmp_path):
     a = G.generate_suite(5, counts=SMALL)
     b = G.generate_suite(5, counts=SMALL)
