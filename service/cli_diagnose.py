@@ -16,6 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw, warn
+from .cli_options import AreaScale, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
 from vfcore.diagnose.options import DiagnoseOptions
 
@@ -77,8 +78,11 @@ class StageReporter:
 
 
 def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
-                  duration: float, discard: float, sigma_e: float, noise: str = "fixed"):
-    """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line."""
+                  duration: float, discard: float, sigma_e: float, noise: str = "fixed", prior_set: str = "paper",
+                  area_scale: list[float] | None = None):
+    """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line.
+    ``prior_set``: the default bounds of the estimated parameters; ``area_scale``: the box of an unknown area
+    scale (``parse_area_scale``; None: calibrated areas)."""
     from vfcore.config import MESHES, SimConfig
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
@@ -121,9 +125,10 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
     if g.fps * dt > 1.0:
         raise _fail(f"--dt: camera fps {g.fps:g} exceeds the simulation rate 1/dt={1 / dt:.0f}")
     try:
-        prior = Prior.default(fixed=fixed)
+        prior = Prior.default(fixed=fixed, prior_set=prior_set)
         problem = Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e), noise=noise,
-                       config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps)))
+                          config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps)),
+                          area_scale=None if area_scale is None else tuple(area_scale))
     except ValueError as exc:
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
     for w in warnings:
@@ -249,7 +254,8 @@ def diagnose_cmd(
             help="store finished simulations in OUT/.resume while running, so the same command run again "
                  "after an interruption reads them back (same result, bit for bit); deleted once the "
                  "diagnosis is written")] = True,
-        seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed) -> None:
+        seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed,
+        prior_set: PriorSet = "paper", area_scale: AreaScale = None, uncalibrated: Uncalibrated = False) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
     from .diagnosis import plot
 
@@ -260,7 +266,8 @@ def diagnose_cmd(
         raise _fail(f"--workers must be >= 1, got {workers}")
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out} exists and is not a folder")
-    problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise)
+    problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise, prior_set,
+                            parse_area_scale(area_scale, uncalibrated))
     base_post = load_base(base, problem) if base is not None else None
 
     console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "

@@ -187,7 +187,10 @@ DIAGNOSE = [(f"gaw-{n}", ["diagnose", f, "--out", "{out}"], nd) for n, f, nd in 
         ("mesh", ["--mesh", "huge"], "mesh"), ("noise", ["--noise", "loud"], "noise"), ("dt", ["--dt", "0"], "--dt"),
         ("discard", ["--discard", "-1"], "--discard"), ("sigma", ["--sigma-e", "0"], "--sigma-e"),
         ("seed", ["--seed", "-1"], "--seed"), ("base-missing", ["--base", "{d}/nothing.nc"], "--base"),
-        ("base-not-netcdf", ["--base", "{d}/good.csv"], "not a vfinfer posterior"), *GENERIC]] + [
+        ("base-not-netcdf", ["--base", "{d}/good.csv"], "not a vfinfer posterior"),
+        ("prior-set", ["--prior-set", "martian"], "prior-set"),
+        ("area-scale-reversed", ["--area-scale", "4:0.25"], "0 < LO < HI"),
+        ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both"), *GENERIC]] + [
     ("out-is-file", ["diagnose", "{d}/good.csv", "--out", "{d}/afile.txt"], "not a folder"),
     ("no-out", ["diagnose", "{d}/good.csv"], "--out")]
 REACH = [(n, ["reach", *a], nd) for n, a, nd in [
