@@ -114,6 +114,8 @@ def fit_base(run: Run, st: DiagnosisState) -> None:
     else:
         st.n_simulations += int(st.base.n_simulations)
         all_base.append((float(st.base.log_evidence), float(st.base.log_evidence_se)))
+        # a stored posterior does not carry its problem's area scale; its residuals need it
+        st.base.area_scale = st.problem.area_scale
     st.before = st.summary(st.base)
     st.before["base_runs"] = [[z, s_] for z, s_ in all_base]
     st.before["wall_s"] = time.perf_counter() - run.t0          # all base runs

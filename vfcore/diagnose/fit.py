@@ -352,6 +352,7 @@ def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, see
                **smc_options)
     post.obs_gaw = problem.obs_compared
     post.fps = problem.fps
+    post.area_scale = problem.area_scale
     post.info["extension"] = extension
     if ev.integrated:
         post.info["integrated"] = integrated_summary(post, ev.integrated)

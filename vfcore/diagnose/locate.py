@@ -262,6 +262,6 @@ def from_posterior(post, *, sigma_e: float | str | None = "estimate", names=DEFA
     rp = post.resampled_predictive()
     if rp is None or rp.gaw is None or post.obs_gaw is None or post.fps is None:
         raise ValueError("posterior carries no predictive GAWs / observation")
-    g = np.asarray(rp.gaw, dtype=float)[np.asarray(rp.ok, dtype=bool)]
+    g = post.recorded_gaws()
     obs = np.asarray(post.obs_gaw, dtype=float)[: g.shape[1]]
     return locate(obs, g, post.fps, **kw), measure_pvalues(g, obs, post.fps, names, sigma_e=sigma_e)

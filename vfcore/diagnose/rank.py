@@ -312,13 +312,11 @@ def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: flo
     from .locate import locate
 
     def rep(p):
-        rp = p.resampled_predictive()
-        g = np.asarray(rp.gaw, dtype=float)[np.asarray(rp.ok, dtype=bool)]
+        g = p.recorded_gaws()
         return locate(np.asarray(p.obs_gaw, dtype=float)[: g.shape[1]], g, p.fps)
 
     def rms_of(p):
-        rp = p.resampled_predictive()
-        g = np.asarray(rp.gaw, dtype=float)[np.asarray(rp.ok, dtype=bool)]
+        g = p.recorded_gaws()
         y = np.asarray(p.obs_gaw, dtype=float)[: g.shape[1]]
         return float(np.sqrt(np.mean((y - g.mean(axis=0)) ** 2)))
 

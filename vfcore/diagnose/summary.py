@@ -13,13 +13,10 @@ __all__ = ["predicted_gaws", "fit_summary", "best_particles"]
 
 
 def predicted_gaws(post: Posterior) -> np.ndarray:
-    """The predicted GAWs of ``post``'s resampled particles whose simulation succeeded, shape
+    """The predicted GAWs of ``post``'s resampled particles whose simulation succeeded, as recorded (times
+    the area scale where it is unknown: :meth:`~vfcore.inference.posterior.Posterior.recorded_gaws`), shape
     ``(n_ok, n_frames)``, mm^2."""
-    rp = post.resampled_predictive()
-    if rp is None:
-        raise ValueError("the posterior carries no predictions (not an FE fit)")
-    g = np.asarray(rp.gaw, dtype=float)
-    return g[np.asarray(rp.ok, dtype=bool)]
+    return post.recorded_gaws()
 
 
 def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float | None = None) -> dict:

@@ -38,6 +38,8 @@ class Posterior:
     n_simulations, n_failed : forward simulations run / failed.
     predictive : per-draw model outputs (aligned GAW, flow, contact) for the rows
         ``predictive_index`` of ``samples`` (None when the likelihood is not the FE model).
+    area_scale : ``(k_lo, k_hi)`` of the problem's unknown area scale (``Problem.area_scale``), or None:
+        the recording's areas are ``k`` times the model's (:meth:`recorded_gaws`).
     """
 
     names: tuple[str, ...]
@@ -57,6 +59,7 @@ class Posterior:
     obs_gaw: np.ndarray | None = None
     fps: float | None = None
     info: dict = field(default_factory=dict)
+    area_scale: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -130,6 +133,25 @@ class Posterior:
     @property
     def resampled_samples(self) -> np.ndarray:
         return self.samples[self.resampled]
+
+    def recorded_gaws(self) -> np.ndarray:
+        """The resampled draws' predicted GAWs as the camera records them, succeeded draws only,
+        ``(n_ok, n_frames)`` mm^2: the model's areas, or with an unknown area scale each draw's areas times
+        its least-squares ``k = y.A / A.A`` against the recording, clipped to the box (the centre of ``k``'s
+        conditional given the draw, docs/inference.md, "Unknown area scale"), so that residuals and measures
+        compare like with like. ValueError without predictions."""
+        rp = self.resampled_predictive()
+        if rp is None or rp.gaw is None:
+            raise ValueError("the posterior carries no predictions (not an FE fit)")
+        g = np.asarray(rp.gaw, dtype=float)[np.asarray(rp.ok, dtype=bool)]
+        if self.area_scale is None or self.obs_gaw is None or g.size == 0:
+            return g
+        y = np.asarray(self.obs_gaw, dtype=float)[: g.shape[1]]
+        S = np.einsum("ij,ij->i", g, g)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = np.where(S > 0.0, (g @ y) / S, 1.0)
+        k = np.clip(k, float(self.area_scale[0]), float(self.area_scale[1]))
+        return g * k[:, None]
 
     def resampled_predictive(self) -> Evaluation | None:
         """Model outputs for each resampled draw (rows aligned with ``resampled``)."""

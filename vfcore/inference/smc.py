@@ -397,4 +397,6 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
     while (th := sampler.ask()) is not None:
         f = cheap if sampler.stage == "screen" else fn
         sampler.tell(map_evaluate(f, th, map=map, chunk_size=chunk_size))
-    return sampler.result(obs_gaw=obs, fps=fps)
+    post = sampler.result(obs_gaw=obs, fps=fps)
+    post.area_scale = getattr(target, "area_scale", None) if isinstance(target, Problem) else None
+    return post

@@ -180,3 +180,26 @@ def test_an_fe_twin_recorded_at_area_scale_1p7_recovers_k_and_the_parameters():
     assert m2 < 9.21 and np.all(np.abs(d) / post.sd < 3.0), (m2, q, tw.truth)
     ll = evaluate(np.vstack([tw.truth, post.mean]), pb).loglik
     assert ll[1] > ll[0] - 2.0, ll
+
+
+def test_recorded_gaws_scale_each_draw_by_its_clipped_least_squares_k():
+    """What the diagnosis compares with an uncalibrated recording: each predicted GAW times its own
+    least-squares scale, clipped to the area-scale box; unchanged without an area scale."""
+    import numpy as np
+
+    from vfcore.inference.posterior import Posterior
+    from vfcore.inference.problem import Evaluation
+
+    t = np.linspace(0.0, 1.0, 50)
+    a = np.vstack([np.sin(np.pi * t) ** 2, 2.0 * np.sin(np.pi * t) ** 2, np.sin(np.pi * t) ** 2])
+    y = 0.5 * a[0]
+    ev = Evaluation(loglik=np.zeros(3), ok=np.array([True, True, False]), gaw=a.astype(np.float32))
+    post = Posterior(names=("E_body",), samples=np.zeros((3, 1)), log_weights=np.log(np.full(3, 1 / 3)),
+                     resampled=np.arange(3), ess=3.0, pareto_k=0.0, log_evidence=0.0, log_evidence_se=0.0,
+                     n_simulations=3, predictive=ev, obs_gaw=y, fps=2000.0)
+    assert np.array_equal(post.recorded_gaws(), a[:2].astype(np.float32).astype(float))
+    post.area_scale = (0.3, 4.0)
+    g = post.recorded_gaws()
+    assert g.shape == (2, 50)
+    np.testing.assert_allclose(g[0], y, rtol=1e-6)                 # k = 0.5, inside the box
+    np.testing.assert_allclose(g[1], 0.3 * 2.0 * a[0], rtol=1e-6)  # k = 0.25, clipped to 0.3
