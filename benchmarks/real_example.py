@@ -82,6 +82,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path("real_example_output"))
     ap.add_argument("--no-fit", action="store_true", help="stop after the reach check")
+    ap.add_argument("--diagnose", action="store_true", help="after the fit, run the diagnosis from its posterior")
     a = ap.parse_args(argv)
     if not a.clip.is_file():
         print(f"clip not found: {a.clip} (the shared data folder beside the repository)")
@@ -129,7 +130,21 @@ def main(argv=None) -> int:
           "other, only shape and frequency inform the moduli")
     for w in summary.get("warnings", []):
         print(f"  warning: {w}")
+    if a.diagnose:
+        diagnose(Path(csv), a.out, a.workers)
     return 0
+
+
+def diagnose(csv: Path, out: Path, workers: int) -> None:
+    """``vfinfer diagnose`` on the recording, from the fit's posterior (no second base fit); prints its verdict."""
+    cmd = [str(Path(sys.executable).with_name("vfinfer")), "diagnose", str(csv), "--out", str(out / "diag"),
+           *FIT_OPTIONS, "--estimate", "E_body,E_cover,p_sub", "--base", str(out / "fit" / "posterior.nc"),
+           "--no-continuation", "--refit-particles", "16", "--max-refits", "2", "--workers", str(workers),
+           "--seed", "0"]
+    r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "COLUMNS": "160"})
+    print("$ " + " ".join(["vfinfer", *cmd[1:]]))
+    lines = (r.stdout + r.stderr).rstrip().splitlines()
+    print("\n".join(lines[-8:]))
 
 
 if __name__ == "__main__":
