@@ -134,11 +134,17 @@ def gaussian_measurement_loglik(values, measurements) -> float:
         if arr.size != len(PARAM_NAMES):
             raise ValueError(f"parameter vector must have {len(PARAM_NAMES)} values ({PARAM_NAMES}), got {arr.size}")
         get = dict(zip(PARAM_NAMES, arr.tolist())).__getitem__
-    total = 0.0
+    return float(measurement_terms({name: float(get(name)) for name in measurements}, measurements))
+
+
+def measurement_terms(values, measurements) -> np.ndarray:
+    """:func:`gaussian_measurement_loglik` over many draws at once: ``values`` maps each measured name to its
+    values (paper units, arrays of one shape); the sum of the Gaussian terms per draw, ``-inf`` where not finite."""
+    total = np.zeros(np.shape(next(iter(values.values())))) if values else np.zeros(())
     for name, (mean, sd) in measurements.items():
-        z = (float(get(name)) - mean) / sd
-        total += -0.5 * z * z - math.log(sd) - 0.5 * math.log(2.0 * math.pi)
-    return total if math.isfinite(total) else -math.inf
+        z = (np.asarray(values[name], dtype=float) - mean) / sd
+        total = total + (-0.5 * z * z - math.log(sd) - 0.5 * math.log(2.0 * math.pi))
+    return np.where(np.isfinite(total), total, -np.inf)
 
 
 # ---------------------------------------------------------------------------- problem

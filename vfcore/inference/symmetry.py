@@ -204,16 +204,13 @@ def scale_group(problem) -> ScaleGroup | None:
     idx = np.array([names.index(n) for n in SCALED])
     offset = None
     if problem.measurements:
-        cols = [(names.index(n), float(m), float(sd)) for n, (m, sd) in problem.measurements.items()]
+        from .problem import measurement_terms
+        meas = dict(problem.measurements)
+        cols = {n: names.index(n) for n in meas}      # measured names are estimated ones
 
         def offset(thetas: np.ndarray) -> np.ndarray:
-            # gaussian_measurement_loglik, vectorised over rows (the measured names are estimated ones)
             th = np.atleast_2d(thetas)
-            total = np.zeros(th.shape[0])
-            for j, mean, sd in cols:
-                z = (th[:, j] - mean) / sd
-                total = total + (-0.5 * z * z - math.log(sd) - 0.5 * math.log(2.0 * math.pi))
-            return total
+            return measurement_terms({n: th[:, j] for n, j in cols.items()}, meas)
     return ScaleGroup(prior, idx, offset)
 
 
