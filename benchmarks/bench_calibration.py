@@ -71,6 +71,12 @@ def main(argv=None) -> int:
                     help="default bounds: the paper's Table 2 or the human set (docs/inference.md, 'Prior sets')")
     ap.add_argument("--symmetry", choices=("auto", "off"), default="auto",
                     help="auto: log-ratio walk and exact scale moves when all six scaled parameters are free")
+    ap.add_argument("--contact", default="projection", help="midline contact law (SimConfig.contact)")
+    ap.add_argument("--max-moves", type=int, default=None,
+                    help="SMC: most Metropolis moves per generation (the sampler's default when omitted)")
+    ap.add_argument("--init-factor", type=int, default=1, help="SMC: first population = factor x particles")
+    ap.add_argument("--ids", default=None,
+                    help="comma-separated twin indices to run (0-based; twin i uses seed --seed + i)")
     ap.add_argument("--out", default="bench_calibration_out")
     a = ap.parse_args(argv)
 
@@ -79,7 +85,7 @@ def main(argv=None) -> int:
     values = TABLE3.as_dict() if a.prior_set == "paper" else HUMAN_HELD
     held = {n: values[n] for n in PARAM_NAMES if n not in est}
     prior = Prior.default(fixed=held, prior_set=a.prior_set)
-    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=a.duration)
+    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=a.duration, contact=a.contact)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     pool = None
@@ -93,14 +99,16 @@ def main(argv=None) -> int:
     rows = []
     t_all = time.perf_counter()
     try:
-        for i in range(a.datasets):
+        ids = [int(t) for t in a.ids.split(",")] if a.ids else range(a.datasets)
+        for i in ids:
             tw = make_twin(prior, cfg, seed=a.seed + i, sigma_e=a.sigma_e, n_obs=a.n_obs)
             t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 if a.sampler == "smc":
                     post = smc(tw.problem, n_particles=a.particles, seed=a.seed + i, map=mapper, chunk_size=a.chunk,
-                               symmetry="auto" if a.symmetry == "auto" else None)
+                               symmetry="auto" if a.symmetry == "auto" else None, init_factor=a.init_factor,
+                               **({"max_moves": a.max_moves} if a.max_moves else {}))
                 else:
                     post = importance_sample(tw.problem, n=a.draws, seed=a.seed + i, map=mapper,
                                              chunk_size=a.chunk * 4)

@@ -2,10 +2,11 @@
 
 Protocol: three twins at random truths inside Table 2 (x0 = 8.4 fixed; rng seeds 1, 2, 3, the first draw
 that phonates and closes on the full model), camera noise 1 mm^2; full model: coarse mesh, dt 5e-5 s, 550 ms;
-screen: the same on dt 1e-4 s. SMC with 200 particles, seed 0, both runs on the same 2 worker processes.
+screen: the same on dt 1e-4 s. SMC (log-ratio walk with exact scale moves, the default for six free parameters)
+with 200 particles (third argument), seed 0, both runs on the same worker processes.
 Reported per twin: full simulations (and screening ones), wall time, the largest change of a posterior mean
 in posterior sds and of a posterior sd (relative), and the truth's z-scores under each.
-Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_delayed_acceptance.py [n_twins] [workers]
+Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_delayed_acceptance.py [n_twins] [workers] [particles]
 """
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ def twin(seed: int):
     raise RuntimeError("no phonating draw")
 
 
-def main(n_twins: int, workers: int) -> None:
+def main(n_twins: int, workers: int, particles: int = 200) -> None:
     print(__doc__.split("Usage")[0])
     prior = Prior({n: TABLE2_BOUNDS[n] for n in NAMES}, {"x0": 8.4})
     print("| twin | run | full sims | screening sims | wall (s) | max dmean (sd) | max dsd | truth z (min, max) |")
@@ -52,7 +53,7 @@ def main(n_twins: int, workers: int) -> None:
             res = {}
             for label, screen in (("plain", None), ("delayed", cheap)):
                 t = time.perf_counter()
-                post = smc(full, n_particles=200, seed=0, map=ex.map, chunk_size=32, screen=screen)
+                post = smc(full, n_particles=particles, seed=0, map=ex.map, chunk_size=32, screen=screen)
                 res[label] = (post, time.perf_counter() - t)
             (a, ta), (b, tb) = res["plain"], res["delayed"]
             dm = np.max(np.abs(b.mean - a.mean) / a.sd)
@@ -66,4 +67,4 @@ def main(n_twins: int, workers: int) -> None:
 
 if __name__ == "__main__":
     args = sys.argv[1:]
-    main(int(args[0]) if args else 3, int(args[1]) if len(args) > 1 else 2)
+    main(int(args[0]) if args else 3, int(args[1]) if len(args) > 1 else 2, int(args[2]) if len(args) > 2 else 200)

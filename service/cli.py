@@ -18,7 +18,7 @@ import typer
 from rich.console import Console
 
 from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
-from .cli_options import (AreaScale, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise,
+from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise,
                           Out, Overwrite, Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Uncalibrated,
                           Workers, parse_area_scale, parse_fixed, parse_priors)
 from .cli_spec import build_spec, note_is
@@ -143,14 +143,16 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
           out: Out = Path("vfinfer_output"), overwrite: Overwrite = False, model: Model = "fe",
           noise: Noise = "fixed", measure: Measure = None, force_reach: ForceReach = False,
           screen: Screen = None, prior_set: PriorSet = "paper", area_scale: AreaScale = None,
-          uncalibrated: Uncalibrated = False) -> None:
+          uncalibrated: Uncalibrated = False, contact: Contact = "projection",
+          contact_layer_mm: ContactLayer = 0.1) -> None:
     """Run an inference on this machine (in-process Dask LocalCluster); write the posterior, samples, figures and
     an HTML report (OUT/index.html); print the posterior table and what the data determined. The recording is
     first checked against the model's reach ('vfinfer reach')."""
     warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
-                      screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated))
+                      screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
+                      contact=contact, contact_layer_mm=contact_layer_mm)
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
     for w in warnings:
@@ -207,6 +209,7 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
                  "--param", help="NAME=VALUE in paper units (E_body kPa, E_cover Pa, E_lig kPa, p_sub Pa, rho kg/m^3, "
                                  "eta Poise, x0 mm), repeatable; others keep the paper's Table 3 values")] = None,
              mesh: Mesh = "medium", dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25,
+             contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1,
              fps: Annotated[float, typer.Option(parser=POSITIVE, help="frame rate of the GAW written, "
                                                                           "frames/s")] = 2000.0,
              out: Annotated[Path, typer.Option("--out", "-o", help="GAW CSV to write (time_s, area_mm2)")
@@ -231,7 +234,8 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
     if not out.resolve().parent.is_dir():
         raise fail(f"--out {out}: the folder {out.resolve().parent} does not exist")
     try:
-        r = sim(p, SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=fps))
+        r = sim(p, SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=fps, contact=contact,
+                             contact_layer_mm=contact_layer_mm))
     except ValueError as exc:
         raise fail(f"simulation settings: {exc}") from None
     if not r.ok:
@@ -240,7 +244,8 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
     os.close(fd)
     try:
         write_gaw_csv(tmp, r.t, r.gaw, r.fps, meta={"source": "vfinfer simulate",
-                                                    "params": json.dumps(p.as_dict()), "mesh": mesh, "dt": dt})
+                                                    "params": json.dumps(p.as_dict()), "mesh": mesh, "dt": dt,
+                                                    "contact": contact})
         os.replace(tmp, out)
     finally:
         if os.path.exists(tmp):
@@ -256,7 +261,7 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
 
 @app.command()
 def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25,
-          prior: Prior = None, fix: Fix = None, prior_set: PriorSet = "paper",
+          contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1, prior: Prior = None, fix: Fix = None, prior_set: PriorSet = "paper",
           n: Annotated[int, typer.Option("--n", min=1, help="prior draws to simulate")] = 2000,
           seed: Annotated[int, typer.Option(min=0, help="random seed of the draws")] = 20190613,
           check: Annotated[Optional[Path], typer.Option(help="a GAW file to check against the reach")] = None,
@@ -281,7 +286,8 @@ def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, disca
     g = load_gaw(check, fps, warnings) if check is not None else None
     try:
         box = PriorBox(bounds, fixed)
-        cfg = SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=min(4000.0, 1.0 / dt))
+        cfg = SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=min(4000.0, 1.0 / dt),
+                        contact=contact, contact_layer_mm=contact_layer_mm)
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in warnings:

@@ -22,6 +22,13 @@ Mesh = Annotated[str, typer.Option(parser=choice("coarse", "medium", "fine"), me
                                    help="finite-element mesh: coarse (~172 triangles), medium (the paper's), fine")]
 Dt = Annotated[float, typer.Option(parser=POSITIVE,
                                    help="simulation time step, s (the paper's 5e-5); 1/dt must reach the frame rate")]
+Contact = Annotated[str, typer.Option(
+    parser=choice("projection", "layer"), metavar="[projection|layer]",
+    help="midline contact: 'projection' (the paper's rigid midline with an inelastic impact; its peak pressures grow "
+         "as --dt shrinks) or 'layer' (a thin compliant layer with the cover's modulus and viscosity: peak pressures "
+         "converge in dt and the likelihood is smoother in the parameters; docs/model.md, 'Contact')")]
+ContactLayer = Annotated[float, typer.Option(
+    "--contact-layer-mm", parser=POSITIVE, help="thickness of the contact layer, mm, in (0, 1) (--contact layer)")]
 Duration = Annotated[float, typer.Option(parser=POSITIVE, help="simulated time per run, s (the paper's 0.55)")]
 Discard = Annotated[float, typer.Option(parser=NON_NEGATIVE,
                                         help="initial transient discarded before comparing, s (< --duration)")]

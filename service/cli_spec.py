@@ -16,7 +16,8 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
                measure: list[str] | None = None, force_reach: bool = False, warnings: list[str] | None = None,
-               screen: str | None = None, prior_set: str = "paper", area_scale: list[float] | None = None):
+               screen: str | None = None, prior_set: str = "paper", area_scale: list[float] | None = None,
+               contact: str = "projection", contact_layer_mm: float = 0.1):
     """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2. Warnings about
     the input (clipped samples) are appended to ``warnings`` for the caller to print once all is checked.
     ``area_scale``: the job's ``area_scale`` box (``parse_area_scale``; None: calibrated areas)."""
@@ -46,7 +47,8 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
             "priors": priors or None, "fixed": fixed, "prior_set": prior_set, "sampler": smp, "mesh": mesh, "dt": dt,
             "duration": duration, "discard": discard, "sigma_e": sigma_e, "noise": noise, "seed": seed,
-            "chunk_size": chunk_size, "measurements": measurements, "force_reach": bool(force_reach)}
+            "chunk_size": chunk_size, "measurements": measurements, "force_reach": bool(force_reach),
+            "contact": contact, "contact_layer_mm": contact_layer_mm}
     if area_scale is not None:
         body["area_scale"] = list(area_scale)
     try:

@@ -115,6 +115,12 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
              f"<p class='muted'>{escape(str(s.get('method', '?')).upper())} posterior from "
              f"{s.get('n_simulations', '?')} simulations ({s.get('n_failed', 0)} failed); "
              f"{s.get('n_samples', '?')} weighted draws, {s.get('n_resampled', '?')} resampled.</p>"]
+    m = s.get("model")
+    if m and m.get("name", "fe") == "fe":
+        layer = f" {fmt_num(m.get('contact_layer_mm'), 'g')} mm" if m.get("contact") == "layer" else ""
+        parts.append(f"<p class='muted'>Model: {escape(str(m.get('mesh')))} mesh, dt {fmt_num(m.get('dt'), 'g')} s, "
+                     f"{fmt_num(m.get('duration'), 'g')} s simulated ({fmt_num(m.get('discard'), 'g')} s discarded), "
+                     f"contact {escape(str(m.get('contact')))}{layer}.</p>")
     warnings = s.get("warnings") or []
     if warnings:
         parts.append("<h2>Warnings</h2>" + "".join(f"<div class='warn'>{escape(w)}</div>" for w in warnings))
@@ -132,7 +138,7 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
     if pred:
         rows = [[escape(k.replace("_", " ")), escape(q.get("unit", "")), fmt_num(q.get("mean")), fmt_num(q.get("sd"), ".3g"),
                  f"{fmt_num(q.get('q05'))} – {fmt_num(q.get('q95'))}"
-                 + ("" if q.get("converged", True) else " (depends on mesh and time step)")]
+                 + ("" if q.get("converged", True) else f" (depends on {q.get('depends_on', 'mesh and time step')})")]
                 for k, q in pred.items()]
         parts.append("<h2>Flow and contact pressure</h2>"
                      + html_table(["quantity", "unit", "mean", "sd", "90 % interval"], rows, numeric_from=2))

@@ -137,6 +137,12 @@ class JobSpec(_Strict):
     sampler: SamplerSettings
     mesh: Literal["coarse", "medium", "fine"] = "medium"
     dt: FiniteFloat = Field(default=5e-5, gt=0, le=1e-3, description="time step, s")
+    contact: Literal["projection", "layer"] = Field(
+        default="projection", description="midline contact law: 'projection' (the paper's rigid midline, inelastic "
+                                          "impact) or 'layer' (a compliant layer with the cover's modulus and "
+                                          "viscosity; docs/model.md, 'Contact')")
+    contact_layer_mm: FiniteFloat = Field(default=0.1, gt=0, lt=1, description="contact layer thickness, mm "
+                                                                                "(contact 'layer')")
     duration: FiniteFloat = Field(default=0.55, gt=0, le=5.0, description="simulated time, s")
     discard: FiniteFloat = Field(default=0.25, ge=0, le=5.0, description="initial transient discarded, s")
     sigma_e: FiniteFloat = Field(gt=0, le=1e6, description="observation noise sd, mm^2")
@@ -290,7 +296,7 @@ class JobSpec(_Strict):
     def sim_config(self):
         from vfcore.config import SimConfig
         return SimConfig(mesh=self.mesh, dt=self.dt, duration=self.duration, discard=self.discard,
-                         fps=self.gaw.fps)
+                         fps=self.gaw.fps, contact=self.contact, contact_layer_mm=self.contact_layer_mm)
 
     def observed(self) -> np.ndarray:
         return np.asarray(self.gaw.areas, dtype=float)

@@ -27,8 +27,11 @@ from .jobspec import JobSpec
 #: as the time step shrinks and change with the mesh (docs/model.md, "Contact").
 SUMMARY_QUANTITIES = {"mean_flow": "m^3/s", "contact_impulse": "N s/m", "contact_pressure_in_contact": "Pa",
                       "mean_contact": "Pa", "max_contact": "Pa"}
-#: Summaries that depend on the time step and mesh: their entries carry ``"converged": False``.
+#: Summaries that are not converged: their entries carry ``"converged": False`` and ``"depends_on"``, the
+#: resolution they depend on. With the compliant contact layer the nodal peaks converge in the time step but,
+#: like every contact quantity, not in the mesh (docs/model.md, "Contact").
 UNCONVERGED = frozenset({"mean_contact", "max_contact"})
+DEPENDS_ON = {"projection": "mesh and time step", "layer": "mesh"}
 
 
 def reduce_is_job(store_path: str) -> dict:
@@ -55,8 +58,9 @@ def _finite_gaw(pred) -> np.ndarray | None:
     return g[np.all(np.isfinite(g), axis=1)]
 
 
-def _predictive_summary(pred) -> tuple[dict, np.ndarray | None]:
-    """Summary quantities and 5/50/95 % GAW bands of ``pred``, a posterior's resampled predictive."""
+def _predictive_summary(pred, contact: str = "projection") -> tuple[dict, np.ndarray | None]:
+    """Summary quantities and 5/50/95 % GAW bands of ``pred``, a posterior's resampled predictive
+    (``contact``: the job's contact law, which sets what the nodal peak pressures depend on)."""
     out = {}
     bands = None
     if pred is None:
@@ -74,6 +78,7 @@ def _predictive_summary(pred) -> tuple[dict, np.ndarray | None]:
                      "q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2])}
         if name in UNCONVERGED:
             out[name]["converged"] = False
+            out[name]["depends_on"] = DEPENDS_ON[contact]
     g = _finite_gaw(pred)
     if g is not None and g.shape[0]:
         bands = np.quantile(g, [0.05, 0.5, 0.95], axis=0)
@@ -250,8 +255,12 @@ def publish_posterior(store_path: str, post, spec: JobSpec | None = None) -> dic
         post.warnings = list(post.warnings) + edge_warnings(spec, post, nc)
     except Exception as exc:  # noqa: BLE001 - a check must not fail the job; recorded
         post.warnings = list(post.warnings) + [f"edge check failed: {type(exc).__name__}: {exc}"]
-    pred, bands = _predictive_summary(resampled)
+    pred, bands = _predictive_summary(resampled, spec.contact)
     summary = posterior_summary(post, pred)
+    summary["model"] = {"name": spec.model, "mesh": spec.mesh, "dt": spec.dt, "duration": spec.duration,
+                        "discard": spec.discard, "contact": spec.contact}
+    if spec.contact == "layer":
+        summary["model"]["contact_layer_mm"] = spec.contact_layer_mm
     if scale is not None:
         summary["area_scale"] = jsonable(scale)
         summary["formatted"] = summary["formatted"] + "\n" + scale["formatted"]

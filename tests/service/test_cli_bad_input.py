@@ -123,7 +123,10 @@ def _fit_options(cmd: str) -> list[tuple]:
             ("area-scale-zero", ["--area-scale", "0:4"], "0 < LO < HI"),
             ("area-scale-negative", ["--area-scale", "-1:4"], "0 < LO < HI"),
             ("area-scale-inf", ["--area-scale", "1:inf"], "finite"),
-            ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both")]
+            ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both"),
+            ("contact", ["--contact", "rigid"], "'rigid' is not one of"),
+            ("contact-layer-thick", ["--contact", "layer", "--contact-layer-mm", "1.5"], "contact_layer_mm"),
+            ("contact-layer-zero", ["--contact-layer-mm", "0"], "--contact-layer-mm")]
     cases = [(n, [*base, *a], nd) for n, a, nd in opts]
     cases += [(f"gaw-{n}", [cmd, f, *TOY], nd) for n, f, nd in GAW_FILES]
     cases += [("gaw-constant", [cmd, "{d}/constant.csv", *TOY], "gaw")]
@@ -147,7 +150,8 @@ SIMULATE = [(n, ["simulate", *a, "-o", "{out}.csv"], nd) for n, a, nd in [
     ("mesh", ["--mesh", "huge"], "mesh"), ("dt-zero", ["--dt", "0"], "--dt"), ("dt-text", ["--dt", "abc"], "--dt"),
     ("duration-neg", ["--duration", "-1"], "--duration"), ("discard-long", ["--discard", "1"], "--discard"),
     ("fps-zero", ["--fps", "0"], "--fps"), ("fps-fast", ["--fps", "1e6"], "--fps"), ("fps-nan", ["--fps", "nan"], "--fps"),
-    *GENERIC]] + [
+    ("contact", ["--contact", "rigid"], "'rigid' is not one of"),
+    ("contact-layer-thick", ["--contact", "layer", "--contact-layer-mm", "2"], "contact_layer_mm"), *GENERIC]] + [
     ("out-folder", ["simulate", "-o", "{d}/folder"], "folder"),
     ("out-no-parent", ["simulate", "-o", "{d}/nowhere/g.csv"], "does not exist"),
     ("out-no-value", ["simulate", "-o"], "requires an argument")]
@@ -200,6 +204,8 @@ REACH = [(n, ["reach", *a], nd) for n, a, nd in [
     ("prior-unknown", ["--prior", "colour=1:2"], "unknown"), ("prior-text", ["--prior", "E_body=a:b"], "not a number"),
     ("fix-unknown", ["--fix", "colour=1"], "unknown"), ("fix-text", ["--fix", "x0=abc"], "not a number"),
     ("fps-zero", ["--fps", "0", "--check", "{d}/good.csv"], "--fps"),
+    ("contact", ["--contact", "rigid"], "'rigid' is not one of"),
+    ("contact-layer-thick", ["--contact", "layer", "--contact-layer-mm", "2"], "contact_layer_mm"),
     *[(f"check-{n}", ["--check", f], nd) for n, f, nd in GAW_FILES], *GENERIC]]
 SERVE = [(n, ["serve", *a], nd) for n, a, nd in [
     ("port-zero", ["--port", "0"], "--port"), ("port-big", ["--port", "70000"], "--port"),

@@ -57,3 +57,41 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     assert any("IRREGULAR VIBRATION" in w for w in post["warnings"]) is reg.irregular
     for name in ("gaw_fit", "corner", "contact_pressure"):
         assert http.get(f"/jobs/{job_id}/figures/{name}", headers=auth("alice")).status_code == 200
+
+
+def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw):
+    """A job with ``contact: layer`` is simulated with the compliant layer on the workers (its log-weights equal
+    a direct run of the layer model and differ from the projection's), and its products say so: the nodal peak
+    pressures depend on the mesh only, and the report names the law."""
+    from vfcore.data import demo_spec_dict
+    from vfcore.inference.importance import importance_sample
+    from worker.jobspec import JobSpec
+
+    n = 24
+    spec = demo_spec_dict(n=n, path=demo_gaw, chunk_size=12, mesh="coarse", dt=1e-4, duration=0.3, discard=0.15,
+                          contact="layer", contact_layer_mm=0.1)
+    http, client = service.http, service.client
+    r = http.post("/jobs", json=spec, headers=auth("alice"))
+    assert r.status_code == 202, r.text
+    job_id = r.json()["id"]
+    st = wait_done(http, job_id, "alice", timeout=900)
+    assert st["state"] == "done", st
+    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("alice")).json()
+    post = http.get(f"/jobs/{job_id}/posterior", headers=auth("alice")).json()
+    lw = np.array([-np.inf if v is None else v for v in js["log_weights"]])
+
+    def dask_map(fn, items):
+        return client.gather(client.map(fn, list(items), pure=False))
+
+    layer = JobSpec.model_validate(spec).to_problem()
+    assert layer.config.contact == "layer" and layer.config.contact_layer_mm == 0.1
+    direct = importance_sample(layer, n=n, seed=spec["seed"], map=dask_map, chunk_size=12)
+    np.testing.assert_array_equal(lw, direct.log_weights)
+    rigid = JobSpec.model_validate({**spec, "contact": "projection"}).to_problem()
+    other = importance_sample(rigid, n=n, seed=spec["seed"], map=dask_map, chunk_size=12)
+    np.testing.assert_array_equal(other.samples, direct.samples)          # the same draws ...
+    assert not np.array_equal(other.log_weights, direct.log_weights)      # ... scored by another model
+    assert post["model"]["contact"] == "layer" and post["model"]["contact_layer_mm"] == 0.1
+    assert post["predictive"]["max_contact"]["depends_on"] == "mesh"
+    html = http.get(f"/jobs/{job_id}/report", headers=auth("alice")).text
+    assert "contact layer 0.1 mm" in html and "(depends on mesh)" in html

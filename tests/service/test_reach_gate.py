@@ -153,3 +153,28 @@ def test_service_without_an_ensemble_warns_and_says_how_to_build_one(http):
     assert r.status_code == 202, r.text
     ws = r.json()["warnings"]
     assert len(ws) == 1 and "reach was not checked" in ws[0] and "vfinfer reach --mesh medium --dt 0.0001" in ws[0]
+
+
+def test_layer_job_hint_builds_the_ensemble_it_needs(tmp_path, empty_cache, monkeypatch):
+    """A job with the compliant contact layer has no shipped ensemble (the key includes the contact law); the
+    command its warning prints builds one that the same job then finds as its own."""
+    import shlex
+
+    import vfcore.batch
+    from vfcore.inference import reach as rc
+    from worker.jobspec import JobSpec
+
+    spec = JobSpec.model_validate(fe_body(contact="layer", contact_layer_mm=0.05))
+    cfg, prior = spec.sim_config(), spec.to_prior()
+    assert rc.find_ensemble(cfg, prior) == (None, False)
+    hint = rc.build_hint(cfg, prior)
+    cmd = hint.split("`")[1]
+    assert "--contact layer --contact-layer-mm 0.05" in cmd
+    monkeypatch.setattr(vfcore.batch, "simulate_many", fake_simulate)
+    r = CliRunner().invoke(cli_app, [*shlex.split(cmd)[1:], "--n", "6"], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    ens, exact = rc.find_ensemble(cfg, prior)
+    assert exact and ens.n == 6 and ens.sim_config().contact == "layer"
+    # the projection's ensemble for the same mesh and step (shipped or none) is another one
+    other = rc.find_ensemble(cfg.replace(contact="projection"), prior)[0]
+    assert getattr(other, "key", None) != ens.key

@@ -47,6 +47,8 @@ CASES = [
     ("sigma_bounds_reversed", lambda: _bad(noise="marginal", sigma_bounds=[2.0, 0.5]), "sigma_bounds"),
     ("negative_seed", lambda: _bad(seed=-1), "seed"),
     ("bad_mesh", lambda: _bad(mesh="huge"), "mesh"),
+    ("unknown_contact", lambda: _bad(contact="rigid"), "contact"),
+    ("contact_layer_too_thick", lambda: _bad(contact="layer", contact_layer_mm=1.0), "contact_layer_mm"),
     ("unknown_field", lambda: _bad(colour="red"), "colour"),
     ("wrong_units", lambda: _bad(gaw__units="px"), "units"),
     ("prior_outside_domain", lambda: _bad(priors={"x0": [7.0, 9.5]}, fixed={}), "priors"),

@@ -162,6 +162,8 @@ def build_hint(config: SimConfig, prior: Prior) -> str:
             f"--discard {config.discard:g}"]
     if config.element != "p1":
         args.append(f"--element {config.element}")
+    if config.contact != "projection":
+        args.append(f"--contact {config.contact} --contact-layer-mm {config.contact_layer_mm:g}")
     # the named set the prior differs least from, then the bounds that differ from it
     name_set = min(PRIOR_SETS, key=lambda k: sum(PRIOR_SETS[k].get(n) != b for n, b in prior.bounds.items()))
     if name_set != "paper":
