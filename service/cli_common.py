@@ -114,29 +114,12 @@ NON_NEGATIVE = finite(0.0)
 
 
 # ------------------------------------------------------------------------------------ GAW input
-#: Negative areas down to this many noise sds below zero are measurement noise around a closed glottis
-#: and are clipped to 0; anything deeper is refused. The noise sd is estimated from the recording's
-#: second differences, which the GAW's smooth waveform barely reaches (so the estimate errs high).
-NEGATIVE_NOISE_SDS = 5.0
-
-
-def noise_sd(area) -> float:
-    """Robust noise sd of a recording (mm^2): MAD of second differences / sqrt(6), which for white noise
-    of sd s has sd s*sqrt(6)."""
-    import numpy as np
-    d2 = np.diff(np.asarray(area, dtype=float), 2)
-    if d2.size == 0:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
-
-
 def load_gaw(path: Path, fps: float | None, warnings: list[str]):
     """Read a GAW file (vfcore.gawio.read_gaw) for a command: any unreadable input is a user error; negative
-    samples within ``NEGATIVE_NOISE_SDS`` noise sds of zero are clipped (a warning with their count goes to
-    ``warnings``), deeper ones are refused. Returns the ``GawData``."""
-    import numpy as np
-
-    from vfcore.gawio import read_gaw
+    samples within ``NEGATIVE_NOISE_SDS`` noise sds of zero are noise around a closed glottis and are kept
+    (the likelihood expects them), deeper ones are refused (``vfcore.gawio.check_negative``). ``warnings``
+    collects what the caller prints once all is checked. Returns the ``GawData``."""
+    from vfcore.gawio import check_negative, read_gaw
     if path.is_dir():
         raise fail(f"GAW file {path} is a folder, not a file")
     try:
@@ -145,18 +128,9 @@ def load_gaw(path: Path, fps: float | None, warnings: list[str]):
         raise fail(f"GAW file {path}: not a text CSV (binary content); expected CSV, NPY or NPZ") from None
     except (ValueError, OSError) as exc:     # GawFileError is a ValueError; its message names the file
         raise fail(str(exc) if str(path) in str(exc) else f"GAW file {path}: {exc}") from None
-    neg = g.area < 0
-    if neg.any():
-        sd = noise_sd(g.area)
-        deepest = float(g.area.min())
-        if not deepest >= -NEGATIVE_NOISE_SDS * sd:
-            raise fail(f"GAW file {path}: {int(neg.sum())} negative areas down to {deepest:.3g} mm^2, beyond the "
-                       f"recording's noise ({NEGATIVE_NOISE_SDS:g} x {sd:.3g} mm^2): an area cannot be negative; "
-                       "check the baseline subtraction")
-        warnings.append(f"{path.name}: {int(neg.sum())} of {g.area.size} samples were slightly negative (down to "
-                        f"{deepest:.3g} mm^2, within {NEGATIVE_NOISE_SDS:g} noise sds of {sd:.3g} mm^2) and were "
-                        "clipped to 0")
-        g.area = np.maximum(g.area, 0.0)
+    why = check_negative(g.area)
+    if why is not None:
+        raise fail(f"GAW file {path}: {why}")
     return g
 
 

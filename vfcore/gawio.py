@@ -28,7 +28,37 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["GawFileError", "GawData", "read_gaw", "write_gaw_csv"]
+__all__ = ["GawFileError", "GawData", "NEGATIVE_NOISE_SDS", "check_negative", "noise_sd", "read_gaw", "write_gaw_csv"]
+
+#: Negative areas down to this many noise sds below zero are measurement noise around a closed glottis and are
+#: kept as they are (the likelihood's Gaussian noise expects them; clipping them to 0 would bias every closed
+#: phase upwards); anything deeper is refused as a baseline error. The noise sd is estimated from the
+#: recording's second differences, which the GAW's smooth waveform barely reaches (so the estimate errs high).
+NEGATIVE_NOISE_SDS = 5.0
+
+
+def noise_sd(area) -> float:
+    """Robust noise sd of a recording (mm^2): MAD of second differences / sqrt(6), which for white noise
+    of sd s has sd s*sqrt(6)."""
+    d2 = np.diff(np.asarray(area, dtype=float), 2)
+    if d2.size == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+
+
+def check_negative(area) -> str | None:
+    """None when no sample of ``area`` lies below ``-NEGATIVE_NOISE_SDS`` noise sds (:func:`noise_sd`);
+    else the reason, one sentence without the source's name (the caller prefixes the file or field)."""
+    a = np.asarray(area, dtype=float)
+    neg = a < 0
+    if not neg.any():
+        return None
+    sd = noise_sd(a)
+    deepest = float(a.min())
+    if deepest >= -NEGATIVE_NOISE_SDS * sd:
+        return None
+    return (f"{int(neg.sum())} negative areas down to {deepest:.3g} mm^2, beyond the recording's noise "
+            f"({NEGATIVE_NOISE_SDS:g} x {sd:.3g} mm^2): an area cannot be negative; check the baseline subtraction")
 
 
 class GawFileError(ValueError):

@@ -54,16 +54,19 @@ class GAWSpec(_Strict):
     """An observed glottal area waveform."""
 
     areas: list[FiniteFloat] = Field(min_length=4, max_length=MAX_FRAMES,
-                                     description="glottal area per frame, mm^2, finite and >= 0")
+                                     description="glottal area per frame, mm^2, finite; negative values only "
+                                                 "within the recording's noise of zero (noise around a closed "
+                                                 "glottis, kept as measured)")
     fps: FiniteFloat = Field(gt=0, le=1e6, description="camera frame rate, frames/s")
     units: Literal["mm2"] = "mm2"
 
     @field_validator("areas")
     @classmethod
-    def _non_negative(cls, v: list[float]) -> list[float]:
-        bad = [i for i, a in enumerate(v) if a < 0]
-        if bad:
-            raise ValueError(f"areas must be >= 0 mm^2 (first negative frame: {bad[0]})")
+    def _negative_only_as_noise(cls, v: list[float]) -> list[float]:
+        from vfcore.gawio import check_negative
+        why = check_negative(v)
+        if why is not None:
+            raise ValueError(why)
         return v
 
     @model_validator(mode="after")

@@ -32,7 +32,7 @@ CASES = [
     ("nan_area", lambda: json.dumps(toy_spec()).replace("[0.0,", "[NaN,", 1).replace('"areas": [', '"areas": [NaN, ', 1),
      "areas"),
     ("inf_area", lambda: json.dumps(toy_spec()).replace('"areas": [', '"areas": [Infinity, ', 1), "areas"),
-    ("negative_area", lambda: _bad(gaw__areas=[-1.0] + toy_spec()["gaw"]["areas"]), "areas"),
+    ("negative_area", lambda: _bad(gaw__areas=[-50.0] + toy_spec()["gaw"]["areas"]), "areas"),
     ("one_cycle", lambda: _bad(gaw__areas=one_cycle), "gaw"),
     ("fps_zero", lambda: _bad(gaw__fps=0), "fps"),
     ("fps_negative", lambda: _bad(gaw__fps=-4000), "fps"),
