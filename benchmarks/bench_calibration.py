@@ -16,6 +16,8 @@ moves (``vfcore.inference.symmetry``), for comparison.
     python benchmarks/bench_calibration.py --datasets 20 --mesh coarse --dt 1e-4 --workers 16
     python benchmarks/bench_calibration.py --datasets 20 --estimate E_body,E_cover,E_lig,p_sub,rho,eta \
         --particles 100 --workers 2          # six free: the common scale from the prior
+    python benchmarks/bench_calibration.py --datasets 20 --estimate E_body,E_cover,E_lig,p_sub,rho,eta \
+        --particles 100 --workers 2 --dt 5e-5 --contact layer    # the model whose likelihood is smooth
 """
 from __future__ import annotations
 
