@@ -48,6 +48,8 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     np.testing.assert_array_equal(lw, direct.log_weights)
     assert post["n_simulations"] == N and post["n_failed"] == direct.n_failed
     assert post["predictive"]["max_contact"]["mean"] > 0 and post["predictive"]["mean_flow"]["mean"] > 0
+    assert post["model"]["contact"] == "projection" and "contact_layer_mm" not in post["model"]
+    assert post["predictive"]["max_contact"]["depends_on"] == "mesh and time step"
     # the regularity check at the heaviest sample (3 simulations in the reducer) equals vfcore's
     from vfcore.diagnose.regularity import sensitivity
     reg = sensitivity(problem, direct.samples[int(np.argmax(direct.log_weights))], seed=spec["seed"])
