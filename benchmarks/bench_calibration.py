@@ -136,7 +136,11 @@ def main(argv=None) -> int:
                          "n_failed": post.n_failed, "loglik_truth": ll_truth, "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings})
             print(f"[{i:2d}] covered {int(cover.sum())}/{cover.size}  |z|max={np.max(np.abs(z)):.2f}  "
                   f"sims={post.n_simulations} failed={post.n_failed} ESS={post.ess:.0f} {wall:.1f} s  "
-                  f"loglik truth {ll_truth:.1f} best {ll_best:.1f}", flush=True)
+                  f"loglik truth {ll_truth:.1f} best {ll_best:.1f}"
+                  + (f"  combinations {int(c_cover.sum())}/{c_cover.size}" if combos else ""), flush=True)
+            # the rows so far, so an interrupted run keeps what it measured
+            (out / "calibration_partial.json").write_text(json.dumps({"names": list(prior.names),
+                                                                      "combinations": combo_names, "rows": rows}))
     finally:
         if pool is not None:
             pool.close()
