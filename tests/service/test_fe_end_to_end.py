@@ -20,6 +20,17 @@ def demo_gaw(tmp_path_factory):
     return make_demo_gaw(tmp_path_factory.mktemp("gaw") / "demo_gaw.csv")
 
 
+def run_job(http, spec: dict) -> tuple[str, dict, dict]:
+    """Submit ``spec`` as alice, wait for it, and return (job id, samples JSON, posterior summary)."""
+    r = http.post("/jobs", json=spec, headers=auth("alice"))
+    assert r.status_code == 202, r.text
+    job_id = r.json()["id"]
+    st = wait_done(http, job_id, "alice", timeout=900)
+    assert st["state"] == "done", st
+    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("alice")).json()
+    return job_id, js, http.get(f"/jobs/{job_id}/posterior", headers=auth("alice")).json()
+
+
 def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     from vfcore.data import demo_spec_dict
     from vfcore.inference.importance import importance_sample
@@ -28,13 +39,7 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     # a cheaper model than the demo's own (this test checks service == direct, not accuracy)
     spec = demo_spec_dict(n=N, path=demo_gaw, chunk_size=20, mesh="coarse", dt=1e-4, duration=0.3, discard=0.15)
     http, client = service.http, service.client
-    r = http.post("/jobs", json=spec, headers=auth("alice"))
-    assert r.status_code == 202, r.text
-    job_id = r.json()["id"]
-    st = wait_done(http, job_id, "alice", timeout=900)
-    assert st["state"] == "done", st
-    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("alice")).json()
-    post = http.get(f"/jobs/{job_id}/posterior", headers=auth("alice")).json()
+    job_id, js, post = run_job(http, spec)
 
     problem = JobSpec.model_validate(spec).to_problem()
 
@@ -73,13 +78,7 @@ def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw):
     spec = demo_spec_dict(n=n, path=demo_gaw, chunk_size=12, mesh="coarse", dt=1e-4, duration=0.3, discard=0.15,
                           contact="layer", contact_layer_mm=0.1)
     http, client = service.http, service.client
-    r = http.post("/jobs", json=spec, headers=auth("alice"))
-    assert r.status_code == 202, r.text
-    job_id = r.json()["id"]
-    st = wait_done(http, job_id, "alice", timeout=900)
-    assert st["state"] == "done", st
-    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("alice")).json()
-    post = http.get(f"/jobs/{job_id}/posterior", headers=auth("alice")).json()
+    job_id, js, post = run_job(http, spec)
     lw = np.array([-np.inf if v is None else v for v in js["log_weights"]])
 
     def dask_map(fn, items):
