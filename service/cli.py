@@ -148,15 +148,11 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     """Run an inference on this machine (in-process Dask LocalCluster); write the posterior, samples, figures and
     an HTML report (OUT/index.html); print the posterior table and what the data determined. The recording is
     first checked against the model's reach ('vfinfer reach')."""
-    warnings: list[str] = []
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise, measure=measure, force_reach=force_reach, warnings=warnings,
-                      screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
+                      model=model, noise=noise, measure=measure, force_reach=force_reach, screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
                       contact=contact, contact_layer_mm=contact_layer_mm)
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
-    for w in warnings:
-        warn(w)
     note_is(sampler)
     print_expected_cost(spec, workers)
     with staged_output(out) as stage:
@@ -261,7 +257,8 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
 
 @app.command()
 def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25,
-          contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1, prior: Prior = None, fix: Fix = None, prior_set: PriorSet = "paper",
+          contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1, prior: Prior = None,
+          fix: Fix = None, prior_set: PriorSet = "paper",
           n: Annotated[int, typer.Option("--n", min=1, help="prior draws to simulate")] = 2000,
           seed: Annotated[int, typer.Option(min=0, help="random seed of the draws")] = 20190613,
           check: Annotated[Optional[Path], typer.Option(help="a GAW file to check against the reach")] = None,
@@ -282,16 +279,13 @@ def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, disca
         bounds.pop(k, None)
     if not discard < duration:
         raise fail(f"--discard ({discard:g} s) must be shorter than --duration ({duration:g} s)")
-    warnings: list[str] = []
-    g = load_gaw(check, fps, warnings) if check is not None else None
+    g = load_gaw(check, fps) if check is not None else None
     try:
         box = PriorBox(bounds, fixed)
         cfg = SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=min(4000.0, 1.0 / dt),
                         contact=contact, contact_layer_mm=contact_layer_mm)
     except ValueError as exc:
         raise fail(str(exc)) from None
-    for w in warnings:
-        warn(w)
     ens, exact = rc.find_ensemble(cfg, box)
     if rebuild or ens is None or not exact:
         t0 = time.perf_counter()

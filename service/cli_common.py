@@ -114,11 +114,11 @@ NON_NEGATIVE = finite(0.0)
 
 
 # ------------------------------------------------------------------------------------ GAW input
-def load_gaw(path: Path, fps: float | None, warnings: list[str]):
+def load_gaw(path: Path, fps: float | None):
     """Read a GAW file (vfcore.gawio.read_gaw) for a command: any unreadable input is a user error; negative
     samples within ``NEGATIVE_NOISE_SDS`` noise sds of zero are noise around a closed glottis and are kept
-    (the likelihood expects them), deeper ones are refused (``vfcore.gawio.check_negative``). ``warnings``
-    collects what the caller prints once all is checked. Returns the ``GawData``."""
+    (the likelihood expects them), deeper ones are refused (``vfcore.gawio.check_negative``). Returns the
+    ``GawData``."""
     from vfcore.gawio import check_negative, read_gaw
     if path.is_dir():
         raise fail(f"GAW file {path} is a folder, not a file")

@@ -15,7 +15,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw, warn
+from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw
 from .cli_options import AreaScale, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
 from vfcore.diagnose.options import DiagnoseOptions
@@ -120,8 +120,7 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
                     f"(got dt={dt}, duration={duration}, discard={discard})")
     if not sigma_e > 0:
         raise _fail(f"--sigma-e must be > 0, got {sigma_e}")
-    warnings: list[str] = []
-    g = load_gaw(gaw, fps, warnings)
+    g = load_gaw(gaw, fps)
     if g.fps * dt > 1.0:
         raise _fail(f"--dt: camera fps {g.fps:g} exceeds the simulation rate 1/dt={1 / dt:.0f}")
     try:
@@ -131,8 +130,6 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
                           area_scale=None if area_scale is None else tuple(area_scale))
     except ValueError as exc:
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
-    for w in warnings:
-        warn(w)
     return problem
 
 

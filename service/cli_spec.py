@@ -15,17 +15,14 @@ console = Console()
 def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
-               measure: list[str] | None = None, force_reach: bool = False, warnings: list[str] | None = None,
-               screen: str | None = None, prior_set: str = "paper", area_scale: list[float] | None = None,
+               measure: list[str] | None = None, force_reach: bool = False, screen: str | None = None, prior_set: str = "paper", area_scale: list[float] | None = None,
                contact: str = "projection", contact_layer_mm: float = 0.1):
-    """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2. Warnings about
-    the input (clipped samples) are appended to ``warnings`` for the caller to print once all is checked.
+    """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2.
     ``area_scale``: the job's ``area_scale`` box (``parse_area_scale``; None: calibrated areas)."""
     from pydantic import ValidationError
 
     from worker.jobspec import JobSpec
 
-    warnings = [] if warnings is None else warnings
     measurements = parse_measurements(measure)
     priors = parse_priors(prior)
     fixed = parse_fixed(fix)
@@ -34,7 +31,7 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
         raise fail(f"{', '.join(both)}: given both --prior and --fix")
     if not discard < duration:
         raise fail(f"--discard ({discard:g} s) must be shorter than --duration ({duration:g} s)")
-    g = load_gaw(gaw, fps, warnings)
+    g = load_gaw(gaw, fps)
     if g.fps * dt > 1.0:
         raise fail(f"--dt {dt:g} s simulates {1 / dt:.0f} steps/s, fewer than the recording's {g.fps:g} frames/s; "
                    f"use --dt <= {1 / g.fps:.3g}")
