@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw
-from .cli_options import AreaScale, PriorSet, Uncalibrated, parse_area_scale
+from .cli_options import AreaScale, Contact, ContactLayer, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
 from vfcore.diagnose.options import DiagnoseOptions
 
@@ -79,10 +79,10 @@ class StageReporter:
 
 def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
                   duration: float, discard: float, sigma_e: float, noise: str = "fixed", prior_set: str = "paper",
-                  area_scale: list[float] | None = None):
+                  area_scale: list[float] | None = None, contact: str = "projection", contact_layer_mm: float = 0.1):
     """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line.
     ``prior_set``: the default bounds of the estimated parameters; ``area_scale``: the box of an unknown area
-    scale (``parse_area_scale``; None: calibrated areas)."""
+    scale (``parse_area_scale``; None: calibrated areas); ``contact``, ``contact_layer_mm``: the midline law."""
     from vfcore.config import MESHES, SimConfig
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
@@ -126,7 +126,8 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
     try:
         prior = Prior.default(fixed=fixed, prior_set=prior_set)
         problem = Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e), noise=noise,
-                          config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps)),
+                          config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps),
+                                           contact=contact, contact_layer_mm=contact_layer_mm),
                           area_scale=None if area_scale is None else tuple(area_scale))
     except ValueError as exc:
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
@@ -252,7 +253,8 @@ def diagnose_cmd(
                  "after an interruption reads them back (same result, bit for bit); deleted once the "
                  "diagnosis is written")] = True,
         seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed,
-        prior_set: PriorSet = "paper", area_scale: AreaScale = None, uncalibrated: Uncalibrated = False) -> None:
+        prior_set: PriorSet = "paper", area_scale: AreaScale = None, uncalibrated: Uncalibrated = False,
+        contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
     from .diagnosis import plot
 
@@ -264,7 +266,7 @@ def diagnose_cmd(
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out} exists and is not a folder")
     problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise, prior_set,
-                            parse_area_scale(area_scale, uncalibrated))
+                            parse_area_scale(area_scale, uncalibrated), contact, contact_layer_mm)
     base_post = load_base(base, problem) if base is not None else None
 
     console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "
@@ -313,9 +315,15 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
     return jsonable(account(report.to_dict(), cmap)), report
 
 
+#: the option that sets each model setting a ``--base`` posterior must share with the diagnosis
+_OPTION = {"mesh": "--mesh", "dt": "--dt", "duration": "--duration", "discard": "--discard", "fps": "--fps",
+           "contact": "--contact", "contact_layer_mm": "--contact-layer-mm"}
+
+
 def load_base(path: Path, problem):
     """The ``--base`` posterior, checked against the problem: a NetCDF posterior of an FE fit with
-    predictions, estimating the problem's parameters or some of them, of the same recording."""
+    predictions, estimating the problem's parameters or some of them, of the same recording, simulated with the
+    same model settings (where the file records them: ``Posterior.model``)."""
     import numpy as np
 
     from vfcore.inference.posterior import Posterior
@@ -327,6 +335,12 @@ def load_base(path: Path, problem):
         raise _fail(f"--base {path}: not a vfinfer posterior.nc ({type(exc).__name__}: {exc})") from None
     if post.predictive is None:
         raise _fail(f"--base {path}: the posterior carries no predicted GAWs (not a finite-element fit)")
+    diff = problem.config.differences(post.model or {})
+    if diff:
+        was = ", ".join(f"{_OPTION.get(k, k)} {a}" for k, (a, _) in diff.items())
+        now = ", ".join(f"{_OPTION.get(k, k)} {b}" for k, (_, b) in diff.items())
+        raise _fail(f"--base {path}: it was simulated with {was}; this diagnosis would simulate {now} "
+                    "(give the fit's settings, so that the base and the extensions are the same model)")
     extra = sorted(set(post.names) - set(problem.prior.names))
     if extra:
         raise _fail(f"--base {path}: it estimates {extra}, which --estimate does not")
@@ -342,5 +356,7 @@ def write_page(out: Path, d: dict, gaw: Path, problem, sigma_e: float, noise: st
     from .report_diagnose import write_diagnosis_report
     source = {"recording": gaw.name, "camera frame rate": f"{problem.fps:g} frames/s",
               "estimated": ", ".join(problem.prior.names), "mesh": mesh,
+              "contact": problem.config.contact + (f" {problem.config.contact_layer_mm:g} mm"
+                                                   if problem.config.contact == "layer" else ""),
               "noise": f"{noise}" + (f", sigma_e = {sigma_e:g} mm²" if noise == "fixed" else "")}
     return write_diagnosis_report(out, d, title=f"vfinfer diagnosis of {gaw.name}", source=source)

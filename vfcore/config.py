@@ -7,6 +7,9 @@ from dataclasses import asdict, dataclass
 MESHES = ("coarse", "medium", "fine", "xfine", "xxfine")  # ~172, ~205, ~263, ~1050, ~4190 triangles; "medium" is the paper's default
 ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
 CONTACTS = ("projection", "layer")
+#: settings that change how a simulation is run or kept, not the waveform it gives (early_stop changes it by
+#: less than its stop tolerances): left out when two models are compared
+NOT_MODEL = ("keep_trajectories", "early_stop")
 
 
 @dataclass(frozen=True)
@@ -178,3 +181,20 @@ class SimConfig:
         d = self.as_dict()
         d.update(kw)
         return SimConfig(**d)
+
+    def differences(self, recorded: dict) -> dict[str, tuple]:
+        """The model settings in which ``recorded`` (an :meth:`as_dict`, possibly read back from JSON, e.g.
+        ``Posterior.model``) differs from this config: ``{name: (recorded value, this value)}``. Settings
+        ``recorded`` does not carry, and those in ``NOT_MODEL``, are not compared; the layer thickness only
+        when both use the layer."""
+        import json
+        mine = json.loads(json.dumps(self.as_dict()))      # tuples as lists, as a stored record has them
+        out = {}
+        for k, v in mine.items():
+            if k in NOT_MODEL or k not in recorded:
+                continue
+            if k == "contact_layer_mm" and not (self.contact == recorded.get("contact") == "layer"):
+                continue
+            if recorded[k] != v:
+                out[k] = (recorded[k], v)
+        return out

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vfcore.inference.problem import model_record
 from vfcore.params import PARAM_UNITS
 from vfcore.strict_json import jsonable
 
@@ -227,6 +228,8 @@ def publish_posterior(store_path: str, post, spec: JobSpec | None = None) -> dic
     root = st.open_store(Path(store_path))
     if spec is None:
         spec = JobSpec.model_validate(dict(root.attrs["jobspec"]))
+    if spec.model == "fe":
+        post.model = model_record(spec.to_problem())
     resampled = post.resampled_predictive()
     scale = area_scale_of(spec, resampled)
     if scale is not None and scale.get("warning"):

@@ -162,3 +162,44 @@ def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it
     assert seen[1].earlier_attempts == 1                  # the dead attempt's time is on record
     r = _invoke([*args, "--no-resume"])
     assert seen[2] is map                                 # --no-resume: the plain map, no store
+
+
+def _base_posterior(problem, model) -> "object":
+    """A posterior of ``problem``'s recording with predicted GAWs, recorded as simulated with ``model``."""
+    from vfcore.inference.posterior import Posterior
+    from vfcore.inference.problem import Evaluation
+    rng = np.random.default_rng(0)
+    obs = np.asarray(problem.obs_compared, dtype=float)
+    samples = np.column_stack([rng.uniform(9, 15, 6), rng.uniform(250, 950, 6)])
+    post = Posterior(names=("E_body", "E_cover"), samples=samples, log_weights=np.full(6, -np.log(6)),
+                     resampled=np.arange(6), ess=6.0, pareto_k=0.1, log_evidence=-1.0, log_evidence_se=0.1,
+                     n_simulations=6, method="smc", obs_gaw=obs, fps=problem.fps, model=model)
+    post.predictive = Evaluation(loglik=np.zeros(6), ok=np.ones(6, bool), gaw=np.tile(obs, (6, 1)).astype(np.float32),
+                                 mean_flow=np.ones(6), mean_contact=np.ones(6), max_contact=np.ones(6))
+    post.predictive_index = np.arange(6)
+    return post
+
+
+def test_a_base_fitted_with_another_model_is_refused(tmp_path, leaky_gaw):
+    """--base must be the model the diagnosis simulates: a fit at another step or contact law is refused with
+    one line naming the options and both values; the same model is taken; a file that does not record its
+    model (written before it was recorded) is taken as before."""
+    from vfcore.inference.posterior import Posterior
+    from vfcore.inference.problem import model_record
+    from service.cli_diagnose import build_problem, load_base
+    problem = build_problem(leaky_gaw, None, "E_body,E_cover", None, "coarse", 1e-4, 0.35, 0.15, 1.0)
+    other = problem.config.replace(dt=5e-5, contact="layer")
+    _base_posterior(problem, json.loads(json.dumps(other.as_dict()))).to_netcdf(tmp_path / "other.nc")
+    out = tmp_path / "out"
+    r = _invoke([str(leaky_gaw), "--out", str(out), "--estimate", "E_body,E_cover", *TINY,
+                 "--base", str(tmp_path / "other.nc")])
+    assert r.exit_code == 2, r.output
+    line = " ".join(r.output.split())
+    assert "--dt 5e-05" in line and "--dt 0.0001" in line and "--contact layer" in line, line
+    assert not out.exists()
+    _base_posterior(problem, model_record(problem)).to_netcdf(tmp_path / "same.nc")
+    got = load_base(tmp_path / "same.nc", problem)
+    assert got.model == model_record(problem) and not problem.config.differences(got.model)
+    _base_posterior(problem, None).to_netcdf(tmp_path / "unrecorded.nc")
+    assert Posterior.from_netcdf(tmp_path / "unrecorded.nc").model is None
+    assert load_base(tmp_path / "unrecorded.nc", problem).names == ("E_body", "E_cover")

@@ -66,12 +66,13 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
         assert http.get(f"/jobs/{job_id}/figures/{name}", headers=auth("alice")).status_code == 200
 
 
-def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw):
+def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw, tmp_path):
     """A job with ``contact: layer`` is simulated with the compliant layer on the workers (its log-weights equal
     a direct run of the layer model and differ from the projection's), and its products say so: the nodal peak
     pressures depend on the mesh only, and the report names the law."""
     from vfcore.data import demo_spec_dict
     from vfcore.inference.importance import importance_sample
+    from vfcore.inference.posterior import Posterior
     from worker.jobspec import JobSpec
 
     n = 24
@@ -94,5 +95,11 @@ def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw):
     assert not np.array_equal(other.log_weights, direct.log_weights)      # ... scored by another model
     assert post["model"]["contact"] == "layer" and post["model"]["contact_layer_mm"] == 0.1
     assert post["predictive"]["max_contact"]["depends_on"] == "mesh"
+    nc = http.get(f"/jobs/{job_id}/samples", params={"format": "netcdf"}, headers=auth("alice"))
+    path = tmp_path / "posterior.nc"
+    path.write_bytes(nc.content)
+    recorded = Posterior.from_netcdf(path).model             # what a later `diagnose --base` checks against
+    assert recorded["contact"] == "layer" and layer.config.differences(recorded) == {}
+    assert rigid.config.differences(recorded) == {"contact": ("layer", "projection")}
     html = http.get(f"/jobs/{job_id}/report", headers=auth("alice")).text
     assert "contact layer 0.1 mm" in html and "(depends on mesh)" in html

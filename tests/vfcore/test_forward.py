@@ -263,3 +263,22 @@ def test_flow_is_bernoulli_jet_of_the_minimum_area():
     assert np.all(r.flow[r.gaw <= 0] == 0.0)
     # order of magnitude: peak flow of a ~27 mm^2 glottis at ~1 kPa is a few hundred ml/s
     assert 1e-4 < r.flow.max() < 2e-3
+
+
+def test_config_differences_name_what_changes_the_simulation():
+    """``SimConfig.differences`` (what ``diagnose --base`` checks): a record read back from JSON equals its config;
+    a changed step or law is named with both values; settings that do not change the waveform, the layer's
+    thickness under the rigid projection, and settings an older record lacks are not differences."""
+    import json
+    cfg = SimConfig(mesh="coarse", dt=1e-4, fps=2000.0, epithelium_profile=(1.0,) * 20 + (2.0,))
+    rec = json.loads(json.dumps(cfg.as_dict()))
+    assert cfg.differences(rec) == {}
+    assert cfg.differences({**rec, "dt": 5e-5, "mesh": "medium"}) == {"dt": (5e-5, 1e-4), "mesh": ("medium", "coarse")}
+    assert cfg.differences({**rec, "early_stop": False, "keep_trajectories": True}) == {}
+    assert cfg.differences({**rec, "contact_layer_mm": 0.3}) == {}                  # projection: no layer
+    layer = cfg.replace(contact="layer")
+    assert layer.differences({**rec, "contact": "layer", "contact_layer_mm": 0.3}) == {"contact_layer_mm": (0.3, 0.1)}
+    assert layer.differences(rec) == {"contact": ("projection", "layer")}
+    assert cfg.differences({k: v for k, v in rec.items() if k != "contact"}) == {}
+    assert cfg.differences({**rec, "epithelium_profile": [1.0] * 21}) == {"epithelium_profile": ([1.0] * 21,
+                                                                                             [1.0] * 20 + [2.0])}

@@ -17,7 +17,7 @@ import numpy as np
 from .diagnostics import log_evidence_is
 from .posterior import Posterior
 from .prior import Prior
-from .problem import Evaluation, Problem, ProblemEvaluator
+from .problem import Evaluation, Problem, ProblemEvaluator, model_record
 
 DEFAULT_DRAWS = 50_000
 
@@ -124,5 +124,6 @@ def importance_sample(target, prior: Prior | None = None, n: int = DEFAULT_DRAWS
     post = reduce_importance(thetas, ev, prior.names, seed, n_resample=n_resample, ess_min=ess_min,
                              obs_gaw=obs, fps=fps)
     post.info["n_draws"] = int(n)
+    post.model = model_record(target)
     return post
 

@@ -40,6 +40,9 @@ class Posterior:
         ``predictive_index`` of ``samples`` (None when the likelihood is not the FE model).
     area_scale : ``(k_lo, k_hi)`` of the problem's unknown area scale (``Problem.area_scale``), or None:
         the recording's areas are ``k`` times the model's (:meth:`recorded_gaws`).
+    model : the forward model's settings the draws were simulated with (``SimConfig.as_dict()``), so that a
+        posterior read back is used only with the model it belongs to; None when unknown (not the FE model,
+        or a file written before it was recorded).
     """
 
     names: tuple[str, ...]
@@ -60,6 +63,7 @@ class Posterior:
     fps: float | None = None
     info: dict = field(default_factory=dict)
     area_scale: tuple | None = None
+    model: dict | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -193,7 +197,7 @@ class Posterior:
         return {"names": list(self.names), "method": self.method, "ess": self.ess, "pareto_k": self.pareto_k,
                 "log_evidence": self.log_evidence, "log_evidence_se": self.log_evidence_se,
                 "n_simulations": self.n_simulations, "n_failed": self.n_failed, "warnings": list(self.warnings),
-                "fps": self.fps}
+                "fps": self.fps, "model": self.model}
 
     # ------------------------------------------------------------------ ArviZ / NetCDF
     def to_inference_data(self):
@@ -258,7 +262,7 @@ class Posterior:
                    log_evidence=float(attrs["log_evidence"]), log_evidence_se=float(attrs["log_evidence_se"]),
                    n_simulations=int(attrs["n_simulations"]), n_failed=int(attrs["n_failed"]),
                    method=str(attrs["method"]), warnings=list(json.loads(attrs["warnings"])),
-                   obs_gaw=obs, fps=fps)
+                   obs_gaw=obs, fps=fps, model=json.loads(attrs["model"]) if "model" in attrs else None)
         if pred is not None:
             # predictive rows follow the resampled draws (duplicates are identical rows)
             post.predictive = pred
@@ -306,4 +310,4 @@ class Posterior:
                    pareto_k=float(meta["pareto_k"]), log_evidence=float(meta["log_evidence"]),
                    log_evidence_se=float(meta["log_evidence_se"]), n_simulations=int(meta["n_simulations"]),
                    n_failed=int(meta["n_failed"]), method=meta["method"], warnings=list(meta["warnings"]),
-                   fps=meta.get("fps"))
+                   fps=meta.get("fps"), model=meta.get("model"))

@@ -26,6 +26,7 @@ area scale"). It costs no extra simulation. ``None`` (default): the areas are ca
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field, fields
 
@@ -150,6 +151,14 @@ def measurement_terms(values, measurements) -> np.ndarray:
 # ---------------------------------------------------------------------------- problem
 #: noise models: ``fixed`` sigma_e (Eq. 15) or ``marginal`` (sigma_e integrated out, log-uniform prior)
 NOISE_MODELS = ("fixed", "marginal")
+
+
+def model_record(target) -> dict | None:
+    """What ``Posterior.model`` records of a fit to ``target``: the settings of its finite-element model as JSON
+    gives them back (``SimConfig.as_dict()``, tuples as lists), or None for anything but a Problem."""
+    if not isinstance(target, Problem):
+        return None
+    return json.loads(json.dumps(target.config.as_dict()))
 
 
 @dataclass(frozen=True, eq=False)

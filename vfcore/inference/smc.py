@@ -51,7 +51,7 @@ from .importance import map_evaluate, resolve_target
 from .moves import COORDS, check_moves, delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
 from .posterior import Posterior
 from .prior import Prior
-from .problem import Evaluation, Problem
+from .problem import Evaluation, Problem, model_record
 from .smc_posterior import posterior_of
 from .tempering import next_temperature, reweight
 
@@ -399,4 +399,5 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
         sampler.tell(map_evaluate(f, th, map=map, chunk_size=chunk_size))
     post = sampler.result(obs_gaw=obs, fps=fps)
     post.area_scale = getattr(target, "area_scale", None) if isinstance(target, Problem) else None
+    post.model = model_record(target)
     return post

@@ -120,11 +120,13 @@ def test_compare_matches_scipy(fitted):
 
 
 def test_export_roundtrip(problem, fitted, tmp_path):
+    from vfcore.inference.problem import model_record
     for post in fitted:
-        post.obs_gaw, post.fps = problem.obs_compared, problem.fps
+        assert post.model is None                   # a callable target: the model it ran is unknown
+        post.obs_gaw, post.fps, post.model = problem.obs_compared, problem.fps, model_record(problem)
         p = post.to_csv(tmp_path / "s.csv")
         q = Posterior.from_csv(p)
-        assert q.names == post.names
+        assert q.names == post.names and q.model == post.model and q.model["dt"] == 1e-4
         assert np.array_equal(q.samples, post.samples) and np.array_equal(q.log_weights, post.log_weights)
         assert np.array_equal(np.sort(q.resampled), np.sort(post.resampled))
         assert q.log_evidence == post.log_evidence and q.n_simulations == post.n_simulations
@@ -134,6 +136,7 @@ def test_export_roundtrip(problem, fitted, tmp_path):
         assert np.array_equal(r.samples, post.samples) and np.array_equal(r.log_weights, post.log_weights)
         assert np.array_equal(r.resampled, post.resampled) and r.warnings == post.warnings
         assert r.ess == post.ess and r.method == post.method
+        assert r.model == post.model and not problem.config.differences(r.model)
         rp0, rp1 = post.resampled_predictive(), r.resampled_predictive()
         assert np.array_equal(rp0.gaw, rp1.gaw, equal_nan=True)
         assert np.array_equal(r.obs_gaw, post.obs_gaw)
