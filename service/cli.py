@@ -18,7 +18,7 @@ import typer
 from rich.console import Console
 
 from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
-from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise,
+from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Element, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise,
                           Out, Overwrite, Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Uncalibrated,
                           Workers, parse_area_scale, parse_fixed, parse_priors)
 from .cli_spec import build_spec, note_is
@@ -257,8 +257,8 @@ def simulate(param: Annotated[Optional[list[str]], typer.Option(
 
 @app.command()
 def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, discard: Discard = 0.25,
-          contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1, prior: Prior = None,
-          fix: Fix = None, prior_set: PriorSet = "paper",
+          contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1, element: Element = "p1",
+          prior: Prior = None, fix: Fix = None, prior_set: PriorSet = "paper",
           n: Annotated[int, typer.Option("--n", min=1, help="prior draws to simulate")] = 2000,
           seed: Annotated[int, typer.Option(min=0, help="random seed of the draws")] = 20190613,
           check: Annotated[Optional[Path], typer.Option(help="a GAW file to check against the reach")] = None,
@@ -283,7 +283,7 @@ def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, disca
     try:
         box = PriorBox(bounds, fixed)
         cfg = SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=min(4000.0, 1.0 / dt),
-                        contact=contact, contact_layer_mm=contact_layer_mm)
+                        contact=contact, contact_layer_mm=contact_layer_mm, element=element)
     except ValueError as exc:
         raise fail(str(exc)) from None
     ens, exact = rc.find_ensemble(cfg, box)

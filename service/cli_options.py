@@ -27,6 +27,10 @@ Contact = Annotated[str, typer.Option(
     help="midline contact: 'projection' (the paper's rigid midline with an inelastic impact; its peak pressures grow "
          "as --dt shrinks) or 'layer' (a thin compliant layer with the cover's modulus and viscosity: peak pressures "
          "converge in dt and the likelihood is smoother in the parameters; docs/model.md, 'Contact')")]
+Element = Annotated[str, typer.Option(
+    parser=choice("p1", "anp"), metavar="[p1|anp]",
+    help="finite element: 'p1' (the paper's linear triangle) or 'anp' (averaged nodal dilatation, free of locking; "
+         "docs/model.md, 'Locking and mesh convergence')")]
 ContactLayer = Annotated[float, typer.Option(
     "--contact-layer-mm", parser=POSITIVE, help="thickness of the contact layer, mm, in (0, 1) (--contact layer)")]
 Duration = Annotated[float, typer.Option(parser=POSITIVE, help="simulated time per run, s (the paper's 0.55)")]

@@ -194,7 +194,9 @@ DIAGNOSE = [(f"gaw-{n}", ["diagnose", f, "--out", "{out}"], nd) for n, f, nd in 
         ("base-not-netcdf", ["--base", "{d}/good.csv"], "not a vfinfer posterior"),
         ("prior-set", ["--prior-set", "martian"], "prior-set"),
         ("area-scale-reversed", ["--area-scale", "4:0.25"], "0 < LO < HI"),
-        ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both"), *GENERIC]] + [
+        ("area-scale-and-uncalibrated", ["--area-scale", "1:2", "--uncalibrated"], "not both"),
+        ("contact", ["--contact", "rigid"], "'rigid' is not one of"),
+        ("contact-layer-thick", ["--contact", "layer", "--contact-layer-mm", "2"], "contact_layer_mm"), *GENERIC]] + [
     ("out-is-file", ["diagnose", "{d}/good.csv", "--out", "{d}/afile.txt"], "not a folder"),
     ("no-out", ["diagnose", "{d}/good.csv"], "--out")]
 REACH = [(n, ["reach", *a], nd) for n, a, nd in [
@@ -206,6 +208,7 @@ REACH = [(n, ["reach", *a], nd) for n, a, nd in [
     ("fps-zero", ["--fps", "0", "--check", "{d}/good.csv"], "--fps"),
     ("contact", ["--contact", "rigid"], "'rigid' is not one of"),
     ("contact-layer-thick", ["--contact", "layer", "--contact-layer-mm", "2"], "contact_layer_mm"),
+    ("element", ["--element", "q2"], "'q2' is not one of"),
     *[(f"check-{n}", ["--check", f], nd) for n, f, nd in GAW_FILES], *GENERIC]]
 SERVE = [(n, ["serve", *a], nd) for n, a, nd in [
     ("port-zero", ["--port", "0"], "--port"), ("port-big", ["--port", "70000"], "--port"),

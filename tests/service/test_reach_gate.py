@@ -178,3 +178,25 @@ def test_layer_job_hint_builds_the_ensemble_it_needs(tmp_path, empty_cache, monk
     # the projection's ensemble for the same mesh and step (shipped or none) is another one
     other = rc.find_ensemble(cfg.replace(contact="projection"), prior)[0]
     assert getattr(other, "key", None) != ens.key
+
+
+def test_an_element_hint_is_a_command_the_cli_runs(tmp_path, empty_cache, monkeypatch):
+    """A library fit with the locking-free element gets a hint with ``--element anp``; `vfinfer reach` takes it
+    and builds the ensemble that configuration then finds (the key includes the element)."""
+    import shlex
+
+    import vfcore.batch
+    from vfcore.inference import reach as rc
+    from worker.jobspec import JobSpec
+
+    spec = JobSpec.model_validate(fe_body())
+    cfg, prior = spec.sim_config().replace(element="anp"), spec.to_prior()
+    assert rc.find_ensemble(cfg, prior) == (None, False)
+    cmd = rc.build_hint(cfg, prior).split("`")[1]
+    assert "--element anp" in cmd
+    monkeypatch.setattr(vfcore.batch, "simulate_many", fake_simulate)
+    r = CliRunner().invoke(cli_app, [*shlex.split(cmd)[1:], "--n", "6"], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    ens, exact = rc.find_ensemble(cfg, prior)
+    assert exact and ens.sim_config().element == "anp"
+    assert getattr(rc.find_ensemble(cfg.replace(element="p1"), prior)[0], "key", None) != ens.key
