@@ -10,6 +10,11 @@ import typer
 
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail
 
+#: vfcore.config's CONTACTS and ELEMENTS, spelled here because importing vfcore costs the command line ~0.6 s at
+#: start (its numba kernels); tests/service/test_cli_conventions.py checks they agree
+CONTACTS = ("projection", "layer")
+ELEMENTS = ("p1", "anp")
+
 Fps = Annotated[Optional[float], typer.Option(
     parser=POSITIVE, help="camera frame rate, frames/s; needed only when the file has neither a time column "
                               "nor a '# fps:' line")]
@@ -23,12 +28,12 @@ Mesh = Annotated[str, typer.Option(parser=choice("coarse", "medium", "fine"), me
 Dt = Annotated[float, typer.Option(parser=POSITIVE,
                                    help="simulation time step, s (the paper's 5e-5); 1/dt must reach the frame rate")]
 Contact = Annotated[str, typer.Option(
-    parser=choice("projection", "layer"), metavar="[projection|layer]",
+    parser=choice(*CONTACTS), metavar="[" + "|".join(CONTACTS) + "]",
     help="midline contact: 'projection' (the paper's rigid midline with an inelastic impact; its peak pressures grow "
          "as --dt shrinks) or 'layer' (a thin compliant layer with the cover's modulus and viscosity: peak pressures "
          "converge in dt and the likelihood is smoother in the parameters; docs/model.md, 'Contact')")]
 Element = Annotated[str, typer.Option(
-    parser=choice("p1", "anp"), metavar="[p1|anp]",
+    parser=choice(*ELEMENTS), metavar="[" + "|".join(ELEMENTS) + "]",
     help="finite element: 'p1' (the paper's linear triangle) or 'anp' (averaged nodal dilatation, free of locking; "
          "docs/model.md, 'Locking and mesh convergence')")]
 ContactLayer = Annotated[float, typer.Option(

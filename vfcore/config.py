@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 MESHES = ("coarse", "medium", "fine", "xfine", "xxfine")  # ~172, ~205, ~263, ~1050, ~4190 triangles; "medium" is the paper's default
 ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
 CONTACTS = ("projection", "layer")
+CONTACT_LAYER_MM = (0.0, 1.0)  # open bounds of the contact layer's thickness, mm (SimConfig, job spec, command line)
 #: settings that change how a simulation is run or kept, not the waveform it gives (early_stop changes it by
 #: less than its stop tolerances): left out when two models are compared
 NOT_MODEL = ("keep_trajectories", "early_stop")
@@ -93,8 +94,9 @@ class SimConfig:
         if not isinstance(self.early_stop, bool):
             raise ValueError(f"config early_stop must be True or False, got {self.early_stop!r}")
         hl = self.contact_layer_mm
-        if not (isinstance(hl, (int, float)) and math.isfinite(hl) and 0.0 < hl < 1.0):
-            raise ValueError(f"config contact_layer_mm must lie in (0, 1) mm, got {hl!r}")
+        lo, hi = CONTACT_LAYER_MM
+        if not (isinstance(hl, (int, float)) and math.isfinite(hl) and lo < hl < hi):
+            raise ValueError(f"config contact_layer_mm must lie in ({lo:g}, {hi:g}) mm, got {hl!r}")
         for name in ("dt", "duration", "fps", "length_mm", "sep_ratio"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):

@@ -12,7 +12,7 @@ import numpy as np
 from pydantic import (BaseModel, ConfigDict, Field, FiniteFloat, PrivateAttr, ValidationError, field_validator,
                       model_validator)
 
-from vfcore.config import MESHES
+from vfcore.config import CONTACT_LAYER_MM, CONTACTS, MESHES
 from vfcore.params import PARAM_NAMES
 
 #: Bump when the meaning of a field changes; stored jobs carry the version they were made with.
@@ -140,11 +140,11 @@ class JobSpec(_Strict):
     sampler: SamplerSettings
     mesh: Literal["coarse", "medium", "fine"] = "medium"
     dt: FiniteFloat = Field(default=5e-5, gt=0, le=1e-3, description="time step, s")
-    contact: Literal["projection", "layer"] = Field(
+    contact: Literal[CONTACTS] = Field(
         default="projection", description="midline contact law: 'projection' (the paper's rigid midline, inelastic "
                                           "impact) or 'layer' (a compliant layer with the cover's modulus and "
                                           "viscosity; docs/model.md, 'Contact')")
-    contact_layer_mm: FiniteFloat = Field(default=0.1, gt=0, lt=1, description="contact layer thickness, mm "
+    contact_layer_mm: FiniteFloat = Field(default=0.1, gt=CONTACT_LAYER_MM[0], lt=CONTACT_LAYER_MM[1], description="contact layer thickness, mm "
                                                                                 "(contact 'layer')")
     duration: FiniteFloat = Field(default=0.55, gt=0, le=5.0, description="simulated time, s")
     discard: FiniteFloat = Field(default=0.25, ge=0, le=5.0, description="initial transient discarded, s")

@@ -55,6 +55,20 @@ def test_every_option_says_its_unit_or_meaning():
                     assert unit in p.help, f"vfinfer {name} {opt}: no unit in {p.help!r}"
 
 
+def test_the_command_lines_choices_are_the_models():
+    """The contact laws and elements the options accept are vfcore.config's (spelled twice only to keep vfcore's
+    import out of the command line's start), and a value the model lacks is refused."""
+    import typer
+    from service import cli_options
+    from vfcore.config import CONTACTS, ELEMENTS
+    assert cli_options.CONTACTS == CONTACTS and cli_options.ELEMENTS == ELEMENTS
+    for option, values in ((cli_options.Contact, CONTACTS), (cli_options.Element, ELEMENTS)):
+        parse = option.__metadata__[0].parser
+        assert [parse(v) for v in values] == list(values)
+        with pytest.raises(typer.BadParameter):
+            parse("rigid")
+
+
 def test_simulate_o_writes_the_readme_file(tmp_path):
     """README: `vfinfer simulate -o gaw.csv` (coarse mesh here, for speed)."""
     from vfvideo.io import read_gaw
