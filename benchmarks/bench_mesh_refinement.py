@@ -1,0 +1,97 @@
+"""Does the limit cycle converge under mesh refinement? f0, opening and closure on six meshes, up to 15,000 triangles.
+
+Protocol (docs/model.md, "Mesh convergence"): the locking-free element (``element="anp"``, whose eigenfrequencies
+converge) and the compliant contact layer (``contact="layer"``, whose pressures converge in the step), so that
+neither the element nor the contact law is what fails to converge. dt 5e-5 s, 0.35 s simulated, the first 0.15 s
+discarded. Parameters: Table 3, and two points inside the region where the three shipped meshes all oscillate
+with anp (docs/model.md, "The oscillation map"): A = Table 3 with E_cover 850 Pa, p_sub 800 Pa; B = E_cover 950 Pa,
+p_sub 1000 Pa. Meshes: the five shipped ones and "x3fine", the M5 section meshed by gmsh at a characteristic length
+of 0.1 mm (about 15,000 triangles; not shipped, built here into a temporary folder, ~1 min). Per run: f0
+(autocorrelation), the smallest and largest area of the kept window, the closed quotient and the contact impulse
+per cycle (0 when the glottis does not close). ``--dt-check``: the finest two meshes again at dt 2.5e-5 s.
+
+    python benchmarks/bench_mesh_refinement.py             # ~10 min on one core, most of it x3fine
+    python benchmarks/bench_mesh_refinement.py --elements anp,p1 --dt-check
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+X3FINE_LC_MM = 0.1
+SHIPPED = ("coarse", "medium", "fine", "xfine", "xxfine")
+
+
+def register_x3fine(folder: Path) -> None:
+    """Build the 0.1-mm mesh into ``folder`` (with links to the shipped meshes) and point this process's mesh
+    loader and ``SimConfig`` at it: the mesh is a measurement aid, not a product option."""
+    import vfcore.config as config
+    import vfcore.mesh as mesh
+    from vfcore.mesh.geometry import build_mesh
+    for name in SHIPPED:
+        shutil.copy(mesh.DATA / f"{name}.npz", folder / f"{name}.npz")
+    pts, tri, lay = build_mesh(X3FINE_LC_MM)
+    np.savez(folder / "x3fine.npz", points_mm=pts, triangles=tri, layer=lay, lc_mm=X3FINE_LC_MM)
+    mesh.DATA = folder
+    mesh.load_mesh.cache_clear()
+    config.MESHES = SHIPPED + ("x3fine",)
+
+
+def row(p, mesh: str, element: str, dt: float) -> list:
+    from vfcore import SimConfig, simulate
+    from vfcore.mesh import load_mesh
+    t0 = time.perf_counter()
+    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer"))
+    if not r.ok:
+        return [mesh, load_mesh(mesh).n_triangles, element, dt, math.nan, math.nan, math.nan, math.nan, math.nan,
+                time.perf_counter() - t0]
+    y = r.cycles
+    closed = y is not None and y.period.size > 0
+    cq = float(y.closed_quotient.mean()) if closed else 0.0
+    imp = 1e3 * float(y.contact_impulse.mean()) if closed else 0.0
+    return [mesh, load_mesh(mesh).n_triangles, element, dt, r.f0, float(r.gaw.min()), float(r.gaw.max()), cq, imp,
+            time.perf_counter() - t0]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--elements", default="anp")
+    ap.add_argument("--points", default="Table 3,A,B")
+    ap.add_argument("--dt-check", action="store_true")
+    a = ap.parse_args(argv)
+    np.seterr(all="ignore")
+    from vfcore import TABLE3
+    points = {"Table 3": TABLE3, "A": replace(TABLE3, E_cover=850.0, p_sub=800.0),
+              "B": replace(TABLE3, E_cover=950.0, p_sub=1000.0)}
+    with tempfile.TemporaryDirectory() as tmp:
+        register_x3fine(Path(tmp))
+        print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
+              "impulse (mN s/m) | wall (s) |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for name in a.points.split(","):
+            p = points[name.strip()]
+            for element in a.elements.split(","):
+                runs = [(m, 5e-5) for m in SHIPPED + ("x3fine",)]
+                if a.dt_check:
+                    runs += [("xxfine", 2.5e-5), ("x3fine", 2.5e-5)]
+                for mesh, dt in runs:
+                    m, n, el, h, f0, lo, hi, cq, imp, wall = row(p, mesh, element, dt)
+                    print(f"| {name} | {m} ({n}) | {el} | {h:g} | {f0:.2f} | {lo:.2f} | {hi:.2f} | {cq:.3f} | "
+                          f"{imp:.3f} | {wall:.0f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
