@@ -106,7 +106,8 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
     """Submit an inference job to a running service; prints the job id (and the service's warnings)."""
     from .cli_spec import build_spec, note_is
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
-                      model=model, noise=noise, measure=measure, force_reach=force_reach, screen=screen, prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
+                      model=model, noise=noise, measure=measure, force_reach=force_reach, screen=screen,
+                      prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
                       contact=contact, contact_layer_mm=contact_layer_mm)
     with Service(url, token) as svc:
         d = svc.json("POST", "/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"})

@@ -15,7 +15,8 @@ console = Console()
 def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: int, mesh: str, dt: float,
                duration: float, discard: float, sigma_e: float, seed: int, prior: list[str] | None,
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
-               measure: list[str] | None = None, force_reach: bool = False, screen: str | None = None, prior_set: str = "paper", area_scale: list[float] | None = None,
+               measure: list[str] | None = None, force_reach: bool = False, screen: str | None = None,
+               prior_set: str = "paper", area_scale: list[float] | None = None,
                contact: str = "projection", contact_layer_mm: float = 0.1):
     """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2.
     ``area_scale``: the job's ``area_scale`` box (``parse_area_scale``; None: calibrated areas)."""

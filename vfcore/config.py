@@ -184,15 +184,18 @@ class SimConfig:
         d.update(kw)
         return SimConfig(**d)
 
-    def differences(self, recorded: dict) -> dict[str, tuple]:
-        """The model settings in which ``recorded`` (an :meth:`as_dict`, possibly read back from JSON, e.g.
-        ``Posterior.model``) differs from this config: ``{name: (recorded value, this value)}``. Settings
-        ``recorded`` does not carry, and those in ``NOT_MODEL``, are not compared; the layer thickness only
-        when both use the layer."""
+    def as_record(self) -> dict:
+        """:meth:`as_dict` as JSON gives it back (tuples as lists): what a stored record such as
+        ``Posterior.model`` holds, and what :meth:`differences` compares."""
         import json
-        mine = json.loads(json.dumps(self.as_dict()))      # tuples as lists, as a stored record has them
+        return json.loads(json.dumps(self.as_dict()))
+
+    def differences(self, recorded: dict) -> dict[str, tuple]:
+        """The model settings in which ``recorded`` (an :meth:`as_record`, e.g. ``Posterior.model``) differs from
+        this config: ``{name: (recorded value, this value)}``. Settings ``recorded`` does not carry, and those in
+        ``NOT_MODEL``, are not compared; the layer thickness only when both use the layer."""
         out = {}
-        for k, v in mine.items():
+        for k, v in self.as_record().items():
             if k in NOT_MODEL or k not in recorded:
                 continue
             if k == "contact_layer_mm" and not (self.contact == recorded.get("contact") == "layer"):

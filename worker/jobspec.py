@@ -144,8 +144,8 @@ class JobSpec(_Strict):
         default="projection", description="midline contact law: 'projection' (the paper's rigid midline, inelastic "
                                           "impact) or 'layer' (a compliant layer with the cover's modulus and "
                                           "viscosity; docs/model.md, 'Contact')")
-    contact_layer_mm: FiniteFloat = Field(default=0.1, gt=CONTACT_LAYER_MM[0], lt=CONTACT_LAYER_MM[1], description="contact layer thickness, mm "
-                                                                                "(contact 'layer')")
+    contact_layer_mm: FiniteFloat = Field(default=0.1, gt=CONTACT_LAYER_MM[0], lt=CONTACT_LAYER_MM[1],
+                                          description="contact layer thickness, mm (contact 'layer')")
     duration: FiniteFloat = Field(default=0.55, gt=0, le=5.0, description="simulated time, s")
     discard: FiniteFloat = Field(default=0.25, ge=0, le=5.0, description="initial transient discarded, s")
     sigma_e: FiniteFloat = Field(gt=0, le=1e6, description="observation noise sd, mm^2")

@@ -26,7 +26,6 @@ area scale"). It costs no extra simulation. ``None`` (default): the areas are ca
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, fields
 
@@ -154,11 +153,9 @@ NOISE_MODELS = ("fixed", "marginal")
 
 
 def model_record(target) -> dict | None:
-    """What ``Posterior.model`` records of a fit to ``target``: the settings of its finite-element model as JSON
-    gives them back (``SimConfig.as_dict()``, tuples as lists), or None for anything but a Problem."""
-    if not isinstance(target, Problem):
-        return None
-    return json.loads(json.dumps(target.config.as_dict()))
+    """What ``Posterior.model`` records of a fit to ``target``: the settings of its finite-element model
+    (``SimConfig.as_record()``), or None for anything but a Problem."""
+    return target.config.as_record() if isinstance(target, Problem) else None
 
 
 @dataclass(frozen=True, eq=False)
