@@ -76,6 +76,11 @@ def main(argv=None) -> int:
     ap.add_argument("--contact", default="projection", help="midline contact law (SimConfig.contact)")
     ap.add_argument("--max-moves", type=int, default=None,
                     help="SMC: most Metropolis moves per generation (the sampler's default when omitted)")
+    ap.add_argument("--runs", type=int, default=1,
+                    help="SMC: independent runs per twin, pooled (vfcore.inference.runs: runs more than 5 nats of "
+                         "evidence below the best left out)")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the twins of --out's calibration_partial.json and run only the others")
     ap.add_argument("--init-factor", type=int, default=1, help="SMC: first population = factor x particles")
     ap.add_argument("--ids", default=None,
                     help="comma-separated twin indices to run (0-based; twin i uses seed --seed + i)")
@@ -99,10 +104,15 @@ def main(argv=None) -> int:
     combo_names = [combination_label(c) for c in combos]
     combo_w = np.array([[c.get(n, 0.0) for n in prior.names] for c in combos]).reshape(len(combos), prior.ndim)
     rows = []
+    partial = out / "calibration_partial.json"
+    if a.resume and partial.exists():
+        rows = json.loads(partial.read_text())["rows"]
     t_all = time.perf_counter()
     try:
         ids = [int(t) for t in a.ids.split(",")] if a.ids else range(a.datasets)
         for i in ids:
+            if any(r["dataset"] == i for r in rows):
+                continue
             tw = make_twin(prior, cfg, seed=a.seed + i, sigma_e=a.sigma_e, n_obs=a.n_obs)
             t0 = time.perf_counter()
             with warnings.catch_warnings():
@@ -110,6 +120,7 @@ def main(argv=None) -> int:
                 if a.sampler == "smc":
                     post = smc(tw.problem, n_particles=a.particles, seed=a.seed + i, map=mapper, chunk_size=a.chunk,
                                symmetry="auto" if a.symmetry == "auto" else None, init_factor=a.init_factor,
+                               runs=a.runs,
                                **({"max_moves": a.max_moves} if a.max_moves else {}))
                 else:
                     post = importance_sample(tw.problem, n=a.draws, seed=a.seed + i, map=mapper,
@@ -133,13 +144,14 @@ def main(argv=None) -> int:
             rows.append({"dataset": i, "truth": tw.truth.tolist(), "mean": post.mean.tolist(), "sd": post.sd.tolist(),
                          "covered": cover.tolist(), "z": z.tolist(),
                          "combo_covered": c_cover.tolist(), "combo_z": c_z.tolist(), "n_simulations": post.n_simulations,
-                         "n_failed": post.n_failed, "loglik_truth": ll_truth, "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings})
+                         "n_failed": post.n_failed, "loglik_truth": ll_truth, "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings,
+                         "runs": post.info.get("runs")})
             print(f"[{i:2d}] covered {int(cover.sum())}/{cover.size}  |z|max={np.max(np.abs(z)):.2f}  "
                   f"sims={post.n_simulations} failed={post.n_failed} ESS={post.ess:.0f} {wall:.1f} s  "
                   f"loglik truth {ll_truth:.1f} best {ll_best:.1f}"
                   + (f"  combinations {int(c_cover.sum())}/{c_cover.size}" if combos else ""), flush=True)
             # the rows so far, so an interrupted run keeps what it measured
-            (out / "calibration_partial.json").write_text(json.dumps({"names": list(prior.names),
+            partial.write_text(json.dumps({"names": list(prior.names),
                                                                       "combinations": combo_names, "rows": rows}))
     finally:
         if pool is not None:

@@ -30,8 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from vfcore.inference.runs import SEED_STRIDE  # noqa: E402
+
 SIX = ("E_body", "E_cover", "E_lig", "p_sub", "rho", "eta")
-SEED_STRIDE = 7919
 
 
 def weighted_interval(x: np.ndarray, w: np.ndarray, level: float = 0.9) -> tuple[float, float]:

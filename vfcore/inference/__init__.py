@@ -13,6 +13,7 @@ from .problem import (NOISE_MODELS, Evaluation, Problem, ProblemEvaluator, evalu
                       gaussian_measurement_loglik, marginal_gaussian_loglik, n_sim_frames, validate_measurements,
                       validate_observation)
 from .products import compare, flow_contact_table, plot_marginals, plot_predictive, predictive_bands
+from .runs import RUN_GAP, pool_runs, run_seeds
 from .sensitivity import dt_mesh_configs, ensemble_size_study, numerics_study, write_table
 from .smc import DEFAULT_PARTICLES, SMCSampler, next_temperature, smc
 from .twin import Twin, make_twin
@@ -29,6 +30,7 @@ __all__ = [
     "marginal_gaussian_loglik", "n_sim_frames", "gaussian_measurement_loglik", "validate_measurements",
     "validate_observation",
     "compare", "flow_contact_table", "plot_marginals", "plot_predictive", "predictive_bands",
+    "RUN_GAP", "pool_runs", "run_seeds",
     "dt_mesh_configs", "ensemble_size_study", "numerics_study", "write_table",
     "DEFAULT_PARTICLES", "SMCSampler", "next_temperature", "smc",
     "Twin", "make_twin",
