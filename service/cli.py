@@ -19,8 +19,8 @@ from rich.console import Console
 
 from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
 from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Element, Fix, Fps, ForceReach,
-                          Measure, Mesh, Model, N, Noise, Out, Overwrite, Particles, Prior, PriorSet, Sampler, Screen,
-                          Seed, SigmaE, Uncalibrated, Workers, parse_area_scale, parse_fixed, parse_priors)
+                          Measure, Mesh, Model, N, Noise, Out, Overwrite, Particles, Prior, PriorSet, Runs, Sampler,
+                          Screen, Seed, SigmaE, Uncalibrated, Workers, parse_area_scale, parse_fixed, parse_priors)
 from .cli_spec import build_spec, note_is
 from .cli_tables import print_identifiability, print_table  # noqa: F401  (re-exported for callers)
 
@@ -144,14 +144,14 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
           noise: Noise = "fixed", measure: Measure = None, force_reach: ForceReach = False,
           screen: Screen = None, prior_set: PriorSet = "paper", area_scale: AreaScale = None,
           uncalibrated: Uncalibrated = False, contact: Contact = "projection",
-          contact_layer_mm: ContactLayer = 0.1) -> None:
+          contact_layer_mm: ContactLayer = 0.1, runs: Runs = 1) -> None:
     """Run an inference on this machine (in-process Dask LocalCluster); write the posterior, samples, figures and
     an HTML report (OUT/index.html); print the posterior table and what the data determined. The recording is
     first checked against the model's reach ('vfinfer reach')."""
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, screen=screen,
                       prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
-                      contact=contact, contact_layer_mm=contact_layer_mm)
+                      contact=contact, contact_layer_mm=contact_layer_mm, runs=runs)
     check_out(out, overwrite)
     reach_gate(spec, force_reach)
     note_is(sampler)

@@ -15,9 +15,9 @@ from rich.console import Console
 from rich.table import Table
 
 from .cli_common import check_out, choice, fail, human_duration, human_time, staged_output, warn
-from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure, Mesh, Model, N, Noise, Out, Overwrite,
-                          Particles, Prior, PriorSet, Sampler, Screen, Seed, SigmaE, Token, Uncalibrated, Url,
-                          parse_area_scale)
+from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Fix, Fps, ForceReach, Measure,
+                          Mesh, Model, N, Noise, Out, Overwrite, Particles, Prior, PriorSet, Runs, Sampler, Screen,
+                          Seed, SigmaE, Token, Uncalibrated, Url, parse_area_scale)
 
 console = Console()
 JobId = Annotated[str, typer.Argument(help="job id printed by 'vfinfer submit' (32 characters)")]
@@ -102,13 +102,13 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
            noise: Noise = "fixed", measure: Measure = None,
            force_reach: ForceReach = False, screen: Screen = None, prior_set: PriorSet = "paper",
            area_scale: AreaScale = None, uncalibrated: Uncalibrated = False, contact: Contact = "projection",
-           contact_layer_mm: ContactLayer = 0.1) -> None:
+           contact_layer_mm: ContactLayer = 0.1, runs: Runs = 1) -> None:
     """Submit an inference job to a running service; prints the job id (and the service's warnings)."""
     from .cli_spec import build_spec, note_is
     spec = build_spec(gaw, fps, sampler, n, particles, mesh, dt, duration, discard, sigma_e, seed, prior, fix,
                       model=model, noise=noise, measure=measure, force_reach=force_reach, screen=screen,
                       prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
-                      contact=contact, contact_layer_mm=contact_layer_mm)
+                      contact=contact, contact_layer_mm=contact_layer_mm, runs=runs)
     with Service(url, token) as svc:
         d = svc.json("POST", "/jobs", content=spec.to_json(), headers={"Content-Type": "application/json"})
     for w in d.get("warnings", []):

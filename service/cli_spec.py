@@ -17,7 +17,7 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
                fix: list[str] | None, chunk_size: int | None = None, model: str = "fe", noise: str = "fixed",
                measure: list[str] | None = None, force_reach: bool = False, screen: str | None = None,
                prior_set: str = "paper", area_scale: list[float] | None = None,
-               contact: str = "projection", contact_layer_mm: float = 0.1):
+               contact: str = "projection", contact_layer_mm: float = 0.1, runs: int = 1):
     """A validated JobSpec from CLI options; every bad input is one ``error:`` line and exit 2.
     ``area_scale``: the job's ``area_scale`` box (``parse_area_scale``; None: calibrated areas)."""
     from pydantic import ValidationError
@@ -39,7 +39,9 @@ def build_spec(gaw: Path, fps: float | None, sampler: str, n: int, particles: in
     scr = parse_screen(screen)
     if scr is not None and sampler != "smc":
         raise fail("--screen needs --sampler smc (it screens the SMC moves)")
-    smp = {"kind": "is", "n_samples": n} if sampler == "is" else {"kind": "smc", "n_particles": particles}
+    if runs != 1 and sampler != "smc":
+        raise fail("--runs needs --sampler smc (it pools independent SMC runs)")
+    smp = {"kind": "is", "n_samples": n} if sampler == "is" else {"kind": "smc", "n_particles": particles, "runs": runs}
     if scr is not None:
         smp["screen"] = scr
     body = {"model": model, "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},

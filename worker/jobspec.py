@@ -22,6 +22,7 @@ SCHEMA_VERSION = 1
 MAX_FRAMES = 200_000
 MAX_SIMULATIONS = 1_000_000
 MAX_SMC_GENERATIONS = 100
+MAX_SMC_RUNS = 8
 
 
 class _Derived:
@@ -103,6 +104,10 @@ class SMCSettings(_Strict):
                                       description="target relative ESS per tempering step")
     min_moves: int = Field(default=2, ge=1, le=50, description="fewest Metropolis moves per generation")
     max_moves: int = Field(default=8, ge=1, le=50, description="most Metropolis moves per generation")
+    runs: int = Field(default=1, ge=1, le=MAX_SMC_RUNS,
+                      description="independent runs (own seeds), pooled: runs more than 5 nats of evidence below "
+                                  "the best left out, the rest sharing the posterior equally (a single run of a "
+                                  "rugged likelihood can settle in a basin of negligible mass); cost x runs")
     screen: ScreenSettings | None = Field(
         default=None, description="delayed acceptance (Christen & Fox 2005): each proposal is first scored by this "
                                   "cheaper model and only the survivors are simulated with the job's model; the "

@@ -114,7 +114,8 @@ def expected_simulations(spec: JobSpec) -> tuple[int, int]:
     if isinstance(spec.sampler, ISSettings):
         return spec.sampler.n_samples, spec.sampler.n_samples
     lo, hi = SMC_SIMS_PER_PARTICLE
-    return lo * spec.sampler.n_particles, hi * spec.sampler.n_particles
+    n = spec.sampler.n_particles * spec.sampler.runs
+    return lo * n, hi * n
 
 
 #: Simulations per task on a GPU worker: one launch of one thread per simulation needs thousands of them to
@@ -294,25 +295,30 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
             import dataclasses
             cheap = dataclasses.replace(problem, config=problem.config.replace(mesh=s.screen.mesh, dt=s.screen.dt))
             screen = evaluator_for(spec, cheap)
+        from vfcore.inference.runs import pool_runs, run_seeds
         from vfcore.inference.symmetry import scale_group
-        # all six scaled parameters estimated: walk their log-ratios, draw the common scale exactly
-        sampler = SMCSampler(problem.prior, s.n_particles, spec.seed, delayed=screen is not None,
-                             symmetry=scale_group(problem), **s.sampler_options())
-        b = 0
-        while (th := sampler.ask()) is not None:
-            if control.cancelled.is_set():
-                raise JobCancelled()
-            prog.n_total += th.shape[0]
-            prog.generation = sampler.generation
-            fn = screen if sampler.stage == "screen" else evaluator
-            ev = _run_batch(client, root, sp, job_id, b, th, fn, prog, report, control)
-            sampler.tell(ev)
-            prog.ess = float(sampler.last_ess)
-            b += 1
+        b, posts = 0, []
+        # independent runs one after another; their batches are numbered on, so a resumed job reads them all back
+        for seed in run_seeds(spec.seed, s.runs):
+            # all six scaled parameters estimated: walk their log-ratios, draw the common scale exactly
+            sampler = SMCSampler(problem.prior, s.n_particles, seed, delayed=screen is not None,
+                                 symmetry=scale_group(problem), **s.sampler_options())
+            while (th := sampler.ask()) is not None:
+                if control.cancelled.is_set():
+                    raise JobCancelled()
+                prog.n_total += th.shape[0]
+                prog.generation = sampler.generation
+                fn = screen if sampler.stage == "screen" else evaluator
+                ev = _run_batch(client, root, sp, job_id, b, th, fn, prog, report, control)
+                sampler.tell(ev)
+                prog.ess = float(sampler.last_ess)
+                b += 1
+            posts.append(sampler.result(obs_gaw=problem.obs_compared, fps=problem.fps))
+            posts[-1].info["seed"] = seed
         t_sim = time.perf_counter() - t0
         prog.phase = "reducing"
         report(prog)
-        post = sampler.result(obs_gaw=problem.obs_compared, fps=problem.fps)
+        post = posts[0] if len(posts) == 1 else pool_runs(posts, seed=spec.seed)
         from .reduce import publish_posterior
         fut = client.submit(publish_posterior, sp, post, key=f"vfreduce-{job_id}", pure=True)
     else:  # pragma: no cover

@@ -117,6 +117,8 @@ def _fit_options(cmd: str) -> list[tuple]:
             ("screen-dt", ["--screen", "coarse:abc"], "not a number"),
             ("screen-dt-range", ["--screen", "coarse:0.01"], "time step"),
             ("screen-with-is", ["--sampler", "is", "--screen", "coarse"], "--sampler smc"),
+            ("runs-with-is", ["--sampler", "is", "--runs", "2"], "--runs needs --sampler smc"),
+            ("runs-zero", ["--runs", "0"], "--runs"), ("runs-many", ["--runs", "9"], "--runs"),
             ("area-scale-text", ["--area-scale", "a:2"], "not a number"),
             ("area-scale-one", ["--area-scale", "2"], "LO:HI"),
             ("area-scale-reversed", ["--area-scale", "4:0.25"], "0 < LO < HI"),
