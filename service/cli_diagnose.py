@@ -220,13 +220,16 @@ def diagnose_cmd(
                                                    "combinations a GAW determines, rho anchoring the scale)")] = DEFAULT_ESTIMATE,
         fix: Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable; "
                                                          "parameters neither estimated nor fixed take Table 3 values")] = None,
-        mesh: Annotated[str, typer.Option(parser=choice("coarse", "medium", "fine"), metavar="[coarse|medium|fine]",
-                                          help="finite-element mesh")] = "coarse",
-        dt: Annotated[float, typer.Option(parser=POSITIVE, help="simulation time step, s")] = 1e-4,
-        duration: Annotated[float, typer.Option(parser=POSITIVE,
-                                                help="simulated time, s (the paper's 0.55)")] = DURATION_S,
-        discard: Annotated[float, typer.Option(parser=NON_NEGATIVE,
-                                               help="initial transient discarded, s")] = DISCARD_S,
+        mesh: Annotated[Optional[str], typer.Option(
+            parser=choice("coarse", "medium", "fine"), metavar="[coarse|medium|fine]",
+            help="finite-element mesh (default: coarse, or the --base fit's)")] = None,
+        dt: Annotated[Optional[float], typer.Option(
+            parser=POSITIVE, help="simulation time step, s (default: 1e-4, or the --base fit's)")] = None,
+        duration: Annotated[Optional[float], typer.Option(
+            parser=POSITIVE, help=f"simulated time, s (default: {DURATION_S:g}, or the --base fit's)")] = None,
+        discard: Annotated[Optional[float], typer.Option(
+            parser=NON_NEGATIVE, help=f"initial transient discarded, s (default: {DISCARD_S:g}, or the --base "
+                                      "fit's)")] = None,
         sigma_e: Annotated[float, typer.Option(parser=POSITIVE, help="observation noise sd, mm^2")] = 1.0,
         noise: Annotated[str, typer.Option(parser=choice("fixed", "marginal"), metavar="[fixed|marginal]",
                                            help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
@@ -254,8 +257,9 @@ def diagnose_cmd(
                  "diagnosis is written")] = True,
         seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed,
         prior_set: PriorSet = "paper", area_scale: AreaScale = None, uncalibrated: Uncalibrated = False,
-        contact: Contact = "projection", contact_layer_mm: ContactLayer = 0.1) -> None:
-    """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics."""
+        contact: Contact = None, contact_layer_mm: ContactLayer = None) -> None:
+    """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics.
+    With --base, the model settings not given on the command line are the fit's own."""
     from .diagnosis import plot
 
     req = diagnose_request(candidates=None if candidates is None else _names(candidates), n_particles=particles,
@@ -265,9 +269,20 @@ def diagnose_cmd(
         raise _fail(f"--workers must be >= 1, got {workers}")
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out} exists and is not a folder")
-    problem = build_problem(gaw, fps, estimate, fix, mesh, dt, duration, discard, sigma_e, noise, prior_set,
-                            parse_area_scale(area_scale, uncalibrated), contact, contact_layer_mm)
-    base_post = load_base(base, problem) if base is not None else None
+    given = {"mesh": mesh, "dt": dt, "duration": duration, "discard": discard, "contact": contact,
+             "contact_layer_mm": contact_layer_mm}
+    base_post = read_base(base) if base is not None else None
+    m = model_settings(given, base_post)
+    problem = build_problem(gaw, fps, estimate, fix, m["mesh"], m["dt"], m["duration"], m["discard"], sigma_e, noise,
+                            prior_set, parse_area_scale(area_scale, uncalibrated), m["contact"],
+                            m["contact_layer_mm"])
+    if base_post is not None:
+        check_base(base_post, base, problem)
+        taken = [f"{_OPTION[k]} {v:g}" if isinstance(v, float) else f"{_OPTION[k]} {v}"
+                 for k, v in m.items() if given[k] is None and v != MODEL_DEFAULTS[k]]
+        if taken:
+            console.print("--base: simulating with the fit's " + ", ".join(taken), highlight=False)
+    mesh = m["mesh"]
 
     console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "
                   f"candidates {req.candidates or 'all implemented'}, {workers} worker(s)")
@@ -320,12 +335,30 @@ _OPTION = {"mesh": "--mesh", "dt": "--dt", "duration": "--duration", "discard": 
            "contact": "--contact", "contact_layer_mm": "--contact-layer-mm"}
 
 
-def load_base(path: Path, problem):
-    """The ``--base`` posterior, checked against the problem: a NetCDF posterior of an FE fit with
-    predictions, estimating the problem's parameters or some of them, of the same recording, simulated with the
-    same model settings (where the file records them: ``Posterior.model``)."""
-    import numpy as np
+#: the model settings of a diagnosis given neither on the command line nor by a ``--base`` fit
+MODEL_DEFAULTS = {"mesh": "coarse", "dt": 1e-4, "duration": DURATION_S, "discard": DISCARD_S,
+                  "contact": "projection", "contact_layer_mm": 0.1}
 
+
+def model_settings(given: dict, base_post=None) -> dict:
+    """The diagnosis's model settings: those ``given`` (not None), else the ``base_post`` fit's recorded ones
+    (``Posterior.model``), else :data:`MODEL_DEFAULTS`. Adopting the fit's settings makes ``--base`` the same
+    model as the extensions refitted against it without the user repeating them; a setting given that differs
+    from the fit's is refused by :func:`check_base`."""
+    rec = (base_post.model or {}) if base_post is not None else {}
+    return {k: given[k] if given.get(k) is not None else rec.get(k, d) for k, d in MODEL_DEFAULTS.items()}
+
+
+def load_base(path: Path, problem):
+    """The ``--base`` posterior read (:func:`read_base`) and checked against the problem (:func:`check_base`)."""
+    post = read_base(path)
+    check_base(post, path, problem)
+    return post
+
+
+def read_base(path: Path):
+    """The ``--base`` posterior: a NetCDF posterior of an FE fit with predictions; anything else is one error
+    line."""
     from vfcore.inference.posterior import Posterior
     if not path.is_file():
         raise _fail(f"--base {path}: no such file")
@@ -335,12 +368,22 @@ def load_base(path: Path, problem):
         raise _fail(f"--base {path}: not a vfinfer posterior.nc ({type(exc).__name__}: {exc})") from None
     if post.predictive is None:
         raise _fail(f"--base {path}: the posterior carries no predicted GAWs (not a finite-element fit)")
+    return post
+
+
+def check_base(post, path: Path, problem) -> None:
+    """``post`` (read from ``path``) against the problem: estimating the problem's parameters or some of them,
+    of the same recording, simulated with the same model settings (where the file records them:
+    ``Posterior.model``)."""
+    import numpy as np
+
     diff = problem.config.differences(post.model or {})
     if diff:
         was = ", ".join(f"{_OPTION.get(k, k)} {a}" for k, (a, _) in diff.items())
         now = ", ".join(f"{_OPTION.get(k, k)} {b}" for k, (_, b) in diff.items())
         raise _fail(f"--base {path}: it was simulated with {was}; this diagnosis would simulate {now} "
-                    "(give the fit's settings, so that the base and the extensions are the same model)")
+                    f"(leave {'/'.join(_OPTION.get(k, k) for k in diff)} out to take the fit's: the base and the extensions "
+                    "must be the same model)")
     extra = sorted(set(post.names) - set(problem.prior.names))
     if extra:
         raise _fail(f"--base {path}: it estimates {extra}, which --estimate does not")
@@ -348,7 +391,6 @@ def load_base(path: Path, problem):
     mine = np.asarray(problem.obs_compared, dtype=float)
     if obs is not None and not (obs.shape == mine.shape and np.allclose(obs, mine, rtol=0, atol=1e-9)):
         raise _fail(f"--base {path}: it was fitted to another recording (or another window of this one)")
-    return post
 
 
 def write_page(out: Path, d: dict, gaw: Path, problem, sigma_e: float, noise: str, mesh: str) -> Path:

@@ -109,7 +109,9 @@ def test_library_cli_service_and_benchmark_share_one_set_of_defaults(monkeypatch
     req = DiagnoseRequest()
     assert (sig["particles"].default, sig["refit_particles"].default, sig["max_refits"].default) == \
         (o.n_particles, o.refit_particles, o.max_refits)
-    assert (sig["duration"].default, sig["discard"].default) == (D.DURATION_S, D.DISCARD_S)
+    from service.cli_diagnose import MODEL_DEFAULTS
+    assert (MODEL_DEFAULTS["duration"], MODEL_DEFAULTS["discard"]) == (D.DURATION_S, D.DISCARD_S)
+    assert sig["duration"].default is sig["dt"].default is None     # None: the --base fit's, else MODEL_DEFAULTS
     assert sig["continuation"].default == req.continuation == o.continuation
     assert sig["free_material"].default == req.free_material == o.free_material
     assert (req.n_particles, req.refit_particles, req.max_refits) == (o.n_particles, o.refit_particles, o.max_refits)
@@ -181,8 +183,8 @@ def _base_posterior(problem, model) -> "object":
 
 
 def test_a_base_fitted_with_another_model_is_refused(tmp_path, leaky_gaw):
-    """--base must be the model the diagnosis simulates: a fit at another step or contact law is refused with
-    one line naming the options and both values; the same model is taken; a file that does not record its
+    """--base must be the model the diagnosis simulates: a fit at another step than the one given is refused
+    with one line naming the option and both values; the same model is taken; a file that does not record its
     model (written before it was recorded) is taken as before."""
     from vfcore.inference.posterior import Posterior
     from vfcore.inference.problem import model_record
@@ -195,7 +197,8 @@ def test_a_base_fitted_with_another_model_is_refused(tmp_path, leaky_gaw):
                  "--base", str(tmp_path / "other.nc")])
     assert r.exit_code == 2, r.output
     line = " ".join(r.output.split())
-    assert "--dt 5e-05" in line and "--dt 0.0001" in line and "--contact layer" in line, line
+    assert "--dt 5e-05" in line and "--dt 0.0001" in line and "leave --dt out" in line, line
+    assert "--contact" not in line                       # not given: the fit's own law is taken
     assert not out.exists()
     _base_posterior(problem, model_record(problem)).to_netcdf(tmp_path / "same.nc")
     got = load_base(tmp_path / "same.nc", problem)
@@ -203,3 +206,34 @@ def test_a_base_fitted_with_another_model_is_refused(tmp_path, leaky_gaw):
     _base_posterior(problem, None).to_netcdf(tmp_path / "unrecorded.nc")
     assert Posterior.from_netcdf(tmp_path / "unrecorded.nc").model is None
     assert load_base(tmp_path / "unrecorded.nc", problem).names == ("E_body", "E_cover")
+
+
+def test_a_base_fit_lends_its_model_to_the_settings_not_given(tmp_path, leaky_gaw, monkeypatch):
+    """Without --dt, --mesh, --contact ... the diagnosis simulates the --base fit's recorded model (a fit of
+    'vfinfer infer' steps at 5e-5 s, a diagnosis by default at 1e-4 s) and says which settings it took; what the
+    command line gives still wins, and a clash is refused (previous test)."""
+    import service.cli_diagnose as C
+    from service.cli_diagnose import build_problem
+    problem = build_problem(leaky_gaw, None, "E_body,E_cover", None, "coarse", 1e-4, 0.35, 0.15, 1.0)
+    fit = problem.config.replace(dt=5e-5, contact="layer", contact_layer_mm=0.2)
+    _base_posterior(problem, json.loads(json.dumps(fit.as_dict()))).to_netcdf(tmp_path / "fit.nc")
+    seen = []
+
+    def stop(problem, req, workers, store, base_post):
+        seen.append((problem, base_post))
+        raise C.fail("stopped before simulating", code=1)
+
+    monkeypatch.setattr(C, "run_local", stop)
+    args = [str(leaky_gaw), "--out", str(tmp_path / "out"), "--estimate", "E_body,E_cover", "--duration", "0.35",
+            "--discard", "0.15", "--no-free-material", "--base", str(tmp_path / "fit.nc")]
+    r = _invoke(args)
+    assert r.exit_code == 1 and "stopped before simulating" in r.output, r.output
+    cfg = seen[0][0].config
+    assert (cfg.dt, cfg.contact, cfg.contact_layer_mm, cfg.mesh) == (5e-5, "layer", 0.2, "coarse")
+    assert not cfg.differences(seen[0][1].model)
+    line = " ".join(r.output.split())
+    assert "simulating with the fit's --dt 5e-05, --contact layer, --contact-layer-mm 0.2" in line, line
+    r = _invoke([*args, "--contact-layer-mm", "0.3"])
+    assert r.exit_code == 2 and "--contact-layer-mm 0.2" in " ".join(r.output.split()), r.output
+    r = _invoke([str(leaky_gaw), "--out", str(tmp_path / "out"), "--estimate", "E_body,E_cover", *TINY])
+    assert seen[-1][0].config.dt == 1e-4 and seen[-1][0].config.contact == "projection"   # no --base: defaults
