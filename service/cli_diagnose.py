@@ -15,6 +15,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from vfcore.config import contact_label
+
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw
 from .cli_options import AreaScale, Contact, ContactLayer, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
@@ -398,7 +400,6 @@ def write_page(out: Path, d: dict, gaw: Path, problem, sigma_e: float, noise: st
     from .report_diagnose import write_diagnosis_report
     source = {"recording": gaw.name, "camera frame rate": f"{problem.fps:g} frames/s",
               "estimated": ", ".join(problem.prior.names), "mesh": mesh,
-              "contact": problem.config.contact + (f" {problem.config.contact_layer_mm:g} mm"
-                                                   if problem.config.contact == "layer" else ""),
+              "contact": contact_label(problem.config.contact, problem.config.contact_layer_mm),
               "noise": f"{noise}" + (f", sigma_e = {sigma_e:g} mm²" if noise == "fixed" else "")}
     return write_diagnosis_report(out, d, title=f"vfinfer diagnosis of {gaw.name}", source=source)

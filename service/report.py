@@ -13,6 +13,8 @@ import math
 from html import escape
 from pathlib import Path
 
+from vfcore.config import contact_label
+
 #: Figures of a job, in the order shown, with their captions.
 FIGURES = {
     "gaw_fit": "The recording (dots) and the fit: the model's 90 % posterior band and the wider band of "
@@ -117,10 +119,9 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
              f"{s.get('n_samples', '?')} weighted draws, {s.get('n_resampled', '?')} resampled.</p>"]
     m = s.get("model")
     if m and m.get("name", "fe") == "fe":
-        layer = f" {fmt_num(m.get('contact_layer_mm'), 'g')} mm" if m.get("contact") == "layer" else ""
         parts.append(f"<p class='muted'>Model: {escape(str(m.get('mesh')))} mesh, dt {fmt_num(m.get('dt'), 'g')} s, "
                      f"{fmt_num(m.get('duration'), 'g')} s simulated ({fmt_num(m.get('discard'), 'g')} s discarded), "
-                     f"contact {escape(str(m.get('contact')))}{layer}.</p>")
+                     f"contact {escape(contact_label(m.get('contact'), m.get('contact_layer_mm')))}.</p>")
     warnings = s.get("warnings") or []
     if warnings:
         parts.append("<h2>Warnings</h2>" + "".join(f"<div class='warn'>{escape(w)}</div>" for w in warnings))

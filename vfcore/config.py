@@ -13,6 +13,13 @@ CONTACT_LAYER_MM = (0.0, 1.0)  # open bounds of the contact layer's thickness, m
 NOT_MODEL = ("keep_trajectories", "early_stop")
 
 
+def contact_label(contact, layer_mm=None) -> str:
+    """How reports name a contact law: ``"projection"``, or ``"layer 0.1 mm"`` with the layer's thickness."""
+    if contact != "layer":
+        return str(contact)
+    return f"layer {layer_mm:g} mm" if isinstance(layer_mm, (int, float)) else "layer"
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Numerical and observation settings of one forward simulation.

@@ -37,13 +37,17 @@ __all__ = ["GawFileError", "GawData", "NEGATIVE_NOISE_SDS", "check_negative", "n
 NEGATIVE_NOISE_SDS = 5.0
 
 
+#: 1 / Phi^-1(3/4): the MAD of a normal sample times this is its sd
+MAD_TO_SD = 1.482602218505602
+
+
 def noise_sd(area) -> float:
     """Robust noise sd of a recording (mm^2): MAD of second differences / sqrt(6), which for white noise
     of sd s has sd s*sqrt(6)."""
     d2 = np.diff(np.asarray(area, dtype=float), 2)
     if d2.size == 0:
         return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+    return float(MAD_TO_SD * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
 
 
 def check_negative(area) -> str | None:

@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..gawio import noise_sd as recording_noise_sd
 from ..measures import DEFAULT_LEVEL, cycle_boundaries, gaw_measures
 
 PHASES = ("closed", "opening", "peak", "closing")
@@ -210,8 +211,7 @@ def noise_sd(obs, pred) -> float:
     n = min(y.size, mu.size)
     if n < 5:
         return 0.0
-    d = np.diff(y[:n] - mu[:n], 2)
-    return float(1.482602218505602 * np.median(np.abs(d - np.median(d))) / math.sqrt(6.0))
+    return recording_noise_sd(y[:n] - mu[:n])
 
 
 def predictive_measures(pred, fps: float, names=DEFAULT_MEASURES) -> dict[str, np.ndarray]:
