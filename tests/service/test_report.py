@@ -59,3 +59,18 @@ def test_report_folder_reads_offline(tmp_path, post):
     assert json.loads(meta)["units"] == {"E_cover": "Pa", "p_sub": "Pa"}
     header = csv_bytes.decode().splitlines()[0]
     assert header == "E_cover,p_sub,log_weight,weight,n_resampled"
+
+
+def test_the_report_says_which_independent_runs_were_pooled(post):
+    """A pooled posterior's page lists every run's evidence and marks the one left out."""
+    import copy
+
+    from service.report import _diagnostics
+    from vfcore.inference.runs import pool_runs
+    from worker.reduce import posterior_summary
+    a, b, c = copy.deepcopy(post), copy.deepcopy(post), copy.deepcopy(post)
+    b.log_evidence, c.log_evidence = post.log_evidence - 1.0, post.log_evidence - 12.0
+    lines = " ".join(t for _, t in _diagnostics(posterior_summary(pool_runs([a, b, c]))))
+    assert "3 independent SMC runs" in lines and lines.count("(left out)") == 1, lines
+    assert f"{c.log_evidence:.1f} (left out)" in lines and "more than 5 nats below the best" in lines
+    assert "independent" not in " ".join(t for _, t in _diagnostics(posterior_summary(post)))
