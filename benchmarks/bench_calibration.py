@@ -18,6 +18,9 @@ moves (``vfcore.inference.symmetry``), for comparison.
         --particles 100 --workers 2          # six free: the common scale from the prior
     python benchmarks/bench_calibration.py --datasets 20 --estimate E_body,E_cover,E_lig,p_sub,rho,eta \
         --particles 100 --workers 2 --dt 5e-5 --contact layer    # the model whose likelihood is smooth
+    python benchmarks/bench_calibration.py --datasets 20 --estimate E_body,E_cover,E_lig,p_sub,rho,eta \
+        --particles 100 --workers 2 --dt 5e-5 --contact layer --runs 3 --out DIR    # 3 runs pooled a twin
+    ... --resume --out DIR           # after an interruption: keeps DIR's finished twins, runs the others
 """
 from __future__ import annotations
 
