@@ -85,16 +85,21 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     assert "/jobs/{job_id}/posterior" in http.get("/openapi.json").json()["paths"]
 
 
-def test_smc_generation_by_generation_matches_direct(service):
-    from vfcore.inference.smc import smc
-    http = service.http
-    spec = toy_spec(seed=5, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3})
+def _smc_job(http, spec):
+    """Submit ``spec``, wait for it, and return its status, its samples JSON and its problem."""
     job_id = http.post("/jobs", json=spec, headers=auth("bob")).json()["id"]
     st = wait_done(http, job_id, "bob")
     assert st["state"] == "done", st
     js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("bob")).json()
     s = JobSpec.model_validate(spec)
-    pb = s.to_problem()
+    return job_id, st, js, s, s.to_problem()
+
+
+def test_smc_generation_by_generation_matches_direct(service):
+    from vfcore.inference.smc import smc
+    http = service.http
+    spec = toy_spec(seed=5, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3})
+    job_id, st, js, s, pb = _smc_job(http, spec)
     direct = smc(ToyEvaluator(pb), pb.prior, 60, s.seed, **s.sampler.sampler_options())
     np.testing.assert_array_equal(np.array(js["samples"]), direct.samples)
     post = http.get(f"/jobs/{job_id}/posterior", headers=auth("bob")).json()
@@ -110,12 +115,7 @@ def test_smc_with_delayed_acceptance_matches_direct(service):
     http = service.http
     spec = toy_spec(seed=6, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3,
                                      "screen": {"mesh": "coarse", "dt": 1e-4}})
-    job_id = http.post("/jobs", json=spec, headers=auth("bob")).json()["id"]
-    st = wait_done(http, job_id, "bob")
-    assert st["state"] == "done", st
-    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("bob")).json()
-    s = JobSpec.model_validate(spec)
-    pb = s.to_problem()
+    job_id, st, js, s, pb = _smc_job(http, spec)
     cheap = dataclasses.replace(pb, config=pb.config.replace(mesh="coarse", dt=1e-4))
     direct = smc(ToyEvaluator(pb), pb.prior, 60, s.seed, screen=ToyEvaluator(cheap), **s.sampler.sampler_options())
     np.testing.assert_array_equal(np.array(js["samples"]), direct.samples)
@@ -161,12 +161,7 @@ def test_smc_independent_runs_match_direct(service):
     from vfcore.inference.smc import smc
     http = service.http
     spec = toy_spec(seed=7, sampler={"kind": "smc", "n_particles": 40, "max_moves": 3, "runs": 2})
-    job_id = http.post("/jobs", json=spec, headers=auth("bob")).json()["id"]
-    st = wait_done(http, job_id, "bob")
-    assert st["state"] == "done", st
-    js = http.get(f"/jobs/{job_id}/samples", params={"format": "json"}, headers=auth("bob")).json()
-    s = JobSpec.model_validate(spec)
-    pb = s.to_problem()
+    job_id, st, js, s, pb = _smc_job(http, spec)
     direct = smc(ToyEvaluator(pb), pb.prior, 40, s.seed, runs=2, **s.sampler.sampler_options())
     np.testing.assert_array_equal(np.array(js["samples"]), direct.samples)
     np.testing.assert_array_equal(np.array(js["resampled"]), direct.resampled)
