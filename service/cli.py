@@ -84,6 +84,9 @@ def print_expected_cost(spec, workers: int) -> None:
     m_lo, m_hi = lo * t / workers / 60.0, hi * t / workers / 60.0
     mins = f"{m_lo:.1f}" if lo == hi else f"{m_lo:.1f}-{m_hi:.1f}"
     per = "" if lo == hi else " (the range of SMC fits of 2 to 6 free parameters)"
+    runs = getattr(spec.sampler, "runs", 1)
+    if runs > 1:
+        per += f" for {runs} independent runs"
     console.print(f"expected cost: {span} simulations{per} at {t * 1e3:.0f} ms each on this machine: about "
                   f"{mins} min on {workers} worker{'s' if workers > 1 else ''}", highlight=False)
 

@@ -96,6 +96,11 @@ def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, mon
     # the cost is announced before the run: the measured SMC range for this many particles
     n = spec.sampler.n_particles
     assert f"expected cost: {20 * n:,}-{90 * n:,} simulations" in r.output, r.output
+    # independent runs: carried into the job, and the cost multiplied
+    r = CliRunner().invoke(app, ["infer", str(gaw), *args, "--runs", "3", "-o", str(tmp_path / "o3")],
+                           env={"COLUMNS": "250"})
+    assert r.exit_code == 0 and seen["spec"].sampler.runs == 3, r.output
+    assert f"expected cost: {60 * n:,}-{270 * n:,} simulations" in r.output and "for 3 independent runs" in r.output
 
 
 def test_job_ids_are_valid_cli_arguments():
