@@ -42,6 +42,7 @@ from scipy import stats  # noqa: E402
 
 from vfcore.config import SimConfig  # noqa: E402
 from vfcore.inference import Prior, importance_sample, make_twin, smc  # noqa: E402
+from vfcore.inference.runs import RUN_RULES, pool_runs, run_seeds  # noqa: E402
 from vfcore.inference.identify import combination_label, scale_invariant_combinations  # noqa: E402
 from vfcore.params import PARAM_NAMES, TABLE3  # noqa: E402
 
@@ -80,8 +81,10 @@ def main(argv=None) -> int:
     ap.add_argument("--max-moves", type=int, default=None,
                     help="SMC: most Metropolis moves per generation (the sampler's default when omitted)")
     ap.add_argument("--runs", type=int, default=1,
-                    help="SMC: independent runs per twin, pooled (vfcore.inference.runs: runs more than 5 nats of "
-                         "evidence below the best left out)")
+                    help="SMC: independent runs per twin, pooled (vfcore.inference.runs) by --run-rule; the "
+                         "combinations covered under every rule are recorded too")
+    ap.add_argument("--run-rule", choices=("loglik", "evidence"), default="loglik",
+                    help="which runs are pooled (vfcore.inference.runs.RUN_RULES)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the twins of --out's calibration_partial.json and run only the others")
     ap.add_argument("--init-factor", type=int, default=1, help="SMC: first population = factor x particles")
@@ -121,11 +124,15 @@ def main(argv=None) -> int:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 if a.sampler == "smc":
-                    post = smc(tw.problem, n_particles=a.particles, seed=a.seed + i, map=mapper, chunk_size=a.chunk,
-                               symmetry="auto" if a.symmetry == "auto" else None, init_factor=a.init_factor,
-                               runs=a.runs,
-                               **({"max_moves": a.max_moves} if a.max_moves else {}))
+                    # the runs one by one, so that every pooling rule can be scored on the same runs
+                    runs = [smc(tw.problem, n_particles=a.particles, seed=s, map=mapper, chunk_size=a.chunk,
+                                symmetry="auto" if a.symmetry == "auto" else None, init_factor=a.init_factor,
+                                **({"max_moves": a.max_moves} if a.max_moves else {}))
+                            for s in run_seeds(a.seed + i, a.runs)]
+                    pooled = {r: pool_runs(runs, seed=a.seed + i, rule=r) for r in RUN_RULES} if a.runs > 1 else {}
+                    post = pooled[a.run_rule] if pooled else runs[0]
                 else:
+                    pooled = {}
                     post = importance_sample(tw.problem, n=a.draws, seed=a.seed + i, map=mapper,
                                              chunk_size=a.chunk * 4)
             wall = time.perf_counter() - t0
@@ -139,16 +146,22 @@ def main(argv=None) -> int:
             cover = (lo <= tw.truth) & (tw.truth <= hi)
             z = (post.mean - tw.truth) / post.sd
             q = (1.0 - a.level) / 2.0
-            lc = np.log(post.samples) @ combo_w.T              # (n_draws, n_combos)
             c_true = combo_w @ np.log(tw.truth)
-            c_lo, c_hi = np.quantile(lc, q, axis=0), np.quantile(lc, 1.0 - q, axis=0)
-            c_cover = (c_lo <= c_true) & (c_true <= c_hi)
-            c_z = (lc.mean(axis=0) - c_true) / lc.std(axis=0)
+
+            def combo_cover(p):
+                # the pooled runs are equally weighted particles of equal-sized runs: plain quantiles
+                lc = np.log(p.samples) @ combo_w.T              # (n_draws, n_combos)
+                lo_, hi_ = np.quantile(lc, q, axis=0), np.quantile(lc, 1.0 - q, axis=0)
+                return (lo_ <= c_true) & (c_true <= hi_), (lc.mean(axis=0) - c_true) / lc.std(axis=0)
+            c_cover, c_z = combo_cover(post)
+            by_rule = {r: combo_cover(p)[0].tolist() for r, p in pooled.items()}
+            per_run = [combo_cover(p)[0].tolist() for p in runs] if pooled else []
             rows.append({"dataset": i, "truth": tw.truth.tolist(), "mean": post.mean.tolist(), "sd": post.sd.tolist(),
                          "covered": cover.tolist(), "z": z.tolist(),
                          "combo_covered": c_cover.tolist(), "combo_z": c_z.tolist(), "n_simulations": post.n_simulations,
                          "n_failed": post.n_failed, "loglik_truth": ll_truth, "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings,
-                         "runs": post.info.get("runs")})
+                         "runs": post.info.get("runs"), "combo_covered_by_rule": by_rule,
+                         "combo_covered_per_run": per_run})
             print(f"[{i:2d}] covered {int(cover.sum())}/{cover.size}  |z|max={np.max(np.abs(z)):.2f}  "
                   f"sims={post.n_simulations} failed={post.n_failed} ESS={post.ess:.0f} {wall:.1f} s  "
                   f"loglik truth {ll_truth:.1f} best {ll_best:.1f}"

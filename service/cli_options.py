@@ -24,9 +24,9 @@ Sampler = Annotated[str, typer.Option(
 N = Annotated[int, typer.Option("--n", min=1, help="--sampler is: prior draws, = simulations")]
 Particles = Annotated[int, typer.Option(min=10, help="--sampler smc: particles per generation (>= 10)")]
 Runs = Annotated[int, typer.Option(
-    min=1, max=8, help="--sampler smc: independent runs, pooled (runs more than 5 nats of evidence below the best "
-                       "left out); a single run of a rugged six-parameter likelihood can miss the truth's basin "
-                       "(docs/inference.md, 'Independent runs'); cost x RUNS")]
+    min=1, max=8, help="--sampler smc: independent runs, pooled (runs whose best particle lies more than 3 nats of "
+                       "log-likelihood below the best run's left out); a single run of a rugged six-parameter "
+                       "likelihood can miss the truth's basin (docs/inference.md, 'Independent runs'); cost x RUNS")]
 Mesh = Annotated[str, typer.Option(parser=choice("coarse", "medium", "fine"), metavar="[coarse|medium|fine]",
                                    help="finite-element mesh: coarse (~172 triangles), medium (the paper's), fine")]
 Dt = Annotated[float, typer.Option(parser=POSITIVE,

@@ -80,16 +80,19 @@ def _diagnostics(s: dict) -> list[tuple[str, str]]:
     le, se = s.get("log_evidence"), s.get("log_evidence_se")
     if le is not None:
         out.append(("ok", f"Log evidence {le:.2f} ± {fmt_num(se, '.2f')} (compares models fitted to the same recording)."))
-    runs = (s.get("info") or {}).get("runs")
+    info = s.get("info") or {}
+    runs = info.get("runs")
     if runs and len(runs) > 1:
         kept = [r for r in runs if r.get("kept")]
+        key, what = (("log_evidence", "log evidence") if info.get("run_rule") == "evidence" else
+                     ("best_loglik", "best log-likelihood"))
         out.append(("ok" if len(kept) == len(runs) else "warn",
-                    f"{len(runs)} independent SMC runs, log evidence "
-                    + ", ".join(f"{r['log_evidence']:.1f}" + ("" if r.get("kept") else " (left out)") for r in runs)
-                    + (": every run found the same evidence to within the gap, and they share the posterior "
-                       "equally." if len(kept) == len(runs) else
-                       f": {len(runs) - len(kept)} settled more than {fmt_num((s.get('info') or {}).get('run_gap'), 'g')}"
-                       " nats below the best and are left out; a single run could have reported that basin.")))
+                    f"{len(runs)} independent SMC runs, {what} "
+                    + ", ".join(f"{r[key]:.1f}" + ("" if r.get("kept") else " (left out)") for r in runs)
+                    + (": every run reached the same to within the gap, and they share the posterior equally."
+                       if len(kept) == len(runs) else
+                       f": {len(runs) - len(kept)} settled more than {fmt_num(info.get('run_gap'), 'g')} nats below "
+                       "the best and are left out; a single run could have reported that basin.")))
     nc = s.get("noise_check")
     if nc and nc.get("residual_rms"):
         r = nc["residual_rms"]

@@ -105,9 +105,10 @@ class SMCSettings(_Strict):
     min_moves: int = Field(default=2, ge=1, le=50, description="fewest Metropolis moves per generation")
     max_moves: int = Field(default=8, ge=1, le=50, description="most Metropolis moves per generation")
     runs: int = Field(default=1, ge=1, le=MAX_SMC_RUNS,
-                      description="independent runs (own seeds), pooled: runs more than 5 nats of evidence below "
-                                  "the best left out, the rest sharing the posterior equally (a single run of a "
-                                  "rugged likelihood can settle in a basin of negligible mass); cost x runs")
+                      description="independent runs (own seeds), pooled: runs whose best particle lies more than 3 "
+                                  "nats of log-likelihood below the best run's left out, the rest sharing the "
+                                  "posterior equally (a single run of a rugged likelihood can settle in a basin of "
+                                  "negligible mass); cost x runs")
     screen: ScreenSettings | None = Field(
         default=None, description="delayed acceptance (Christen & Fox 2005): each proposal is first scored by this "
                                   "cheaper model and only the survivors are simulated with the job's model; the "

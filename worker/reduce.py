@@ -91,7 +91,7 @@ def posterior_summary(post, pred: dict | None = None) -> dict:
         pred, _ = _predictive_summary(post.resampled_predictive())
     info = {k: v for k, v in post.info.items() if k in (
         "generations", "n_generations", "n_particles", "temperatures", "max_loglik", "n_draws",
-        "failure_messages", "runs", "runs_kept", "run_gap")}
+        "failure_messages", "runs", "runs_kept", "run_rule", "run_gap")}
     return jsonable({
         "method": post.method, "names": list(post.names), "units": {n: PARAM_UNITS[n] for n in post.names},
         "table": post.summary_table(), "ess": post.ess, "pareto_k": post.pareto_k,

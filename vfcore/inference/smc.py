@@ -372,8 +372,8 @@ class SMCSampler:
 
 
 def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *, map: Callable = map,
-        chunk_size: int = 32, screen=None, symmetry: str | None = "auto", runs: int = 1, run_gap: float | None = None,
-        **options) -> Posterior:
+        chunk_size: int = 32, screen=None, symmetry: str | None = "auto", runs: int = 1, run_rule: str = "loglik",
+        run_gap: float | None = None, **options) -> Posterior:
     """Run likelihood-tempered SMC to completion.
 
     ``target``: a ``Problem`` or a callable ``thetas (k, d) -> loglik (k,)`` (then ``prior`` is
@@ -387,15 +387,16 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
     dependence: a rough lower bound).
 
     ``runs`` > 1: that many independent runs (seeds :func:`.runs.run_seeds`; the first is this seed's own run),
-    pooled by :func:`.runs.pool_runs` (runs more than ``run_gap`` nats of evidence below the best left out, the
-    others sharing the posterior equally); ``info["runs"]`` lists them.
+    pooled by :func:`.runs.pool_runs` (runs whose best particle's log-likelihood, or with ``run_rule="evidence"``
+    whose log evidence, lies more than ``run_gap`` nats below the best run's are left out, the others sharing the
+    posterior equally); ``info["runs"]`` lists them.
     """
     if int(runs) != 1:
-        from .runs import RUN_GAP, pool_runs, run_seeds
+        from .runs import pool_runs, run_seeds
         seeds = run_seeds(seed, runs)
         posts = [smc(target, prior, n_particles, s, map=map, chunk_size=chunk_size, screen=screen, symmetry=symmetry,
                      **options) for s in seeds]
-        return pool_runs(posts, seed=seed, gap=RUN_GAP if run_gap is None else run_gap)
+        return pool_runs(posts, seed=seed, rule=run_rule, gap=run_gap)
     prior, obs, fps, fn = resolve_target(target, prior)
     cheap = resolve_target(screen, prior)[3] if screen is not None else None
     if symmetry not in ("auto", None):

@@ -39,6 +39,8 @@ def posterior_of(sampler, rng: np.random.Generator, *, obs_gaw=None, fps: float 
     if s.ev is not None and s.ev.gaw is not None:
         post.predictive = s.ev
         post.predictive_index = np.arange(s.n)
+    if s.ev is not None and len(s.ev.loglik):
+        post.info["max_loglik"] = float(np.max(s.ev.loglik))
     post.info.update({"generations": s.history, "n_generations": s.generation,
                       "n_particles": s.n, "temperatures": [h["phi"] for h in s.history],
                       "reference": s.reference is not None})

@@ -10,19 +10,37 @@ from vfcore.inference import Evaluation, Posterior, Prior, pool_runs, run_seeds,
 from linear_gaussian import LinearGaussianToy
 
 
-def _run(center, log_z, n, seed):
+def _run(center, log_z, n, seed, peak=None):
+    """A finished run about ``center``: its predictions' log-likelihood peaks at ``peak`` (default ``log_z``)."""
     rng = np.random.default_rng(seed)
     x = center + 0.1 * rng.standard_normal((n, 2))
     p = Posterior.from_weighted(("a", "b"), x, np.zeros(n), rng=rng, log_evidence=log_z, log_evidence_se=0.3,
                                 n_simulations=10 * n, method="smc", check=False)
-    p.predictive = Evaluation(loglik=-((x - center) ** 2).sum(1) + log_z, ok=np.ones(n, bool))
+    p.predictive = Evaluation(loglik=-((x - center) ** 2).sum(1) + (log_z if peak is None else peak),
+                              ok=np.ones(n, bool))
     p.predictive_index = np.arange(n)
     return p
 
 
+def test_a_run_whose_best_particle_is_far_below_the_best_runs_is_left_out():
+    """The default rule reads each run's best particle: runs of one basin reach the same peak whatever their
+    evidence estimates say; a run that missed the basin peaks lower."""
+    a = _run(0.0, -100.0, 40, 1, peak=-50.0)
+    b = _run(0.1, -130.0, 40, 2, peak=-50.5)       # same basin, evidence 30 nats lower by the sampler's luck
+    c = _run(5.0, -99.0, 40, 3, peak=-58.0)        # another basin, 8 nats short at its peak
+    post = pool_runs([a, b, c])
+    assert [r["kept"] for r in post.info["runs"]] == [True, True, False]
+    assert post.info["run_rule"] == "loglik" and post.info["run_gap"] == 3.0
+    assert np.allclose(post.mean, 0.5 * (a.mean + b.mean))
+    assert [r["best_loglik"] for r in post.info["runs"]] == pytest.approx([-50.0, -50.5, -58.0], abs=0.05)
+    # the evidence rule, on the same runs, keeps a and c and drops b: the luck of the evidence decides
+    ev = pool_runs([a, b, c], rule="evidence")
+    assert [r["kept"] for r in ev.info["runs"]] == [True, False, True]
+
+
 def test_a_run_far_below_the_best_evidence_is_left_out_and_the_rest_share_equally():
     a, b, c = _run(0.0, -100.0, 40, 1), _run(0.2, -103.0, 60, 2), _run(5.0, -110.0, 50, 3)
-    post = pool_runs([a, b, c], gap=5.0)
+    post = pool_runs([a, b, c], rule="evidence")
     # c (10 nats below a) holds at most e^-5 of the mass: out; a and b share 1/2 each though b has 60 particles
     assert [r["kept"] for r in post.info["runs"]] == [True, True, False] and post.info["runs_kept"] == 2
     assert np.allclose(post.mean, 0.5 * a.mean + 0.5 * b.mean)
@@ -37,7 +55,7 @@ def test_a_run_far_below_the_best_evidence_is_left_out_and_the_rest_share_equall
     centre = np.where(post.resampled < 40, 0.0, 0.2)
     assert np.allclose(pred.loglik, -((x - centre[:, None]) ** 2).sum(1) + np.where(post.resampled < 40, -100.0, -103.0))
     # a wider gap keeps c: three runs, equal shares
-    wide = pool_runs([a, b, c], gap=20.0)
+    wide = pool_runs([a, b, c], rule="evidence", gap=20.0)
     assert wide.info["runs_kept"] == 3 and np.allclose(wide.mean, (a.mean + b.mean + c.mean) / 3)
 
 
@@ -49,6 +67,12 @@ def test_pooling_refuses_what_cannot_be_pooled():
         pool_runs([a, _run(0.0, float("nan"), 10, 2)])
     with pytest.raises(ValueError, match="gap"):
         pool_runs([a], gap=0.0)
+    with pytest.raises(ValueError, match="rule must be one of"):
+        pool_runs([a], rule="vote")
+    blind = _run(0.0, -100.0, 10, 2)
+    blind.predictive = None
+    with pytest.raises(ValueError, match="best log-likelihood"):
+        pool_runs([a, blind])
     with pytest.raises(ValueError, match="runs must be at least 1"):
         run_seeds(3, 0)
 
