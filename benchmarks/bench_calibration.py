@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=int, default=1,
                     help="SMC: independent runs per twin, pooled (vfcore.inference.runs) by --run-rule; the "
                          "combinations covered under every rule are recorded too")
-    ap.add_argument("--run-rule", choices=("loglik", "evidence"), default="loglik",
+    ap.add_argument("--run-rule", choices=tuple(RUN_RULES), default="loglik",
                     help="which runs are pooled (vfcore.inference.runs.RUN_RULES)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the twins of --out's calibration_partial.json and run only the others")

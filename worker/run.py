@@ -314,7 +314,6 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
                 prog.ess = float(sampler.last_ess)
                 b += 1
             posts.append(sampler.result(obs_gaw=problem.obs_compared, fps=problem.fps))
-            posts[-1].info["seed"] = seed
         t_sim = time.perf_counter() - t0
         prog.phase = "reducing"
         report(prog)

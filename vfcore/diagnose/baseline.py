@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from ..inference.runs import SEED_STRIDE
 from .material import material_first, material_sentence
 from .state import DiagnosisState, Run
 from .summary import best_particles
@@ -60,7 +61,7 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
 
     runs, notes, factor = [], [], 1
     for k in range(max(1, int(base_runs))):
-        runs.append(smc(problem, n_particles=n_particles, seed=seed + 7919 * k, map=map, chunk_size=chunk_size,
+        runs.append(smc(problem, n_particles=n_particles, seed=seed + SEED_STRIDE * k, map=map, chunk_size=chunk_size,
                         **smc_options))
     n_sims = sum(int(p.n_simulations) for p in runs)
     tau = between_run_sd(runs)
@@ -68,7 +69,7 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
         notes.append(f"base runs log-evidence: {fmt(runs)}; the largest kept")
     if escalate_tau is not None and len(runs) > 1 and tau > escalate_tau and int(escalate_factor) > 1:
         factor = int(escalate_factor)
-        big = [smc(problem, n_particles=n_particles * factor, seed=seed + 7919 * (k + len(runs)), map=map,
+        big = [smc(problem, n_particles=n_particles * factor, seed=seed + SEED_STRIDE * (k + len(runs)), map=map,
                    chunk_size=chunk_size, **smc_options) for k in range(max(2, int(base_runs)))]
         n_sims += sum(int(p.n_simulations) for p in big)
         notes.append(f"base runs disagree (between-run error {tau:.1f} nats > {escalate_tau:g}): "

@@ -10,7 +10,8 @@ Which runs are pooled (``rule``):
 
 * ``"loglik"`` (default): a run whose best final particle's log-likelihood is more than ``gap`` nats
   (default 3) below the best run's is left out. Runs kept so agreed on it to within 1.4 nats (2.4 where no
-  run found the truth's basin), and the others fell 4.4 to 1,458 nats short (20 six-parameter twins, 3 runs each; docs/inference.md);
+  run found the truth's basin), and the others fell 4.4 to 1,458 nats short (20 six-parameter twins, 3 runs each;
+  docs/inference.md);
 * ``"evidence"``: a run whose log evidence is more than ``gap`` nats (default 5) below the best run's is left
   out (the basin it holds would carry at most exp(-gap) of the mass). This was the first rule, fixed before
   its calibration; that calibration found the SMC evidence of runs whose best particles agree spread by up to
@@ -86,16 +87,15 @@ def pool_runs(posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik"
         raise ValueError(f"rule 'loglik' needs each run's best log-likelihood, got {best.tolist()}")
     score = best if rule == "loglik" else lz
     kept = score >= score.max() - gap
-    share = -math.log(int(kept.sum()))
-    samples = np.concatenate([p.samples for p, k in zip(posts, kept) if k])
-    logw = np.concatenate([p.log_weights + share for p, k in zip(posts, kept) if k])
+    pooled = [p for p, k in zip(posts, kept) if k]
+    share = -math.log(len(pooled))
+    samples = np.concatenate([p.samples for p in pooled])
+    logw = np.concatenate([p.log_weights + share for p in pooled])
     # mean of the runs' Z, and the standard error of that mean, in logs
     z = np.exp(lz - lz.max())
     log_z = float(lz.max() + math.log(z.mean()))
     se = float(z.std(ddof=1) / math.sqrt(z.size) / z.mean()) if z.size > 1 else posts[0].log_evidence_se
-    msgs = []
-    for p, k in zip(posts, kept):
-        msgs += [m for m in p.warnings if k and m not in msgs]
+    msgs = list(dict.fromkeys(m for p in pooled for m in p.warnings))
     if not kept.all():
         what = "best log-likelihood" if rule == "loglik" else "log evidence"
         msgs.append(f"independent runs: {int((~kept).sum())} of {len(posts)} settled more than {gap:g} nats of "
@@ -105,9 +105,8 @@ def pool_runs(posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik"
                                    n_simulations=sum(p.n_simulations for p in posts),
                                    n_failed=sum(p.n_failed for p in posts), method=posts[0].method, check=False,
                                    warnings=msgs, obs_gaw=posts[0].obs_gaw, fps=posts[0].fps)
-    post.ess = float(sum(p.ess for p, k in zip(posts, kept) if k))
+    post.ess = float(sum(p.ess for p in pooled))
     post.pareto_k = float("nan")
-    pooled = [p for p, k in zip(posts, kept) if k]
     if all(p.predictive is not None and p.predictive_index is not None for p in pooled):
         # predictive row i of a run belongs to its sample predictive_index[i]; shift by the run's offset
         offsets = np.cumsum([0] + [len(p.samples) for p in pooled[:-1]])
@@ -120,7 +119,7 @@ def pool_runs(posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik"
         runs.append({"seed": p.info.get("seed"), "log_evidence": float(p.log_evidence),
                      "log_evidence_se": float(p.log_evidence_se), "n_simulations": int(p.n_simulations),
                      "n_generations": int(p.info.get("n_generations", 0)), "best_loglik": float(b), "kept": bool(k)})
-    post.info.update({"runs": runs, "runs_kept": int(kept.sum()), "run_rule": rule, "run_gap": float(gap),
+    post.info.update({"runs": runs, "runs_kept": len(pooled), "run_rule": rule, "run_gap": float(gap),
                       "max_loglik": float(np.nanmax(best)) if np.any(np.isfinite(best)) else float("nan"),
                       "n_particles": sum(int(p.info.get("n_particles", len(p.samples))) for p in pooled)})
     return post

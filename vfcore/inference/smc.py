@@ -412,5 +412,4 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
     post = sampler.result(obs_gaw=obs, fps=fps)
     post.area_scale = getattr(target, "area_scale", None) if isinstance(target, Problem) else None
     post.model = model_record(target)
-    post.info["seed"] = int(seed)
     return post

@@ -42,7 +42,7 @@ def posterior_of(sampler, rng: np.random.Generator, *, obs_gaw=None, fps: float 
     if s.ev is not None and len(s.ev.loglik):
         post.info["max_loglik"] = float(np.max(s.ev.loglik))
     post.info.update({"generations": s.history, "n_generations": s.generation,
-                      "n_particles": s.n, "temperatures": [h["phi"] for h in s.history],
+                      "n_particles": s.n, "seed": s.seed, "temperatures": [h["phi"] for h in s.history],
                       "reference": s.reference is not None})
     if s.delayed:
         post.info.update({"delayed_acceptance": True, "n_screened": s.n_screened,
