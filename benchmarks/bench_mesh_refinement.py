@@ -5,13 +5,16 @@ converge) and the compliant contact layer (``contact="layer"``, whose pressures 
 neither the element nor the contact law is what fails to converge. dt 5e-5 s, 0.35 s simulated, the first 0.15 s
 discarded. Parameters: Table 3, and two points inside the region where the three shipped meshes all oscillate
 with anp (docs/model.md, "The oscillation map"): A = Table 3 with E_cover 850 Pa, p_sub 800 Pa; B = E_cover 950 Pa,
-p_sub 1000 Pa. Meshes: the five shipped ones and "x3fine", the M5 section meshed by gmsh at a characteristic length
+p_sub 1000 Pa; two louder ones where the 1,049-triangle mesh closes: C = E_cover 500 Pa, p_sub 1200 Pa; D = E_cover
+700 Pa, p_sub 1400 Pa. ``--sep-ratio`` sets the flow's separation ratio (the Bernoulli pressure at the narrowest
+gap is p_sub - sep_ratio^2 (p_sub - p_sup): a suction for any ratio above 1; 1.0 has none). Meshes: the five shipped ones and "x3fine", the M5 section meshed by gmsh at a characteristic length
 of 0.1 mm (about 15,000 triangles; not shipped, built here into a temporary folder, ~1 min). Per run: f0
 (autocorrelation), the smallest and largest area of the kept window, the closed quotient and the contact impulse
 per cycle (0 when the glottis does not close). ``--dt-check``: the finest two meshes again at dt 2.5e-5 s.
 
     python benchmarks/bench_mesh_refinement.py             # ~10 min on one core, most of it x3fine
     python benchmarks/bench_mesh_refinement.py --elements anp,p1 --dt-check
+    python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3,A" --sep-ratio 1.0 --meshes medium,xfine,xxfine,x3fine
 """
 from __future__ import annotations
 
@@ -49,20 +52,22 @@ def register_x3fine(folder: Path) -> None:
     config.MESHES = SHIPPED + ("x3fine",)
 
 
-def row(p, mesh: str, element: str, dt: float) -> list:
+def row(p, mesh: str, element: str, dt: float, sep_ratio: float = 1.3) -> list:
     from vfcore import SimConfig, simulate
     from vfcore.mesh import load_mesh
     t0 = time.perf_counter()
-    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer"))
+    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer",
+                              sep_ratio=sep_ratio))
     if not r.ok:
         return [mesh, load_mesh(mesh).n_triangles, element, dt, math.nan, math.nan, math.nan, math.nan, math.nan,
-                time.perf_counter() - t0]
+                math.nan, time.perf_counter() - t0]
     y = r.cycles
     closed = y is not None and y.period.size > 0
     cq = float(y.closed_quotient.mean()) if closed else 0.0
     imp = 1e3 * float(y.contact_impulse.mean()) if closed else 0.0
+    pic = float(y.contact_pressure_in_contact.mean()) if closed else 0.0
     return [mesh, load_mesh(mesh).n_triangles, element, dt, r.f0, float(r.gaw.min()), float(r.gaw.max()), cq, imp,
-            time.perf_counter() - t0]
+            pic, time.perf_counter() - t0]
 
 
 def main(argv=None) -> int:
@@ -70,26 +75,31 @@ def main(argv=None) -> int:
     ap.add_argument("--elements", default="anp")
     ap.add_argument("--points", default="Table 3,A,B")
     ap.add_argument("--dt-check", action="store_true")
+    ap.add_argument("--meshes", default=",".join(SHIPPED + ("x3fine",)))
+    ap.add_argument("--sep-ratio", type=float, default=1.3,
+                    help="flow separation at this multiple of the narrowest gap (SimConfig.sep_ratio)")
     a = ap.parse_args(argv)
     np.seterr(all="ignore")
     from vfcore import TABLE3
     points = {"Table 3": TABLE3, "A": replace(TABLE3, E_cover=850.0, p_sub=800.0),
-              "B": replace(TABLE3, E_cover=950.0, p_sub=1000.0)}
+              "B": replace(TABLE3, E_cover=950.0, p_sub=1000.0),
+              "C": replace(TABLE3, E_cover=500.0, p_sub=1200.0), "D": replace(TABLE3, E_cover=700.0, p_sub=1400.0)}
     with tempfile.TemporaryDirectory() as tmp:
         register_x3fine(Path(tmp))
+        print(f"sep_ratio {a.sep_ratio:g}")
         print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
-              "impulse (mN s/m) | wall (s) |")
-        print("|---|---|---|---|---|---|---|---|---|---|")
+              "impulse (mN s/m) | p in contact (Pa) | wall (s) |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for name in a.points.split(","):
             p = points[name.strip()]
             for element in a.elements.split(","):
-                runs = [(m, 5e-5) for m in SHIPPED + ("x3fine",)]
+                runs = [(m.strip(), 5e-5) for m in a.meshes.split(",")]
                 if a.dt_check:
                     runs += [("xxfine", 2.5e-5), ("x3fine", 2.5e-5)]
                 for mesh, dt in runs:
-                    m, n, el, h, f0, lo, hi, cq, imp, wall = row(p, mesh, element, dt)
+                    m, n, el, h, f0, lo, hi, cq, imp, pic, wall = row(p, mesh, element, dt, a.sep_ratio)
                     print(f"| {name} | {m} ({n}) | {el} | {h:g} | {f0:.2f} | {lo:.2f} | {hi:.2f} | {cq:.3f} | "
-                          f"{imp:.3f} | {wall:.0f} |", flush=True)
+                          f"{imp:.3f} | {pic:.1f} | {wall:.0f} |", flush=True)
     return 0
 
 
