@@ -12,6 +12,7 @@ entries of the reverse Cuthill-McKee band used before (docs/model.md, "Speed").
 """
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -127,19 +128,25 @@ def minimum_degree(pattern: sp.csr_matrix) -> np.ndarray:
 
     Plain (not approximate) minimum degree on the elimination graph: repeatedly eliminate the
     vertex of least current degree (lowest index on ties) and join its neighbours into a clique.
-    O(n d^2); the fold meshes have a few hundred dofs.
+    The least degree comes from a heap of (degree, vertex) entries, stale ones skipped, so a step
+    costs O(d^2 + log n) and meshes of tens of thousands of dofs order in seconds.
     """
     n = pattern.shape[0]
     adj = [set(pattern.indices[pattern.indptr[i]:pattern.indptr[i + 1]].tolist()) - {i} for i in range(n)]
-    alive = set(range(n))
+    alive = np.ones(n, dtype=bool)
+    heap = [(len(adj[i]), i) for i in range(n)]
+    heapq.heapify(heap)
     order = []
-    while alive:
-        v = min(alive, key=lambda i: (len(adj[i]), i))
+    while heap:
+        d, v = heapq.heappop(heap)
+        if not alive[v] or d != len(adj[v]):
+            continue
         nb = adj[v]
         for w in nb:
             adj[w] |= nb
             adj[w] -= {w, v}
-        alive.remove(v)
+            heapq.heappush(heap, (len(adj[w]), w))
+        alive[v] = False
         adj[v] = set()
         order.append(v)
     return np.asarray(order, dtype=np.int64)
@@ -147,16 +154,40 @@ def minimum_degree(pattern: sp.csr_matrix) -> np.ndarray:
 
 def cholesky_pattern(pattern: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     """Row-CSR pattern (Lp, Lj) of the lower Cholesky factor of a matrix with ``pattern``
-    (symbolic elimination; columns ascending in each row, the diagonal last)."""
+    (symbolic elimination; columns ascending in each row, the diagonal last).
+
+    Row i of L holds i and every column reached by climbing the elimination tree from each
+    j < i of row i of the matrix until i (Davis 2006, Direct Methods for Sparse Linear Systems,
+    sections 4.1-4.2): memory O(nnz(L)), not the O(n^2) of a dense elimination.
+    """
     n = pattern.shape[0]
-    S = np.tril(pattern.toarray() != 0) | np.eye(n, dtype=bool)
-    for k in range(n):
-        rows = np.nonzero(S[k + 1:, k])[0] + k + 1
-        if rows.size:
-            S[np.ix_(rows, rows)] |= np.tril(np.ones((rows.size, rows.size), dtype=bool))
-    counts = S.sum(axis=1)
-    Lp = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    Lj = np.concatenate([np.nonzero(S[i])[0] for i in range(n)]).astype(np.int64)
+    ptr, idx = pattern.indptr, pattern.indices
+    parent = np.full(n, -1, dtype=np.int64)
+    ancestor = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        for j in idx[ptr[i]:ptr[i + 1]]:
+            # climb from j to its root, pointing the path at i (path compression)
+            while j != -1 and j < i:
+                nxt = ancestor[j]
+                ancestor[j] = i
+                if nxt == -1:
+                    parent[j] = i
+                j = nxt
+    mark = np.full(n, -1, dtype=np.int64)
+    rows = []
+    for i in range(n):
+        mark[i] = i
+        r = []
+        for j in idx[ptr[i]:ptr[i + 1]]:
+            while j < i and mark[j] != i:
+                r.append(j)
+                mark[j] = i
+                j = parent[j]
+        r.sort()
+        r.append(i)
+        rows.append(r)
+    Lp = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+    Lj = np.fromiter((j for r in rows for j in r), dtype=np.int64, count=int(Lp[-1]))
     return Lp, Lj
 
 

@@ -20,6 +20,48 @@ def _random_sparse_spd(n, density, rng):
     return A, C
 
 
+def _dense_symbolic(C):
+    """Fill pattern by eliminating a dense boolean matrix column by column: O(n^2) memory, the oracle."""
+    n = C.shape[0]
+    S = np.tril(C.toarray() != 0) | np.eye(n, dtype=bool)
+    for k in range(n):
+        rows = np.nonzero(S[k + 1:, k])[0] + k + 1
+        S[np.ix_(rows, rows)] |= np.tril(np.ones((rows.size, rows.size), dtype=bool))
+    return S
+
+
+def _brute_minimum_degree(C):
+    """Eliminate the least-degree live vertex (lowest index on ties) found by scanning all of them."""
+    n = C.shape[0]
+    adj = [set(C.indices[C.indptr[i]:C.indptr[i + 1]].tolist()) - {i} for i in range(n)]
+    alive, order = set(range(n)), []
+    while alive:
+        v = min(alive, key=lambda i: (len(adj[i]), i))
+        for w in adj[v]:
+            adj[w] = (adj[w] | adj[v]) - {w, v}
+        alive.remove(v)
+        order.append(v)
+    return order
+
+
+@pytest.mark.parametrize("n,density", [(1, 1.0), (7, 0.3), (30, 0.1), (80, 0.04), (150, 0.02), (60, 0.4)])
+def test_symbolic_factor_and_ordering_match_the_dense_elimination(n, density):
+    """The elimination-tree pattern is exactly the dense elimination's fill, row by row, and the heap's
+    minimum-degree order is the scan's, tie for tie, on random structurally symmetric patterns."""
+    rng = np.random.default_rng(7 * n + int(1000 * density))
+    _, C = _random_sparse_spd(n, density, rng)
+    order = minimum_degree(C)
+    assert order.tolist() == _brute_minimum_degree(C)
+    for perm in (np.arange(n), order, rng.permutation(n)):
+        Cp = sp.csr_matrix(C[perm][:, perm])
+        Cp.sort_indices()
+        Lp, Lj = cholesky_pattern(Cp)
+        S = _dense_symbolic(Cp)
+        assert Lp[-1] == S.sum()
+        for i in range(n):
+            assert Lj[Lp[i]:Lp[i + 1]].tolist() == np.nonzero(S[i])[0].tolist()
+
+
 @pytest.mark.parametrize("n,density", [(1, 1.0), (5, 0.3), (12, 0.2), (40, 0.08), (100, 0.03), (60, 0.5)])
 def test_sparse_cholesky_and_solve_vs_dense(n, density):
     rng = np.random.default_rng(n * 100 + int(100 * density))
