@@ -7,14 +7,16 @@ discarded. Parameters: Table 3, and two points inside the region where the three
 with anp (docs/model.md, "The oscillation map"): A = Table 3 with E_cover 850 Pa, p_sub 800 Pa; B = E_cover 950 Pa,
 p_sub 1000 Pa; two louder ones where the 1,049-triangle mesh closes: C = E_cover 500 Pa, p_sub 1200 Pa; D = E_cover
 700 Pa, p_sub 1400 Pa. ``--sep-ratio`` sets the flow's separation ratio (the Bernoulli pressure at the narrowest
-gap is p_sub - sep_ratio^2 (p_sub - p_sup): a suction for any ratio above 1; 1.0 has none). Meshes: the five shipped ones and "x3fine", the M5 section meshed by gmsh at a characteristic length
-of 0.1 mm (about 15,000 triangles; not shipped, built here into a temporary folder, ~1 min). Per run: f0
+gap is p_sub - sep_ratio^2 (p_sub - p_sup): a suction for any ratio above 1; 1.0 has none). Meshes: the five shipped ones, "x3fine", the M5 section meshed by gmsh at a characteristic length
+of 0.1 mm (about 15,000 triangles), and on request "x4fine" at 0.05 mm (about 60,000 triangles; a 0.35-s run takes
+about half an hour on one core); neither is shipped, both are built here into a temporary folder in seconds. Per run: f0
 (autocorrelation), the smallest and largest area of the kept window, the closed quotient and the contact impulse
 per cycle (0 when the glottis does not close). ``--dt-check``: the finest two meshes again at dt 2.5e-5 s.
 
     python benchmarks/bench_mesh_refinement.py             # ~10 min on one core, most of it x3fine
     python benchmarks/bench_mesh_refinement.py --elements anp,p1 --dt-check
     python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3,A" --sep-ratio 1.0 --meshes medium,xfine,xxfine,x3fine
+    python benchmarks/bench_mesh_refinement.py --points C --sep-ratio 1.0 --meshes x4fine
 """
 from __future__ import annotations
 
@@ -33,23 +35,25 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-X3FINE_LC_MM = 0.1
+#: Meshes the benchmark builds (name: gmsh characteristic length, mm): measurement aids, not product options.
+BUILT = {"x3fine": 0.1, "x4fine": 0.05}
 SHIPPED = ("coarse", "medium", "fine", "xfine", "xxfine")
 
 
-def register_x3fine(folder: Path) -> None:
-    """Build the 0.1-mm mesh into ``folder`` (with links to the shipped meshes) and point this process's mesh
-    loader and ``SimConfig`` at it: the mesh is a measurement aid, not a product option."""
+def register_built(folder: Path, names) -> None:
+    """Build the meshes ``names`` of :data:`BUILT` into ``folder`` (with copies of the shipped meshes) and point this
+    process's mesh loader and ``SimConfig`` at it."""
     import vfcore.config as config
     import vfcore.mesh as mesh
     from vfcore.mesh.geometry import build_mesh
     for name in SHIPPED:
         shutil.copy(mesh.DATA / f"{name}.npz", folder / f"{name}.npz")
-    pts, tri, lay = build_mesh(X3FINE_LC_MM)
-    np.savez(folder / "x3fine.npz", points_mm=pts, triangles=tri, layer=lay, lc_mm=X3FINE_LC_MM)
+    for name in names:
+        pts, tri, lay = build_mesh(BUILT[name])
+        np.savez(folder / f"{name}.npz", points_mm=pts, triangles=tri, layer=lay, lc_mm=BUILT[name])
     mesh.DATA = folder
     mesh.load_mesh.cache_clear()
-    config.MESHES = SHIPPED + ("x3fine",)
+    config.MESHES = SHIPPED + tuple(names)
 
 
 def row(p, mesh: str, element: str, dt: float, sep_ratio: float = 1.3) -> list:
@@ -85,7 +89,8 @@ def main(argv=None) -> int:
               "B": replace(TABLE3, E_cover=950.0, p_sub=1000.0),
               "C": replace(TABLE3, E_cover=500.0, p_sub=1200.0), "D": replace(TABLE3, E_cover=700.0, p_sub=1400.0)}
     with tempfile.TemporaryDirectory() as tmp:
-        register_x3fine(Path(tmp))
+        meshes = [m.strip() for m in a.meshes.split(",")]
+        register_built(Path(tmp), [m for m in BUILT if m in meshes or (a.dt_check and m == "x3fine")])
         print(f"sep_ratio {a.sep_ratio:g}")
         print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
               "impulse (mN s/m) | p in contact (Pa) | wall (s) |")
@@ -93,7 +98,7 @@ def main(argv=None) -> int:
         for name in a.points.split(","):
             p = points[name.strip()]
             for element in a.elements.split(","):
-                runs = [(m.strip(), 5e-5) for m in a.meshes.split(",")]
+                runs = [(m, 5e-5) for m in meshes]
                 if a.dt_check:
                     runs += [("xxfine", 2.5e-5), ("x3fine", 2.5e-5)]
                 for mesh, dt in runs:
