@@ -10,8 +10,9 @@ Where two or more of the six scaled parameters are estimated, the coverage of ea
 combination a GAW determines (``vfcore.inference.identify.scale_invariant_combinations``; its interval
 from the posterior draws of ``sum a_i log theta_i``) is printed too: with all six free the absolute
 values are set by the prior's box along the common scale, so these are the numbers the data stand
-behind, and the pooled verdict is then the combinations' (the parameters' pooled line carries none). ``--symmetry off`` runs the plain random walk instead of the log-ratio walk with exact scale
-moves (``vfcore.inference.symmetry``), for comparison.
+behind, and the pooled verdict is then the combinations' (the parameters' pooled line carries none).
+``--symmetry off`` runs the plain random walk instead of the log-ratio walk with exact scale moves
+(``vfcore.inference.symmetry``), for comparison.
 
     python benchmarks/bench_calibration.py --datasets 20 --mesh coarse --dt 1e-4 --workers 16
     python benchmarks/bench_calibration.py --datasets 20 --estimate E_body,E_cover,E_lig,p_sub,rho,eta \
@@ -164,8 +165,9 @@ def main(argv=None) -> int:
             per_run = [combo_cover(p)[0].tolist() for p in runs] if pooled else []
             rows.append({"dataset": i, "truth": tw.truth.tolist(), "mean": post.mean.tolist(), "sd": post.sd.tolist(),
                          "covered": cover.tolist(), "z": z.tolist(),
-                         "combo_covered": c_cover.tolist(), "combo_z": c_z.tolist(), "n_simulations": post.n_simulations,
-                         "n_failed": post.n_failed, "loglik_truth": ll_truth, "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings,
+                         "combo_covered": c_cover.tolist(), "combo_z": c_z.tolist(),
+                         "n_simulations": post.n_simulations, "n_failed": post.n_failed, "loglik_truth": ll_truth,
+                         "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings,
                          "runs": post.info.get("runs"), "combo_covered_by_rule": by_rule,
                          "combo_covered_per_run": per_run})
             print(f"[{i:2d}] covered {int(cover.sum())}/{cover.size}  |z|max={np.max(np.abs(z)):.2f}  "

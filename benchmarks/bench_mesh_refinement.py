@@ -7,15 +7,18 @@ discarded. Parameters: Table 3, and two points inside the region where the three
 with anp (docs/model.md, "The oscillation map"): A = Table 3 with E_cover 850 Pa, p_sub 800 Pa; B = E_cover 950 Pa,
 p_sub 1000 Pa; two louder ones where the 1,049-triangle mesh closes: C = E_cover 500 Pa, p_sub 1200 Pa; D = E_cover
 700 Pa, p_sub 1400 Pa. ``--sep-ratio`` sets the flow's separation ratio (the Bernoulli pressure at the narrowest
-gap is p_sub - sep_ratio^2 (p_sub - p_sup): a suction for any ratio above 1; 1.0 has none). Meshes: the five shipped ones, "x3fine", the M5 section meshed by gmsh at a characteristic length
-of 0.1 mm (about 15,000 triangles), and on request "x4fine" at 0.05 mm (about 60,000 triangles; a 0.35-s run takes
-about half an hour on one core); neither is shipped, both are built here into a temporary folder in seconds. Per run: f0
-(autocorrelation), the smallest and largest area of the kept window, the closed quotient and the contact impulse
-per cycle (0 when the glottis does not close). ``--dt-check``: the finest two meshes again at dt 2.5e-5 s.
+gap is p_sub - sep_ratio^2 (p_sub - p_sup): a suction for any ratio above 1; 1.0 has none; default the model's).
+Meshes: the five shipped ones, "x3fine", the M5 section meshed by gmsh at a characteristic length of 0.1 mm (about
+15,000 triangles), and on request "x4fine" at 0.05 mm (about 60,000 triangles; a 0.35-s run takes about half an
+hour on one core); neither is shipped, both are built here into a temporary folder. Per run: f0
+(autocorrelation), the smallest and largest area of the kept window, the closed quotient, the contact impulse
+per cycle and the pressure in contact (0 when the glottis does not close). ``--dt-check``: the finest two meshes
+again at dt 2.5e-5 s.
 
     python benchmarks/bench_mesh_refinement.py             # ~10 min on one core, most of it x3fine
     python benchmarks/bench_mesh_refinement.py --elements anp,p1 --dt-check
-    python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3,A" --sep-ratio 1.0 --meshes medium,xfine,xxfine,x3fine
+    python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3,A" --sep-ratio 1.0 \
+        --meshes medium,xfine,xxfine,x3fine
     python benchmarks/bench_mesh_refinement.py --points C --sep-ratio 1.0 --meshes x4fine
 """
 from __future__ import annotations
@@ -56,12 +59,12 @@ def register_built(folder: Path, names) -> None:
     config.MESHES = SHIPPED + tuple(names)
 
 
-def row(p, mesh: str, element: str, dt: float, sep_ratio: float = 1.3) -> list:
+def row(p, mesh: str, element: str, dt: float, sep_ratio: float | None = None) -> list:
     from vfcore import SimConfig, simulate
     from vfcore.mesh import load_mesh
     t0 = time.perf_counter()
-    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer",
-                              sep_ratio=sep_ratio))
+    flow = {} if sep_ratio is None else {"sep_ratio": sep_ratio}
+    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", **flow))
     if not r.ok:
         return [mesh, load_mesh(mesh).n_triangles, element, dt, math.nan, math.nan, math.nan, math.nan, math.nan,
                 math.nan, time.perf_counter() - t0]
@@ -80,8 +83,8 @@ def main(argv=None) -> int:
     ap.add_argument("--points", default="Table 3,A,B")
     ap.add_argument("--dt-check", action="store_true")
     ap.add_argument("--meshes", default=",".join(SHIPPED + ("x3fine",)))
-    ap.add_argument("--sep-ratio", type=float, default=1.3,
-                    help="flow separation at this multiple of the narrowest gap (SimConfig.sep_ratio)")
+    ap.add_argument("--sep-ratio", type=float, default=None,
+                    help="flow separation at this multiple of the narrowest gap (default: SimConfig.sep_ratio's)")
     a = ap.parse_args(argv)
     np.seterr(all="ignore")
     from vfcore import TABLE3
@@ -91,7 +94,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         meshes = [m.strip() for m in a.meshes.split(",")]
         register_built(Path(tmp), [m for m in BUILT if m in meshes or (a.dt_check and m == "x3fine")])
-        print(f"sep_ratio {a.sep_ratio:g}")
+        from vfcore import SimConfig
+        print(f"sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}")
         print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
               "impulse (mN s/m) | p in contact (Pa) | wall (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|---|")
