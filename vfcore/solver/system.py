@@ -129,7 +129,7 @@ def minimum_degree(pattern: sp.csr_matrix) -> np.ndarray:
     Plain (not approximate) minimum degree on the elimination graph: repeatedly eliminate the
     vertex of least current degree (lowest index on ties) and join its neighbours into a clique.
     The least degree comes from a heap of (degree, vertex) entries, stale ones skipped, so a step
-    costs O(d^2 + log n) and meshes of tens of thousands of dofs order in seconds.
+    costs O(d^2 + log n) rather than a scan of every live vertex.
     """
     n = pattern.shape[0]
     adj = [set(pattern.indices[pattern.indptr[i]:pattern.indptr[i + 1]].tolist()) - {i} for i in range(n)]
