@@ -59,12 +59,15 @@ def register_built(folder: Path, names) -> None:
     config.MESHES = SHIPPED + tuple(names)
 
 
-def row(p, mesh: str, element: str, dt: float, sep_ratio: float | None = None) -> list:
+def row(p, mesh: str, element: str, dt: float, sep_ratio: float | None = None,
+        epithelium: tuple[float, float] | None = None) -> list:
     from vfcore import SimConfig, simulate
     from vfcore.mesh import load_mesh
     t0 = time.perf_counter()
-    flow = {} if sep_ratio is None else {"sep_ratio": sep_ratio}
-    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", **flow))
+    extra = {} if sep_ratio is None else {"sep_ratio": sep_ratio}
+    if epithelium is not None:
+        extra.update(epithelium_E_kpa=epithelium[0], epithelium_h_mm=epithelium[1])
+    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", **extra))
     if not r.ok:
         return [mesh, load_mesh(mesh).n_triangles, element, dt, math.nan, math.nan, math.nan, math.nan, math.nan,
                 math.nan, time.perf_counter() - t0]
@@ -85,7 +88,12 @@ def main(argv=None) -> int:
     ap.add_argument("--meshes", default=",".join(SHIPPED + ("x3fine",)))
     ap.add_argument("--sep-ratio", type=float, default=None,
                     help="flow separation at this multiple of the narrowest gap (default: SimConfig.sep_ratio's)")
+    ap.add_argument("--epithelium", default=None, metavar="E_KPA,H_MM",
+                    help="add the epithelium membrane (SimConfig.epithelium_E_kpa, epithelium_h_mm; default none)")
     a = ap.parse_args(argv)
+    epi = None if a.epithelium is None else tuple(float(v) for v in a.epithelium.split(","))
+    if epi is not None and len(epi) != 2:
+        ap.error(f"--epithelium takes E_KPA,H_MM, got {a.epithelium!r}")
     np.seterr(all="ignore")
     from vfcore import TABLE3
     points = {"Table 3": TABLE3, "A": replace(TABLE3, E_cover=850.0, p_sub=800.0),
@@ -95,7 +103,8 @@ def main(argv=None) -> int:
         meshes = [m.strip() for m in a.meshes.split(",")]
         register_built(Path(tmp), [m for m in BUILT if m in meshes or (a.dt_check and m == "x3fine")])
         from vfcore import SimConfig
-        print(f"sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}")
+        print(f"sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}, epithelium "
+              + ("none" if epi is None else f"{epi[0]:g} kPa, {epi[1]:g} mm"))
         print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
               "impulse (mN s/m) | p in contact (Pa) | wall (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -106,7 +115,7 @@ def main(argv=None) -> int:
                 if a.dt_check:
                     runs += [("xxfine", 2.5e-5), ("x3fine", 2.5e-5)]
                 for mesh, dt in runs:
-                    m, n, el, h, f0, lo, hi, cq, imp, pic, wall = row(p, mesh, element, dt, a.sep_ratio)
+                    m, n, el, h, f0, lo, hi, cq, imp, pic, wall = row(p, mesh, element, dt, a.sep_ratio, epi)
                     print(f"| {name} | {m} ({n}) | {el} | {h:g} | {f0:.2f} | {lo:.2f} | {hi:.2f} | {cq:.3f} | "
                           f"{imp:.3f} | {pic:.1f} | {wall:.0f} |", flush=True)
     return 0
