@@ -13,13 +13,14 @@ Meshes: the five shipped ones, "x3fine", the M5 section meshed by gmsh at a char
 hour on one core); neither is shipped, both are built here into a temporary folder. Per run: f0
 (autocorrelation), the smallest and largest area of the kept window, the closed quotient, the contact impulse
 per cycle and the pressure in contact (0 when the glottis does not close). ``--dt-check``: the finest two meshes
-again at dt 2.5e-5 s.
+again at dt 2.5e-5 s. ``--epithelium E_KPA,H_MM`` adds the epithelium membrane (docs/model.md, "Model extensions").
 
     python benchmarks/bench_mesh_refinement.py             # ~10 min on one core, most of it x3fine
     python benchmarks/bench_mesh_refinement.py --elements anp,p1 --dt-check
     python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3,A" --sep-ratio 1.0 \
         --meshes medium,xfine,xxfine,x3fine
     python benchmarks/bench_mesh_refinement.py --points C --sep-ratio 1.0 --meshes x4fine
+    python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3" --meshes xfine,xxfine,x3fine --epithelium 30,0.05
 """
 from __future__ import annotations
 
