@@ -4,8 +4,11 @@ Where a fit misses its truth although the truth scores as well as the best parti
 between them a hill (a posterior sampled too thinly) or a staircase of plateaus (a likelihood no local
 sampler can describe)? Reads one row of ``bench_calibration.py``'s ``calibration.json``, rebuilds that twin
 (same seed, noise and model, which must be given as they were to the calibration), and prints the
-log-likelihood at points ``exp(log mean + s (log truth - log mean))``, s from -0.25 to 1.25, and the limit
-cycle's f0 at each point: a jump of the log-likelihood with a jump of f0 is the limit cycle changing state.
+log-likelihood at points ``exp(log mean + s (log truth - log mean))``, s from -0.25 to 1.25, with the limit
+cycle's autocorrelation f0 beside it (whether the period moves with the jumps). Points are simulated one by one
+with ``simulate`` rather than ``vfcore.inference.evaluate``, because the f0 is wanted too. The prior is the
+paper's Table 2 box with the calibration's fixed parameters at Table 3 (``--prior-set human`` calibrations are
+not supported; the truth check below refuses them).
 
     python benchmarks/scan_fit_to_truth.py DIR/calibration.json --dataset 0 --seed 2000 --dt 5e-5 --contact layer
 """
