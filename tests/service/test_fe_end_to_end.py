@@ -58,7 +58,7 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     # the regularity check at the heaviest sample (3 simulations in the reducer) equals vfcore's
     from vfcore.diagnose.regularity import sensitivity
     reg = sensitivity(problem, direct.samples[int(np.argmax(direct.log_weights))], seed=spec["seed"])
-    assert post["regularity"]["n_simulations"] == 3
+    assert post["regularity"]["n_simulations"] == 7
     assert post["regularity"]["loglik"] == pytest.approx(reg.loglik, rel=1e-12, abs=1e-9)
     assert post["regularity"]["irregular"] is reg.irregular
     assert any("IRREGULAR VIBRATION" in w for w in post["warnings"]) is reg.irregular
