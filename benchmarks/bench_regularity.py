@@ -4,11 +4,15 @@ For ``--n`` scrambled-Sobol draws of the free parameters of the Table 2 prior (t
 suites' fixed values for the rest), in the suites' simulated window, each draw's waveform plus
 noise (``--sigma`` mm^2, 500 frames at 2 kHz) is the recording, and
 :func:`vfcore.diagnose.regularity.sensitivity` measures how much a relative 1e-6 change of the
-parameters moves the log-likelihood (the *roughness*; > 1 nat = irregular). Prints one line per
-draw and the irregular fraction per subglottal-pressure band (docs/diagnose.md section 4,
-"Regularity").
+parameters moves the log-likelihood (the *roughness*; > 1 nat = irregular), the second difference
+at a relative 1e-4 and the waveform's aperiodicity (> 3 nats either = rough). Prints one line per
+draw and the irregular and rough fractions per subglottal-pressure band (docs/diagnose.md section 4,
+"Regularity"; docs/inference.md, "Aperiodic vibration"). ``--six`` frees all six scaled parameters
+of the paper's Table 2 box (x0 at Table 3), as the six-parameter calibrations do; ``--dt`` and
+``--contact`` set the forward model.
 
     python benchmarks/bench_regularity.py --n 64 --seed 7
+    python benchmarks/bench_regularity.py --n 64 --seed 7 --six --dt 5e-5 --contact layer
 """
 from __future__ import annotations
 
@@ -50,6 +54,9 @@ def main(argv=None) -> int:
     ap.add_argument("--sigma", type=float, default=0.5)
     ap.add_argument("--duration", type=float, default=0.55)
     ap.add_argument("--discard", type=float, default=0.25)
+    ap.add_argument("--six", action="store_true", help="all six scaled parameters free (x0 at Table 3)")
+    ap.add_argument("--dt", type=float, default=None, help="time step, s (default: the suites')")
+    ap.add_argument("--contact", default=None, help="contact law (default: the suites')")
     a = ap.parse_args(argv)
     from scipy.stats import qmc
 
@@ -58,8 +65,10 @@ def main(argv=None) -> int:
     from vfcore.diagnose.regularity import sensitivity
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
-    prior = Prior.default(fixed=FIXED)
-    cfg = dc.replace(CFG, duration=a.duration, discard=a.discard)
+    from vfcore.params import TABLE3
+    prior = Prior.default(fixed={"x0": TABLE3.x0} if a.six else FIXED)
+    model = {k: v for k, v in (("dt", a.dt), ("contact", a.contact)) if v is not None}
+    cfg = dc.replace(CFG, duration=a.duration, discard=a.discard, **model)
     th = prior.lo + qmc.Sobol(prior.ndim, scramble=True, seed=a.seed).random(a.n) * prior.width
     rows, failed, still = [], 0, 0
     t0 = time.perf_counter()
@@ -76,17 +85,21 @@ def main(argv=None) -> int:
             print(f"{i:3d} {np.round(t, 1)} no oscillation", flush=True)
             continue
         s = sensitivity(pb, t, seed=i)
-        rows.append((t, s.max_change))
-        print(f"{i:3d} {np.round(t, 1)} roughness {s.max_change:.3g} nats{'  IRREGULAR' if s.irregular else ''}",
-              flush=True)
+        rows.append((t, s))
+        print(f"{i:3d} {np.round(t, 1)} roughness {s.max_change:.3g} nats, second difference "
+              f"{s.max_second_difference:.3g}, aperiodicity {s.aperiodicity:.3g}"
+              f"{'  IRREGULAR' if s.irregular else ''}{'  ROUGH' if s.rough else ''}", flush=True)
     names = prior.names
     p = np.array([t[names.index("p_sub")] for t, _ in rows])
-    irr = np.array([c > 1.0 for _, c in rows])
+    irr = np.array([s.irregular for _, s in rows], dtype=bool)
+    rough = np.array([s.rough for _, s in rows], dtype=bool)
     print(f"\n{a.n} draws: {failed} failed, {still} did not oscillate, {len(rows)} oscillated, "
-          f"{int(irr.sum())} irregular ({time.perf_counter() - t0:.0f} s)")
+          f"{int(irr.sum())} irregular, {int(rough.sum())} rough, {int((irr | rough).sum())} either "
+          f"({time.perf_counter() - t0:.0f} s)")
     for lo, hi in BANDS:
         m = (p >= lo) & (p < hi)
-        print(f"  p_sub {lo:6.0f}-{hi:6.0f} Pa: {int(irr[m].sum())} of {int(m.sum())} irregular")
+        print(f"  p_sub {lo:6.0f}-{hi:6.0f} Pa: {int(irr[m].sum())} irregular, {int(rough[m].sum())} rough, "
+              f"{int((irr | rough)[m].sum())} either, of {int(m.sum())}")
     return 0
 
 

@@ -103,7 +103,7 @@ def posterior_summary(post, pred: dict | None = None) -> dict:
 
 
 def regularity_of(spec: JobSpec, post) -> dict | None:
-    """The regularity check (vfcore.diagnose.regularity; 3 simulations) at the posterior's heaviest
+    """The regularity check (vfcore.diagnose.regularity; 7 simulations) at the posterior's heaviest
     sample of an FE job: is the fitted vibration regular, so that the waveform likelihood is a
     smooth function of the parameters? ``None`` for another model; an error is reported, not raised
     (docs/inference.md, "Irregular vibration")."""
@@ -240,6 +240,13 @@ def publish_posterior(store_path: str, post, spec: JobSpec | None = None) -> dic
             f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters changes "
             f"the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough here and the "
             "posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')"]
+    elif reg is not None and reg.get("rough"):
+        post.warnings = list(post.warnings) + [
+            f"ROUGH LIKELIHOOD: at the heaviest sample the fitted waveform does not repeat within 4 cycles (a shift of "
+            f"its modulation costs {reg['aperiodicity']:.3g} nats) or a relative {reg['rough_step']:g} change of the "
+            f"parameters has a second difference of {reg['max_second_difference']:.3g} nats; the likelihood is a "
+            "staircase at the scale of the posterior and its intervals are not calibrated (docs/inference.md, "
+            "'Aperiodic vibration')"]
     ident = identifiability_of(spec, post)
     if ident is not None and ident.get("warnings"):
         post.warnings = list(post.warnings) + list(ident["warnings"])

@@ -55,13 +55,15 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     assert post["predictive"]["max_contact"]["mean"] > 0 and post["predictive"]["mean_flow"]["mean"] > 0
     assert post["model"]["contact"] == "projection" and "contact_layer_mm" not in post["model"]
     assert post["predictive"]["max_contact"]["depends_on"] == "mesh and time step"
-    # the regularity check at the heaviest sample (3 simulations in the reducer) equals vfcore's
+    # the regularity check at the heaviest sample (7 simulations in the reducer) equals vfcore's
     from vfcore.diagnose.regularity import sensitivity
     reg = sensitivity(problem, direct.samples[int(np.argmax(direct.log_weights))], seed=spec["seed"])
     assert post["regularity"]["n_simulations"] == 7
     assert post["regularity"]["loglik"] == pytest.approx(reg.loglik, rel=1e-12, abs=1e-9)
     assert post["regularity"]["irregular"] is reg.irregular
     assert any("IRREGULAR VIBRATION" in w for w in post["warnings"]) is reg.irregular
+    assert post["regularity"]["rough"] is reg.rough
+    assert any("ROUGH LIKELIHOOD" in w for w in post["warnings"]) is (reg.rough and not reg.irregular)
     for name in ("gaw_fit", "corner", "contact_pressure"):
         assert http.get(f"/jobs/{job_id}/figures/{name}", headers=auth("alice")).status_code == 200
 

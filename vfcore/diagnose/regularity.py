@@ -95,16 +95,17 @@ def aperiodicity(gaw_hr, f0: float, fps: float, oversample: int, n_compare: int,
                  max_period: int = 4) -> float:
     """The module docstring's ``aperiodicity`` (nats) of one oversampled simulated area ``gaw_hr``
     (``oversample`` samples per camera frame at ``fps``) with fundamental ``f0`` (Hz), read over the
-    last ``n_compare`` frames before ``max_period`` cycles of the run's end; ``inf`` where the run is
-    too short for that or ``f0`` is not a frequency."""
+    last ``n_compare`` frames before ``max_period`` cycles of the run's end (fewer where the run is
+    shorter: the mean square is then read over what there is and scaled to ``n_compare`` frames);
+    ``nan`` (no verdict) where less than two cycles are left to read or ``f0`` is not a frequency."""
     x = np.asarray(gaw_hr, dtype=float)
     if not (math.isfinite(f0) and f0 > 0):
-        return math.inf
+        return math.nan
     period = fps * oversample / f0                  # samples per cycle
-    n = int(n_compare) * int(oversample)
     top = int(math.ceil(1.05 * max_period * period)) + 2
-    if x.size < n + top:
-        return math.inf
+    n = min(int(n_compare) * int(oversample), x.size - top)
+    if n < 2 * period:
+        return math.nan
     a = x[x.size - n - top: x.size - top]
     best = math.inf
     for k in range(1, int(max_period) + 1):
@@ -163,7 +164,7 @@ def sensitivity(problem: Problem, theta, *, step: float = 1e-6, n_dirs: int = 2,
     r0 = res[0]
     ap = aperiodicity(r0.gaw_hr, r0.f0, problem.fps, HR_OVERSAMPLE, problem.window[1], problem.sigma_e,
                       max_period=max_period)
-    rough = bool((second and max(second) > rough_tol) or ap > aperiodic_tol)
+    rough = bool((second and max(second) > rough_tol) or ap > aperiodic_tol)      # nan: no verdict
     return Sensitivity(step=float(step), tol=float(tol), loglik=lls[0], changes=changes,
                        irregular=bool(max(changes) > tol), n_simulations=len(res), rough_step=float(rough_step),
                        second_differences=tuple(second), aperiodicity=float(ap), rough=rough)
