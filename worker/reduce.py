@@ -117,6 +117,24 @@ def regularity_of(spec: JobSpec, post) -> dict | None:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
+def regularity_warning(reg: dict | None) -> str | None:
+    """The summary's warning for the regularity check's dict (:func:`regularity_of`), or None when the fit is
+    smooth, the check did not run or it failed (its error is recorded in the summary)."""
+    if not reg or "error" in reg:
+        return None
+    if reg.get("irregular"):
+        return (f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters "
+                f"changes the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough "
+                "here and the posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')")
+    if reg.get("rough"):
+        return (f"ROUGH LIKELIHOOD: at the heaviest sample the fitted waveform does not repeat within 4 cycles (a shift "
+                f"of its modulation costs {reg['aperiodicity']:.3g} nats) or a relative {reg['rough_step']:g} change of "
+                f"the parameters has a second difference of {reg['max_second_difference']:.3g} nats; the likelihood is "
+                "a staircase at the scale of the posterior and its intervals are not calibrated (docs/inference.md, "
+                "'Aperiodic vibration')")
+    return None
+
+
 def identifiability_of(spec: JobSpec, post) -> dict | None:
     """The identifiability table of the posterior (vfcore.inference.identify: per parameter, principal
     directions, the common scale of the six scaled parameters and the combinations a GAW determines),
@@ -235,18 +253,9 @@ def publish_posterior(store_path: str, post, spec: JobSpec | None = None) -> dic
     if scale is not None and scale.get("warning"):
         post.warnings = list(post.warnings) + [scale["warning"]]
     reg = regularity_of(spec, post)
-    if reg is not None and reg.get("irregular"):
-        post.warnings = list(post.warnings) + [
-            f"IRREGULAR VIBRATION: at the heaviest sample a relative {reg['step']:g} change of the parameters changes "
-            f"the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough here and the "
-            "posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')"]
-    elif reg is not None and reg.get("rough"):
-        post.warnings = list(post.warnings) + [
-            f"ROUGH LIKELIHOOD: at the heaviest sample the fitted waveform does not repeat within 4 cycles (a shift of "
-            f"its modulation costs {reg['aperiodicity']:.3g} nats) or a relative {reg['rough_step']:g} change of the "
-            f"parameters has a second difference of {reg['max_second_difference']:.3g} nats; the likelihood is a "
-            "staircase at the scale of the posterior and its intervals are not calibrated (docs/inference.md, "
-            "'Aperiodic vibration')"]
+    w = regularity_warning(reg)
+    if w:
+        post.warnings = list(post.warnings) + [w]
     ident = identifiability_of(spec, post)
     if ident is not None and ident.get("warnings"):
         post.warnings = list(post.warnings) + list(ident["warnings"])

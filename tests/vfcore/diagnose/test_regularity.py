@@ -72,9 +72,12 @@ def test_a_staircase_likelihood_is_flagged_rough_and_a_smooth_one_is_not():
     s = sensitivity(rough.problem, rough.truth)
     assert not s.irregular and s.rough and not s.smooth, s
     assert s.aperiodicity > 30 and s.max_second_difference > 10, s
+    from worker.reduce import regularity_warning
+    assert regularity_warning(s.to_dict()).startswith("ROUGH LIKELIHOOD: at the heaviest sample")
     smooth = make_twin(prior, cfg, seed=2001, sigma_e=1.0, n_obs=400)
     s = sensitivity(smooth.problem, smooth.truth)
     assert s.smooth and s.aperiodicity < 1 and s.max_second_difference < 1, s
+    assert regularity_warning(s.to_dict()) is None
     off = sensitivity(smooth.problem, smooth.truth, rough_step=0.0)
     assert off.n_simulations == 3 and off.second_differences == () and off.loglik == s.loglik
 
