@@ -228,7 +228,7 @@ def main(argv=None) -> int:
             print(f"{name:<20} {k:>4}/{ccov.shape[0]:<3} {k / ccov.shape[0]:6.2f} [{lo:.2f}, {hi:.2f}]  "
                   f"median |z| {np.median(np.abs(czs[:, j])):.2f}")
         # split by what the fit itself says (the job's regularity check), never by the truth
-        flag = np.array([not r.get("smooth", not r["irregular"]) for r in rows])
+        flag = np.array([not r["smooth"] for r in rows])          # every row has it: --resume adds it first
         for label, sel in (("fits checked smooth", ~flag), ("fits flagged rough", flag)):
             k, n = int(ccov[sel].sum()), int(ccov[sel].size)
             lo, hi = clopper_pearson(k, n) if n else (math.nan, math.nan)

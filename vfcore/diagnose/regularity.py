@@ -106,11 +106,11 @@ def aperiodicity(gaw_hr, f0: float, fps: float, oversample: int, n_compare: int,
     n = min(int(n_compare) * int(oversample), x.size - top)
     if n < 2 * period:
         return math.nan
-    a = x[x.size - n - top: x.size - top]
+    base = x.size - n - top
+    a = x[base: base + n]
     best = math.inf
     for k in range(1, int(max_period) + 1):
         lags = np.arange(max(1, int(0.95 * k * period)), int(math.ceil(1.05 * k * period)) + 1)
-        base = x.size - n - top
         mse = np.array([np.mean((a - x[base + lag: base + lag + n]) ** 2) for lag in lags])
         i = int(np.argmin(mse))
         m = float(mse[i])
