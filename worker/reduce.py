@@ -135,6 +135,21 @@ def regularity_warning(reg: dict | None) -> str | None:
     return None
 
 
+def runs_warning(spec: JobSpec) -> str | None:
+    """The summary's warning for a single SMC run where all six scaled parameters are estimated: one run cannot
+    show that it missed a basin, and on six-parameter twins single runs covered about two thirds of what their
+    90 % intervals claimed (docs/inference.md, "Independent runs"); None otherwise."""
+    from vfcore.inference.identify import SCALED
+    sampler = spec.sampler
+    if getattr(sampler, "kind", None) != "smc" or sampler.runs > 1:
+        return None
+    if not set(SCALED) <= set(spec.to_prior().names):
+        return None
+    return ("ONE RUN: a single SMC run of six free material parameters cannot show whether it missed a basin of "
+            "the likelihood; independent runs that agree are the check (sampler.runs = 3, --runs 3 on the "
+            "command line; cost x3) (docs/inference.md, 'Independent runs' and 'Do the runs agree?')")
+
+
 def identifiability_of(spec: JobSpec, post) -> dict | None:
     """The identifiability table of the posterior (vfcore.inference.identify: per parameter, principal
     directions, the common scale of the six scaled parameters and the combinations a GAW determines),
@@ -254,6 +269,9 @@ def publish_posterior(store_path: str, post, spec: JobSpec | None = None) -> dic
         post.warnings = list(post.warnings) + [scale["warning"]]
     reg = regularity_of(spec, post)
     w = regularity_warning(reg)
+    if w:
+        post.warnings = list(post.warnings) + [w]
+    w = runs_warning(spec)
     if w:
         post.warnings = list(post.warnings) + [w]
     ident = identifiability_of(spec, post)
