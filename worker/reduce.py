@@ -127,9 +127,8 @@ def regularity_warning(reg: dict | None) -> str | None:
                 f"changes the log-likelihood by up to {reg['max_change']:.3g} nats; the waveform likelihood is rough "
                 "here and the posterior reflects which points were simulated (docs/inference.md, 'Irregular vibration')")
     if reg.get("rough"):
-        return (f"ROUGH LIKELIHOOD: at the heaviest sample the fitted waveform does not repeat within 4 cycles (a shift "
-                f"of its modulation costs {reg['aperiodicity']:.3g} nats) or a relative {reg['rough_step']:g} change of "
-                f"the parameters has a second difference of {reg['max_second_difference']:.3g} nats; the likelihood is "
+        from vfcore.diagnose.regularity import rough_phrase
+        return (f"ROUGH LIKELIHOOD: at the heaviest sample {rough_phrase(reg)}; the likelihood is "
                 "a staircase at the scale of the posterior and its intervals are not calibrated (docs/inference.md, "
                 "'Aperiodic vibration')")
     return None

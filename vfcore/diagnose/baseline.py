@@ -151,6 +151,11 @@ def check_regularity(run: Run, st: DiagnosisState) -> None:
                         "waveform likelihood is a rough function of the parameters here and log-evidences carry "
                         "the luck of the simulated points (the between-run error measures part of it); the local "
                         "check counts that change as an error of its comparison")
+    elif sens.rough:
+        st.notes.append(f"the base fit's likelihood is rough: {regularity.rough_phrase(sens.to_dict())}; the base "
+                        "posterior is a staircase at its own scale, so its evidence, and every dlogZ against it, "
+                        "carries the luck of the simulated points beyond the quoted errors (docs/inference.md, "
+                        "'Aperiodic vibration')")
 
 
 def at_noise_floor(run: Run, st: DiagnosisState) -> bool:

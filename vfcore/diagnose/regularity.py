@@ -50,7 +50,7 @@ import numpy as np
 
 from ..inference.problem import Problem, aligned_loglik
 
-__all__ = ["Sensitivity", "aperiodicity", "sensitivity"]
+__all__ = ["Sensitivity", "aperiodicity", "rough_phrase", "sensitivity"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +89,17 @@ class Sensitivity:
         d["max_second_difference"] = self.max_second_difference
         d["smooth"] = self.smooth
         return d
+
+
+def rough_phrase(d: dict) -> str:
+    """What a rough verdict measured, in words, from :meth:`Sensitivity.to_dict` (an aperiodicity of NaN, no
+    verdict, is left out)."""
+    a = d.get("aperiodicity", math.nan)
+    parts = [] if a is None or not math.isfinite(a) else [
+        f"the waveform does not repeat within 4 cycles (a shift of its modulation costs {a:.3g} nats)"]
+    parts.append(f"a relative {d['rough_step']:g} change of the parameters has a second difference of "
+                 f"{d['max_second_difference']:.3g} nats")
+    return " or ".join(parts)
 
 
 def aperiodicity(gaw_hr, f0: float, fps: float, oversample: int, n_compare: int, sigma_e: float, *,

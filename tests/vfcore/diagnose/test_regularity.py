@@ -105,3 +105,17 @@ def test_local_check_counts_the_roughness_as_an_error():
     assert ok and se < 1.0
     assert not local_passes(2.5, 0.1, 0.1, 0.0)[0]            # below min_gain = 3 nats
     assert not local_passes(float("nan"), 0.1, 0.1, 0.0)[0]
+
+
+def test_the_rough_phrase_names_what_was_measured_and_skips_a_missing_verdict():
+    """A check without an aperiodicity verdict (NaN: under two cycles) is described by its second differences
+    alone, never as 'costs nan nats'."""
+    from vfcore.diagnose.regularity import Sensitivity, rough_phrase
+    both = Sensitivity(step=1e-6, tol=1.0, loglik=-500.0, changes=(0.1,), irregular=False, n_simulations=7,
+                       rough_step=1e-4, second_differences=(0.5, 12.0), aperiodicity=40.0, rough=True)
+    p = rough_phrase(both.to_dict())
+    assert "costs 40 nats" in p and "second difference of 12 nats" in p
+    none = Sensitivity(step=1e-6, tol=1.0, loglik=-500.0, changes=(0.1,), irregular=False, n_simulations=7,
+                       rough_step=1e-4, second_differences=(5.0,), aperiodicity=float("nan"), rough=True)
+    p = rough_phrase(none.to_dict())
+    assert "nan" not in p and "repeat" not in p and p.startswith("a relative 0.0001 change")
