@@ -92,7 +92,9 @@ def _diagnostics(s: dict) -> list[tuple[str, str]]:
                     + (": every run reached the same to within the gap, and they share the posterior equally."
                        if len(kept) == len(runs) else
                        f": {len(runs) - len(kept)} settled more than {fmt_num(info.get('run_gap'), 'g')} nats below "
-                       "the best and are left out; a single run could have reported that basin.")))
+                       "the best and are left out; a single run could have reported that basin, and a sampler that "
+                       "missed a basin once may have missed one in the runs kept, so the intervals are not "
+                       "calibrated.")))
     nc = s.get("noise_check")
     if nc and nc.get("residual_rms"):
         r = nc["residual_rms"]

@@ -74,4 +74,5 @@ def test_the_report_says_which_independent_runs_were_pooled(post):
     lines = " ".join(t for _, t in _diagnostics(posterior_summary(pool_runs([a, b, c]))))
     assert "3 independent SMC runs, best log-likelihood" in lines and lines.count("(left out)") == 1, lines
     assert f"{top - 12.0:.1f} (left out)" in lines and "more than 3 nats below the best" in lines
+    assert "the intervals are not calibrated" in lines
     assert "independent" not in " ".join(t for _, t in _diagnostics(posterior_summary(post)))
