@@ -227,23 +227,20 @@ def main(argv=None) -> int:
             # median |z|: a collapsed run has a zero spread and an unbounded z
             print(f"{name:<20} {k:>4}/{ccov.shape[0]:<3} {k / ccov.shape[0]:6.2f} [{lo:.2f}, {hi:.2f}]  "
                   f"median |z| {np.median(np.abs(czs[:, j])):.2f}")
-        # split by what the fit itself says (the job's regularity check), never by the truth
+        # split by what the fit itself says, never by the truth: the job's regularity check, and with several runs
+        # whether they agree (no run left out by the pooling rule: runs that settle on different best
+        # log-likelihoods show that the sampler missed a basin at least once)
         flag = np.array([not r["smooth"] for r in rows])          # every row has it: --resume adds it first
-        for label, sel in (("fits checked smooth", ~flag), ("fits flagged rough", flag)):
+        splits = [("fits checked smooth", ~flag), ("fits flagged rough", flag)]
+        if any(r.get("runs") for r in rows):
+            agree = np.array([bool(r.get("runs")) and all(x["kept"] for x in r["runs"]) for r in rows])
+            splits += [("runs agree", agree), ("runs disagree", ~agree),
+                       ("smooth, runs agree", agree & ~flag), ("rough or disagree", ~(agree & ~flag))]
+        for label, sel in splits:
             k, n = int(ccov[sel].sum()), int(ccov[sel].size)
             lo, hi = clopper_pearson(k, n) if n else (math.nan, math.nan)
             print(f"{label:<24} {int(sel.sum()):>2} twins: combinations {k}/{n}"
                   + (f" {k / n:.2f} [{lo:.2f}, {hi:.2f}]" if n else ""))
-        # with several runs, split again by whether they agree (no run left out by the pooling rule): runs that
-        # settle on different best log-likelihoods show that the sampler missed a basin at least once
-        if any(r.get("runs") for r in rows):
-            agree = np.array([bool(r.get("runs")) and all(x["kept"] for x in r["runs"]) for r in rows])
-            for label, sel in (("runs agree", agree), ("runs disagree", ~agree),
-                               ("smooth, runs agree", agree & ~flag), ("rough or disagree", ~(agree & ~flag))):
-                k, n = int(ccov[sel].sum()), int(ccov[sel].size)
-                lo, hi = clopper_pearson(k, n) if n else (math.nan, math.nan)
-                print(f"{label:<24} {int(sel.sum()):>2} twins: combinations {k}/{n}"
-                      + (f" {k / n:.2f} [{lo:.2f}, {hi:.2f}]" if n else ""))
     pooled_cov = {"parameters": (int(cov.sum()), cov.size)}
     if combos:
         pooled_cov["combinations"] = (int(ccov.sum()), ccov.size)
