@@ -25,6 +25,13 @@ from .solver import _kernels as kern
 from .solver._batch_kernels import integrate_many
 from .solver.system import get_system
 
+#: Blocks of fewer rows than this run through the scalar kernel (``forward.simulate``), which gives the
+#: same bits: the lock-step kernel's sample loops cost more than they share at one or two samples.
+#: Coarse mesh, dt 1e-4 s, one core beside a busy one, time per simulation against the scalar kernel's:
+#: block 1 2.4x, block 2 1.45x, block 3 0.82x, block 16 0.49x
+#: (``benchmarks/bench_batch.py --mesh coarse --dt 1e-4``). Single rows are what a Nelder-Mead polish evaluates.
+MIN_LOCKSTEP = 3
+
 #: SimConfig fields that may differ between the rows of one lock-step block.
 PER_SAMPLE_FIELDS = ("sep_ratio", "epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile", "subglottal_modes")
 
@@ -182,7 +189,9 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 32
     """Simulate each row of ``params_array`` ((N, 7), ``PARAM_NAMES`` order, paper units).
 
     Rows are advanced ``block`` at a time in lock-step; results equal ``simulate`` row by
-    row (a sample that blows up gets ``ok=False`` without stopping its block).
+    row (a sample that blows up gets ``ok=False`` without stopping its block). A block of fewer
+    than :data:`MIN_LOCKSTEP` rows (a single row, a group's last one or two) runs through the
+    scalar kernel, which is faster there and gives the same bits.
 
     ``configs`` (optional, one SimConfig per row) overrides ``config`` row by row. Rows are
     grouped by :func:`block_key` (everything but the extensions in ``PER_SAMPLE_FIELDS``) and each
@@ -217,6 +226,11 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 32
             continue
         for s in range(0, len(idx), block):
             sel = idx[s:s + block]
-            for i, r in zip(sel, _simulate_block([ps[i] for i in sel], [configs[i] for i in sel])):
+            if len(sel) < MIN_LOCKSTEP:
+                from .forward import simulate   # lazy: forward imports this module
+                res = [simulate(ps[i], configs[i]) for i in sel]
+            else:
+                res = _simulate_block([ps[i] for i in sel], [configs[i] for i in sel])
+            for i, r in zip(sel, res):
                 out[i] = r
     return out  # type: ignore[return-value]

@@ -27,6 +27,29 @@ def batched(rows):
     return simulate_many(rows, SimConfig(), block=6)
 
 
+def test_small_blocks_take_the_scalar_kernel_with_the_same_bits(rows, batched, monkeypatch):
+    """A block of fewer than MIN_LOCKSTEP rows goes to the scalar kernel: the lock-step kernel sees only the
+    full blocks, and the small block's results equal those the lock-step kernel gave the same rows."""
+    import vfcore.batch as vb
+    sizes = []
+    lockstep = vb._simulate_block
+
+    def spy(ps, cfgs):
+        sizes.append(len(ps))
+        return lockstep(ps, cfgs)
+    monkeypatch.setattr(vb, "_simulate_block", spy)
+    out = simulate_many(rows, SimConfig(), block=4)            # a block of 4, then one of 2
+    assert sizes == [4] and vb.MIN_LOCKSTEP > 2
+    one = simulate_many(rows[1:2], SimConfig())                # a single oscillating row
+    assert sizes == [4]
+    for b, s in zip(batched, out):
+        assert b.ok == s.ok
+        np.testing.assert_array_equal(b.gaw, s.gaw)
+        np.testing.assert_array_equal(b.contact_force, s.contact_force)
+    np.testing.assert_array_equal(one[0].gaw, batched[1].gaw)
+    assert batched[1].gaw.max() > 1e-4
+
+
 def test_batch_equals_scalar(scalar, batched):
     assert any(not s.ok for s in scalar) and sum(s.ok for s in scalar) >= 3
     assert any(s.ok and s.gaw.max() > 1e-4 for s in scalar)      # at least one oscillating sample
