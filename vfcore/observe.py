@@ -46,8 +46,8 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int, search: str = "win
     and the recording may sit anywhere in the kept simulation. ``"periods"``: lags up to 1.5
     periods, enough for a settled limit cycle, whose cycles repeat; but a vibration that is
     still drifting, or repeats only every few cycles, looks different 100 frames on, and the
-    1.5-period search cannot reach the part of the simulation that matches (measured on the
-    concealed-effect suite of seed 7, at the true parameters without the effect: misfits up to
+    1.5-period search cannot reach the part of the simulation that matches (measured on a
+    concealed-effect suite, at the true parameters without the effect: misfits up to
     18 mm^2 RMS with ``"periods"``, at most 0.14 mm^2 in every case with ``"window"``;
     docs/model.md, "Lag range"). Either way, when the simulation is too short for the whole observation the
     observation is trimmed to ``n_sim - max_lag`` frames.

@@ -238,8 +238,8 @@ def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list
 
 
 #: Absorption search of :func:`audit_presence`: a denser design and more polished starts than the
-#: generator's (64 points, the truth polished). Why: in the seed-0 suite the diagnosis's own
-#: base fit of case 07 (frame rate 1.039) reached a residual of 0.650 mm^2 against sigma 0.555,
+#: generator's (64 points, the truth polished). Why: on a concealed frame-rate error (rate 1.039) the
+#: diagnosis's own base fit reached a residual of 0.650 mm^2 against sigma 0.555,
 #: i.e. an unabsorbed part of ~0.34 mm^2 = 0.61 sigma, where the generator had measured 2.08 mm^2
 #: (3.7 sigma) from the truth: the base model absorbs a time stretch in another material mode,
 #: along the f0 ridge, which a local search from the truth does not reach.

@@ -64,7 +64,7 @@ MIN_PEAK_MM2 = 2.0
 #: Phonation criterion of a usable recording: the clean waveform's robust peak-to-trough amplitude
 #: (95th minus 5th percentile) must reach this many mm^2 AND ``MIN_AMPLITUDE_SIGMA`` noise standard
 #: deviations, and the noisy recording must still show a periodic oscillation (finite
-#: autocorrelation f0, >= 2 cycles). Without it, seed 0's case 08 (epithelium) keeps a glottis
+#: autocorrelation f0, >= 2 cycles). Without it, an epithelium draw can keep a glottis
 #: open at ~8.5 mm^2 with a 0.9 mm^2 ripple, and its noisy recording (sigma 0.31) has no f0.
 MIN_AMPLITUDE_MM2 = 2.0
 MIN_AMPLITUDE_SIGMA = 4.0

@@ -31,8 +31,8 @@ def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: fl
     the refit and of the base refitted in its mode, and the likelihood's ``roughness`` at the base
     fit (:func:`.regularity.sensitivity`; 0 for a regular vibration), in quadrature. On an
     irregular likelihood there is no smooth local mode for the two fits to share, and how far the
-    log-likelihood jumps between neighbouring points is an error of their comparison (concealed
-    case 06 of seed 4: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; docs/diagnose.md
+    log-likelihood jumps between neighbouring points is an error of their comparison (a concealed
+    leak at high p_sub: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; docs/diagnose.md
     section 4, "Regularity")."""
     se = math.hypot(float(se_refit), float(se_bound), float(roughness))
     ok = math.isfinite(d_local) and math.isfinite(se) and d_local > min_gain and d_local > k_se * se

@@ -77,8 +77,8 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
     ``by_drop=True``: a parameter with a measured drop is judged by the drop alone (null-consistent
     when it is at most ``2 null_sd^2`` nats), whatever its mean and sd. The nested check's gate
     uses it: there the refit of the simpler entry, not this test, decides, and a parameter pinned
-    a few sd from its null can still cost less likelihood at the null (concealed case 11 of seed 8: a phase
-    difference 0.012 +- 0.004 cycles, 2.7 sd, whose null costs 2.2 nats) than its Occam factor
+    a few sd from its null can still cost less likelihood at the null (an asymmetry fit of a concealed
+    recording: a phase difference 0.012 +- 0.004 cycles, 2.7 sd, whose null costs 2.2 nats) than its Occam factor
     (~ log(prior width / posterior width), 3 nats there) buys back."""
     from .extensions import get
     ext = get(extension) if isinstance(extension, str) else extension

@@ -6,8 +6,8 @@ smoothly on the parameters. At high subglottal pressure the fold model can vibra
 (period doubling, then chaos: Herzel, Berry, Titze & Saleh 1994, J. Speech Hear. Res. 37:1008;
 Steinecke & Herzel 1995, J. Acoust. Soc. Am. 97:1874); then the waveform after the transient
 depends on the parameters at every scale, the likelihood is a rough random function of them, and
-a sampler's evidence is the luck of the points it happened to simulate. Measured on concealed
-case 06 of seed 4 (p_sub 1,714 Pa): the base fit's point gave log-likelihood -2,398; the same point
+a sampler's evidence is the luck of the points it happened to simulate. Measured on a concealed
+recording at p_sub 1,714 Pa: the base fit's point gave log-likelihood -2,398; the same point
 with every parameter changed by a relative 1e-9 gave -70,555 (docs/diagnose.md section 4,
 "Regularity").
 

@@ -4,8 +4,8 @@ Why (docs/diagnose.md section 4, "Continuation search"): on a recording whose vi
 or is irregular, the waveform log-likelihood over the whole window is a rough function of the
 material parameters: a relative change of 1e-4 in a modulus moves the phase of the late cycles by
 a large fraction of a period. A tempered SMC of a few dozen particles then collapses on the best
-spike it happened to draw, which is often not the mode (on 9 missed cases of the concealed suite
-of seed 8, at the true materials the right entry left about the noise in 7, its SMC fit 1.3-2.6
+spike it happened to draw, which is often not the mode (on 9 missed concealed-effect
+recordings, at the true materials the right entry left about the noise in 7, its SMC fit 1.3-2.6
 times more).
 
 The remedy used for fitting oscillators by least squares is continuation in the length of the
@@ -38,11 +38,11 @@ __all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "wi
 
 #: default search: Sobol design points, starts kept from it, first window in cycles, Nelder-Mead
 #: evaluations on window k (``maxfev0 + maxfev_step * k``) and its initial simplex step in unit
-#: coordinates (``max(step0 / step_ratio**k, step_min)``). On concealed case 06 of seed 8 a start
-#: reached 0.52 mm^2 (truth 0.48) in 270 simulations with these; with 30 evaluations and steps
-#: halving to 0.005 it stopped at 1.11. Four starts, not two: on case 00 of seed 8 (a frame-rate
-#: error) the frame-rate search kept two and ended at log L -830.6; with four (another design) it
-#: reached -481.1, and three of the four starts ended above -572.
+#: coordinates (``max(step0 / step_ratio**k, step_min)``). Why these (docs/diagnose.md section 4,
+#: "Continuation search"): on a concealed leak a start reached 0.52 mm^2 (truth 0.48) in 270
+#: simulations with them, and stopped at 1.11 with 30 evaluations and steps halving to 0.005; four
+#: starts, not two, because on a concealed frame-rate error two starts ended at log L -830.6 and
+#: four reached -481.1, three of them above -572.
 CONTINUATION = {"n_design": 256, "n_keep": 4, "cycles0": 3.0, "maxfev0": 30, "maxfev_step": 25,
                 "step0": 0.05, "step_ratio": 4.0, "step_min": 5e-4, "halving": False}
 
@@ -274,7 +274,7 @@ def continued_fit(problem: Problem, found: SearchResult, extension: str | None =
     model's log-evidence from the mode the search found (the reference mixes in 10 % of the
     prior, as the rescue's does). Returns ``(log Z, se, posterior)``.
 
-    On concealed case 06 of seed 8 (a leak the SMC fits from the prior miss): from the search's
+    On a concealed leak that the SMC fits from the prior missed (docs/diagnose.md): from the search's
     optimum (residual 0.52 mm^2) this fit reached log Z -459.7 +- 0.4 with residual 0.59 mm^2 and
     the leak's area 2.11 mm^2 (truth 2.105) in 384 simulations; the best SMC refit from the prior
     reached -838."""

@@ -380,7 +380,7 @@ def test_null_consistent_posteriors():
 
 def test_nested_gate_reads_the_likelihood_drop_at_the_null():
     """The nested check's gate (``by_drop=True``): a phase difference pinned 2.7 sd from zero
-    whose null costs only 2.2 nats passes (the asymmetry fit of concealed case 11 of seed 8, whose in-phase form is
+    whose null costs only 2.2 nats passes (an asymmetry fit of a concealed recording, whose in-phase form is
     a scale error), one that costs 20 nats does not, and without a measured drop the mean +- 2 sd
     test still applies."""
     from vfcore.diagnose.rank import null_consistent
@@ -596,7 +596,7 @@ def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred(
 
 
 def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter_swamped():
-    """Concealed case 11 of seed 7 (a scale error, irregular base): base runs at -2,506,
+    """A concealed scale error on an irregular base: base runs at -2,506,
     -2,378, -2,482 and -1,904 nats (between-run error 409), the scale refit at -644 with its RMS
     59 % lower. With the between-run error in quadrature the 1,260-nat gain is 2.2 se and not
     named; against the best of all base fits by their own errors it is."""
@@ -622,7 +622,7 @@ def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter
 
 
 def test_best_of_base_keeps_the_effect_size_against_a_null_consistent_reference():
-    """Concealed case 08 of seed 5, a control with an irregular base: the asymmetry refit is 394 nats
+    """A concealed control with an irregular base: the asymmetry refit is 394 nats
     above every base-model fit and 40 % lower in RMS than the base, but only 26 % lower than the
     reference (the exposure refit at its null value, a better base-model fit). Not named."""
     from vfcore.diagnose.rank import rank_best_of_base

@@ -387,7 +387,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
 def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(base_run,
                                                                                                  monkeypatch):
     """Blind runs through the whole pipeline. The base fit is made to look as it does on
-    an irregular vibration (concealed case 11 of seed 7): its runs scattered (further runs 3,000 and
+    an irregular vibration of a concealed recording: its runs scattered (further runs 3,000 and
     9,000 nats below the kept one, between-run error 5,000 nats) and a roughness of 10,000 nats.
     A hidden 12 % scale error is then not named by the rule with the between-run error (the gain is swamped, and the
     local check counts the roughness), and is named by the best-of-base rule, with its material mode

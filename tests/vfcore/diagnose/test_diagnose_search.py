@@ -97,7 +97,7 @@ def test_search_never_returns_less_than_its_start():
     """The first window's optimum (0.2) lies far from the whole window's narrow one (0.8). A start
     on the whole window's optimum is pulled to 0.2 by the first window, and the last window's small
     polish cannot find the spike again; the search must still return the start's own value
-    (without that guard, on concealed case 00 of seed 8 the base search from the base fit's best
+    (without that guard, on a concealed frame-rate error the base search from the base fit's best
     particle ended 115 nats below that fit's log-evidence)."""
     from types import SimpleNamespace
     from vfcore.diagnose.search import CONTINUATION, _Continuer

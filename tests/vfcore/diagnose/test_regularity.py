@@ -22,9 +22,9 @@ def _problem_at(theta, prior, seed):
 
 
 def test_regular_and_irregular_vibration_told_apart():
-    """At the base fit of concealed case 10 of seed 4 (E_body 9.8, E_cover 562 kPa, p_sub 1,274 Pa) the limit
+    """At one concealed recording's base fit (E_body 9.8, E_cover 562 kPa, p_sub 1,274 Pa) the limit
     cycle is regular: a 1e-6 relative change of the parameters moves the log-likelihood of a
-    recording made from that very point by far less than a nat. At case 06's (10.0, 912, 1,783) the
+    recording made from that very point by far less than a nat. At another's (10.0, 912, 1,783) the
     vibration is irregular and the same change moves it by hundreds of nats or more."""
     prior = Prior.default(fixed=FIXED)
     regular = np.array([9.763560880049237, 562.201183299505, 1273.7606383329155])   # case 10's base fit
@@ -94,7 +94,7 @@ def test_sensitivity_rejects_bad_input():
 
 
 def test_local_check_counts_the_roughness_as_an_error():
-    """Concealed case 06 of seed 4: leak beat the base refitted in its mode by 1,426 +- 0.8 nats and was
+    """A concealed leak at high p_sub: leak beat the base refitted in its mode by 1,426 +- 0.8 nats and was
     named on the local comparison; the base fit's vibration was irregular (a 1e-6 relative change
     moved the log-likelihood by up to 81,000 nats). With the roughness in the error it is not
     named; at a regular base's roughness (0.01 nats) it is."""
