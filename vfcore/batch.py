@@ -19,13 +19,14 @@ import numpy as np
 from .config import SimConfig
 from .params import PARAM_NAMES, Params
 from .result import SimResult
+from .scalar import simulate_one
 from .simcore import (BLOWUP, CLOSED_TOL, as_params, assemble_result, contact_law, flow_coefficient, midline, setup,
                       stop_settings)
 from .solver import _kernels as kern
 from .solver._batch_kernels import integrate_many
 from .solver.system import get_system
 
-#: Blocks of fewer rows than this run through the scalar kernel (``forward.simulate``), which gives the
+#: Blocks of fewer rows than this run through the scalar kernel (:func:`.scalar.simulate_one`), which gives the
 #: same bits: the lock-step kernel's sample loops cost more than they share at one or two samples.
 #: Coarse mesh, dt 1e-4 s, one core beside a busy one, time per simulation against the scalar kernel's:
 #: block 1 2.4x, block 2 1.45x, block 3 0.82x, block 16 0.49x
@@ -227,8 +228,7 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 32
         for s in range(0, len(idx), block):
             sel = idx[s:s + block]
             if len(sel) < MIN_LOCKSTEP:
-                from .forward import simulate   # lazy: forward imports this module
-                res = [simulate(ps[i], configs[i]) for i in sel]
+                res = [simulate_one(ps[i], configs[i]) for i in sel]
             else:
                 res = _simulate_block([ps[i] for i in sel], [configs[i] for i in sel])
             for i, r in zip(sel, res):

@@ -1,12 +1,12 @@
 """Public face of the forward model: ``simulate(params, config) -> SimResult``.
 
-Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in docs/model.md. The set-up and
-result assembly live in :mod:`vfcore.simcore`, shared with the lock-step :mod:`vfcore.batch`; the
-constants and steps are re-exported here, where callers read them as ``vfcore.forward.X``.
+Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in docs/model.md. The scalar kernel's
+driver is :mod:`vfcore.scalar`; the set-up and result assembly live in :mod:`vfcore.simcore`, shared with the
+lock-step :mod:`vfcore.batch`; the constants and steps are re-exported here, where callers read them as
+``vfcore.forward.X``.
 """
 from __future__ import annotations
 
-import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -15,11 +15,10 @@ from . import batch
 from .config import SimConfig
 from .params import PARAM_NAMES, Params
 from .result import SimResult
+from .scalar import simulate_one
 from .simcore import (BLOWUP, CLOSED_TOL, MIN_CYCLE_AMPLITUDE, RHO_AIR, STOP_VEL, STOP_WIDTH, STOP_WINDOW_S,
                       as_params, assemble_result, contact_law, cycle_summary, flow_coefficient, midline, prestress,
                       setup, stop_settings)
-from .solver import _kernels as kern
-from .solver.system import get_system
 
 __all__ = ["simulate", "simulate_batch", "BLOWUP", "CLOSED_TOL", "MIN_CYCLE_AMPLITUDE", "RHO_AIR", "STOP_VEL",
            "STOP_WIDTH", "STOP_WINDOW_S", "as_params", "assemble_result", "contact_law", "cycle_summary",
@@ -40,43 +39,7 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
     SimResult at the camera rate over [discard, duration]. A simulation whose state
     becomes non-finite (or exceeds 1 cm) is returned with ``ok=False``, never as NaNs.
     """
-    p = as_params(params)
-    config = config or SimConfig()
-    t_wall = time.perf_counter()
-    system = get_system(config.mesh, config.nu, config.element)
-    si = p.si()
-    h = config.dt
-    n_steps = int(round(config.duration / h))
-    x_mid = midline(p, config)
-
-    K_vals, D_vals, M_vals, u, Lx, G = setup(p, config, system)
-    v = np.zeros(system.n)
-    a = np.zeros(system.n)
-    m = system.sdx.size
-    width = np.zeros(n_steps)
-    gsep = np.zeros(n_steps)
-    lam = np.zeros((n_steps, m))
-    traj_every = 0
-    n_traj = 0
-    if config.keep_trajectories:
-        traj_every = max(1, int(round(1.0 / (config.fps * h))))
-        n_traj = n_steps // traj_every
-    tu = np.zeros((n_traj, system.n))
-    tv = np.zeros((n_traj, system.n))
-    am, af, beta, gamma = kern.newmark_coefficients(h, config.rho_inf)
-    proj = np.zeros((n_steps, m))
-    stop = np.zeros(1, dtype=np.int64)
-    # no resonator rows: exactly kern.integrate (the inlet pressure stays p_sub)
-    p_in = np.full(n_steps, si["p_sub"]) if config.has_subglottal else np.zeros(0)
-    status = kern.integrate_coupled(
-        n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
-        D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
-        u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
-        config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
-        kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj,
-        config.contact == "layer", *contact_law(p, config, system), *stop_settings(config), stop)
-    return assemble_result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,
-                           p_in if config.has_subglottal else None, proj, int(stop[0]))
+    return simulate_one(as_params(params), config or SimConfig())
 
 
 def _simulate_rows(args):
