@@ -1,5 +1,5 @@
 """Batched forward model: ms per 550-ms simulation for the lock-step kernel at block sizes 1, 2, 3,
-4, 8, 16 versus the scalar ``simulate``, one core, and ``simulate_many`` itself (which sends blocks of
+4, 6, 8, 16 versus the scalar ``simulate``, one core, and ``simulate_many`` itself (which sends blocks of
 fewer than ``MIN_LOCKSTEP`` rows to the scalar kernel). Prints medians of --reps runs.
 
     OMP_NUM_THREADS=1 python benchmarks/bench_batch.py [--n 16] [--reps 3] [--mesh medium] [--dt 5e-5]
@@ -54,7 +54,7 @@ def main() -> None:
     print(f"== batched forward model, {args.mesh} mesh, dt {args.dt:g} s (ms per simulation, median) ==")
     scalar = per_sim(lambda: [simulate(p, cfg) for p in P])
     print(f"scalar simulate      : {scalar:8.1f} ms")
-    for block in (1, 2, 3, 4, 8, 16):
+    for block in (1, 2, 3, 4, 6, 8, 16):
         t = per_sim(lambda: lockstep(block))
         print(f"lock-step block {block:2d}   : {t:8.1f} ms  ({t / scalar:.2f}x scalar)")
     print(f"simulate_many, block 32 (blocks under {MIN_LOCKSTEP} rows scalar): "

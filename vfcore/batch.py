@@ -27,11 +27,11 @@ from .solver._batch_kernels import integrate_many
 from .solver.system import get_system
 
 #: Blocks of fewer rows than this run through the scalar kernel (:func:`.scalar.simulate_one`), which gives the
-#: same bits: the lock-step kernel's sample loops cost more than they share at one or two samples.
-#: Coarse mesh, dt 1e-4 s, one core beside a busy one, time per simulation against the scalar kernel's:
-#: block 1 2.4x, block 2 1.45x, block 3 0.82x, block 16 0.49x
-#: (``benchmarks/bench_batch.py --mesh coarse --dt 1e-4``). Single rows are what a Nelder-Mead polish evaluates.
-MIN_LOCKSTEP = 3
+#: same bits: the lock-step kernel's sample loops cost more than they share at a few samples. Coarse mesh, dt 1e-4 s,
+#: one core beside a busy one, time per simulation against the scalar kernel's: block 1 2.2x, 2 1.5x, 3 1.1x, 4 1.1x,
+#: 6 0.90x, 16 0.63x (``benchmarks/bench_batch.py --mesh coarse --dt 1e-4 --n 12``; three runs put blocks 3 and 4
+#: at 1.06-1.41x, the medium mesh at dt 5e-5 s alike). Single rows are what a Nelder-Mead polish evaluates.
+MIN_LOCKSTEP = 5
 
 #: SimConfig fields that may differ between the rows of one lock-step block.
 PER_SAMPLE_FIELDS = ("sep_ratio", "epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile", "subglottal_modes")
@@ -191,7 +191,7 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = 32
 
     Rows are advanced ``block`` at a time in lock-step; results equal ``simulate`` row by
     row (a sample that blows up gets ``ok=False`` without stopping its block). A block of fewer
-    than :data:`MIN_LOCKSTEP` rows (a single row, a group's last one or two) runs through the
+    than :data:`MIN_LOCKSTEP` rows (a single row, a group's last few) runs through the
     scalar kernel, which is faster there and gives the same bits.
 
     ``configs`` (optional, one SimConfig per row) overrides ``config`` row by row. Rows are

@@ -38,10 +38,10 @@ def test_small_blocks_take_the_scalar_kernel_with_the_same_bits(rows, batched, m
         sizes.append(len(ps))
         return lockstep(ps, cfgs)
     monkeypatch.setattr(vb, "_simulate_block", spy)
-    out = simulate_many(rows, SimConfig(), block=4)            # a block of 4, then one of 2
-    assert sizes == [4] and vb.MIN_LOCKSTEP > 2
+    out = simulate_many(rows, SimConfig(), block=5)            # a block of 5, then one of 1
+    assert sizes == [5] and 1 < vb.MIN_LOCKSTEP <= 5
     one = simulate_many(rows[1:2], SimConfig())                # a single oscillating row
-    assert sizes == [4]
+    assert sizes == [5]
     for b, s in zip(batched, out):
         assert b.ok == s.ok
         np.testing.assert_array_equal(b.gaw, s.gaw)
