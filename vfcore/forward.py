@@ -13,7 +13,7 @@ import numpy as np
 
 from . import batch
 from .config import SimConfig
-from .params import PARAM_NAMES, Params
+from .params import PARAM_NAMES
 from .result import SimResult
 from .scalar import simulate_one
 from .simcore import (BLOWUP, CLOSED_TOL, MIN_CYCLE_AMPLITUDE, RHO_AIR, STOP_VEL, STOP_WIDTH, STOP_WINDOW_S,
@@ -44,9 +44,8 @@ def simulate(params, config: SimConfig | None = None) -> SimResult:
 
 def _simulate_rows(args):
     rows, config, block = args
-    if block <= 1:
-        return [simulate(Params.from_array(r), config) for r in rows]
-    return batch.simulate_many(rows, config, block=block)
+    # simulate_many runs blocks under MIN_LOCKSTEP rows, block 1 included, through the scalar kernel
+    return batch.simulate_many(rows, config, block=max(1, block))
 
 
 def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1, block: int = 32
