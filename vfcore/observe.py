@@ -125,7 +125,7 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
     nuisance). For an exactly periodic simulation the two agree up to whole periods; when
     cycles differ slightly the first-two-cycle correlation is nearly tied between lags one
     period apart and flips between them as the parameters change, which makes the
-    likelihood jump (docs/inference.md, "Alignment").
+    likelihood jump (docs/model.md, "Observation").
 
     Without ``sim_hr`` the lag is a whole number of frames. With ``sim_hr`` (the same
     simulated GAW sampled ``oversample`` times faster from the same start, e.g.

@@ -13,10 +13,9 @@ Which runs are pooled (``rule``):
   run found the truth's basin), and the others fell 4.4 to 1,458 nats short (20 six-parameter twins, 3 runs each;
   docs/inference.md);
 * ``"evidence"``: a run whose log evidence is more than ``gap`` nats (default 5) below the best run's is left
-  out (the basin it holds would carry at most exp(-gap) of the mass). This was the first rule, fixed before
-  its calibration; that calibration found the SMC evidence of runs whose best particles agree spread by up to
-  143 nats (against quoted errors of 0.3-0.5), so this rule drops runs of the right basin by luck and keeps
-  the luckiest.
+  out (the basin it holds would carry at most exp(-gap) of the mass). On the same twins the SMC evidence of
+  runs whose best particles agree spread by up to 143 nats (against quoted errors of 0.3-0.5), so this rule
+  drops runs of the right basin by luck and keeps the luckiest.
 
 The runs kept share the posterior equally, each run's own (equal) particle weights scaled by 1 / runs kept:
 weighting them by their evidence would lean on the same unreliable estimates. The evidence is the mean of
