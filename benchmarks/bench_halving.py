@@ -10,7 +10,7 @@ without halving, so a lost winner shows as a start that was behind early and ahe
 Run it only on suites already scored (development data; docs/diagnose.md section 5): a suite
 that still measures the code must not inform a setting. The search reads the public recordings
 and ``cases.json``, never the truth. The suite of seed 8 (regenerated with
-``python -m benchmarks.concealed.generate --out runs/concealedS8 --seed 8``):
+``python -m benchmarks.concealed.generate --out runs/concealedS8 --seed 8 --material three``):
 
     python benchmarks/bench_halving.py --cases runs/concealedS8 \
         --runs 00:frame_rate,06:leak,05:base [--seed 1] [--n-keep 4]

@@ -26,8 +26,8 @@ def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int,
     uniform prior on the box and ``V_box / V`` the box's prior probability,
     ``log Z_base >= log Z_box + log(V_box / V)`` because the likelihood is >= 0 outside the box:
     a lower bound on the base evidence *in the mode the extended fit found*. Returns
-    ``(log Z bound, se, posterior)``. At the defaults a 3-parameter box costs at most
-    3 log(0.05) = -9 nats of prior volume, small against the gains it is compared with.
+    ``(log Z bound, se, posterior)``. At the defaults a box over d material parameters costs at most
+    d log(0.05) of prior volume (-9 nats for three, -15 for five), small against the gains it is compared with.
     ``extension``: refit that extended model instead of the base model (its own parameters keep
     their whole prior), for the nested check of :func:`diagnose`; the bound is then on its evidence.
 
