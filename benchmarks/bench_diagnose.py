@@ -37,32 +37,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np  # noqa: E402
-
 from benchmarks.suite import case_problem  # noqa: E402
-
-
-class BalancedMap:
-    """``map`` for :func:`vfcore.inference.importance.map_evaluate` that re-splits each batch into
-    ``workers`` contiguous, equal parts for the pool, then cuts the results back into one
-    Evaluation per part it was given (row order kept): callers count one result per part. With a
-    fixed chunk size a 24-particle SMC batch goes out as 20 + 4 rows and one worker idles."""
-
-    def __init__(self, imap, workers: int):
-        self.imap, self.workers = imap, workers
-
-    def __call__(self, fn, parts):
-        from vfcore.inference.problem import Evaluation
-        parts = [np.atleast_2d(p) for p in parts]
-        if not parts:
-            return []
-        rows = np.concatenate(parts)
-        if rows.shape[0] == 0:
-            return [Evaluation.coerce(r) for r in self.imap(fn, parts)]
-        ev = Evaluation.concat([Evaluation.coerce(r) for r in
-                                self.imap(fn, np.array_split(rows, min(self.workers, rows.shape[0])))])
-        edges = np.cumsum([0] + [p.shape[0] for p in parts])
-        return [ev.take(np.arange(a, b)) for a, b in zip(edges[:-1], edges[1:])]
+from vfcore.inference.importance import BalancedMap  # noqa: E402
 
 
 def _mapper(pool, workers: int, store: Path | None):

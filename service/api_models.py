@@ -144,9 +144,11 @@ DIAGNOSIS_OPTIONS = {"candidates": "--candidates", "n_particles": "--particles",
 
 
 class DiagnosisSpec(BaseModel):
-    """What a diagnosis job stores (its table row and its store): the job it diagnoses, the settings, and the
-    size of its batches, fixed when it was submitted so that a resumed run asks for the same parts its store
-    kept (``None``: sized from the cluster when it runs)."""
+    """What a diagnosis job stores (its table row and its store): the job it diagnoses, the settings, and how
+    its batches are cut, fixed when it was submitted so that a resumed run asks for the same parts its store
+    kept: ``parts`` equal parts a batch, one per worker thread of the cluster at submission
+    (:class:`vfcore.inference.importance.BalancedMap`), or chunks of ``chunk_size`` rows (both ``None``: chunks
+    sized from the cluster when it runs)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -154,6 +156,7 @@ class DiagnosisSpec(BaseModel):
     job: str = Field(description="the id of the finished inference job diagnosed")
     request: DiagnoseRequest
     chunk_size: int | None = Field(default=None, ge=1, le=400)
+    parts: int | None = Field(default=None, ge=1, le=4096)
 
     def to_json(self) -> str:
         return self.model_dump_json()

@@ -322,10 +322,11 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
                 report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status), base=base_post)
             else:
                 from concurrent.futures import ProcessPoolExecutor
-                chunk = max(1, math.ceil(req.n_particles / (2 * workers)))
+
+                from vfcore.inference.importance import BalancedMap
                 with ProcessPoolExecutor(workers) as pool:
                     cmap = CachedMap(pool.map, store) if store is not None else None
-                    report = run_diagnose(problem, req, map=cmap or pool.map, chunk_size=chunk,
+                    report = run_diagnose(problem, req, map=BalancedMap(cmap or pool.map, workers),
                                           progress=StageReporter(status), base=base_post)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None

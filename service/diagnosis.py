@@ -112,6 +112,16 @@ def cancellable(inner, event: threading.Event):
     return _map
 
 
+def n_slots(client) -> int:
+    """Worker threads of the cluster (at least 1): the parts each batch of a diagnosis is cut into."""
+    if client is None:
+        return 1
+    try:
+        return max(1, sum(int(w.get("nthreads", 1)) for w in client.scheduler_info()["workers"].values()))
+    except Exception:  # noqa: BLE001 - only used to size parts
+        return 1
+
+
 def n_workers(client) -> int:
     if client is None:
         return 1
@@ -229,11 +239,15 @@ def run_diagnosis(client, job_id: str, store_path: Path, spec, problem, *, stop:
     its stored report; returns its stats (the report's clock readings, the simulations). Raises
     :class:`DiagnosisCancelled` once ``stop`` is set. ``base``: the diagnosed job's posterior
     (:func:`job_posterior`) to start from, or None."""
+    from vfcore.inference.importance import BalancedMap
     from vfcore.inference.memo import CachedMap, account
     st.create_diagnosis_store(store_path, job_id, spec.to_json())
     cmap = CachedMap(dask_map(client, stop), resume_dir(store_path))
-    chunk = spec.chunk_size or chunk_size_for(spec.request, client)
-    report = run_diagnose(problem, spec.request, map=cancellable(cmap, stop), chunk_size=chunk, progress=progress,
+    if spec.parts:                               # every batch in equal parts, one per worker thread
+        inner, chunk = BalancedMap(cmap, spec.parts), None
+    else:
+        inner, chunk = cmap, spec.chunk_size or chunk_size_for(spec.request, client)
+    report = run_diagnose(problem, spec.request, map=cancellable(inner, stop), chunk_size=chunk, progress=progress,
                           base=base)
     d = account(report.to_dict(), cmap)          # a resumed run counts its earlier attempts' time
     png = figure_png(report, problem, store_path)

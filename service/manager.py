@@ -113,7 +113,7 @@ class JobManager:
     def submit_diagnosis(self, owner: str, job_id: str, request: DiagnoseRequest) -> str:
         """Queue a diagnosis of the finished job ``job_id``; it replaces the job's previous diagnosis and goes on
         from the simulations a failed one left. Raises :class:`DiagnosisRunning` while one is queued or running."""
-        spec = DiagnosisSpec(job=job_id, request=request, chunk_size=dg.chunk_size_for(request, self.client))
+        spec = DiagnosisSpec(job=job_id, request=request, parts=dg.n_slots(self.client))
         diag_id = new_job_id()
         with self._submit_lock:
             earlier = self.db.children(job_id)

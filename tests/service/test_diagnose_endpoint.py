@@ -119,10 +119,12 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
 
 
 def test_a_failed_diagnosis_leaves_its_simulations_to_the_next_request(service, monkeypatch):
-    """A diagnosis that evaluates 3 parts and then dies: the failure is recorded, the 3 parts stay in its
-    store, and the same request posted again reads all 3 back and simulates nothing."""
+    """A diagnosis that evaluates a batch of 3 parts (6 rows) and then dies: the failure is recorded, the
+    parts the store was given (the batch cut into one equal part per worker thread) stay in it, and the same
+    request posted again reads every one back and simulates nothing."""
     import vfcore.diagnose.pipeline as P
     from service.diagnosis import resume_dir
+    from vfcore.inference.importance import BalancedMap
 
     maps = []
     monkeypatch.setattr(P, "diagnose", dying_diagnosis(maps, "worker lost"))
@@ -131,11 +133,14 @@ def test_a_failed_diagnosis_leaves_its_simulations_to_the_next_request(service, 
     first = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).json()
     d = _wait_diagnosis(http, jid, "alice", timeout=60)
     assert d["state"] == "failed" and "worker lost" in d["error"], d
-    assert len(list(resume_dir(stores / f"{first['diagnosis_id']}.zarr").rglob("*.pkl"))) == 3
+    balanced = maps[0].inner                              # inside the cancellable map
+    assert isinstance(balanced, BalancedMap)
+    stored = len(list(resume_dir(stores / f"{first['diagnosis_id']}.zarr").rglob("*.pkl")))
+    assert stored == min(balanced.workers, 6) >= 1
     second = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).json()
     assert _wait_diagnosis(http, jid, "alice", timeout=60)["state"] == "failed"
-    store = maps[1].inner                                 # the store, inside the cancellable map
-    assert (store.hits, store.misses) == (3, 0)
+    store = maps[1].inner.inner                           # the store, inside the balanced, cancellable map
+    assert (store.hits, store.misses) == (stored, 0)
     assert store.earlier_attempts == 1                    # the dead attempt's time is on record
     # the new diagnosis replaced the old one, which is gone with its store
     assert http.get(f"/jobs/{first['diagnosis_id']}", headers=auth("alice")).status_code == 404
