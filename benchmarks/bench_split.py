@@ -1,9 +1,10 @@
 """How a diagnosis's SMC generation is cut for the worker pool: wall time of one generation of
 ``--rows`` finite-element rows on a pool of ``--workers`` processes, in fixed chunks of
-``n_particles / workers`` and of ``n_particles / (2 workers)`` rows at 40 base particles (what the service and
-the command line cut without :class:`~vfcore.inference.importance.BalancedMap`) and in equal parts, one per worker (:class:`vfcore.inference.importance.BalancedMap`). Every split gives
-the same log-likelihoods (checked here, and in tests/vfcore/inference/test_balanced_map.py). Prints the
-median of ``--reps`` interleaved repetitions; run it with the machine to itself.
+``n_particles / workers`` and of ``n_particles / (2 workers)`` rows at 40 base particles (what the
+service and the command line cut without a balanced map) and in equal parts, one per worker
+(:class:`vfcore.inference.importance.BalancedMap`). Every split gives the same log-likelihoods
+(checked here, and in tests/vfcore/inference/test_balanced_map.py). Prints the median of
+``--reps`` interleaved repetitions; run it with the machine to itself.
 
     python benchmarks/bench_split.py [--rows 24,48] [--workers 2] [--reps 5]
 """
