@@ -22,7 +22,7 @@ def _problem_at(theta, prior, seed):
 
 
 def test_regular_and_irregular_vibration_told_apart():
-    """At one concealed recording's base fit (E_body 9.8, E_cover 562 kPa, p_sub 1,274 Pa) the limit
+    """At one concealed recording's base fit (E_body 9.8, E_cover 562 Pa, p_sub 1,274 Pa) the limit
     cycle is regular: a 1e-6 relative change of the parameters moves the log-likelihood of a
     recording made from that very point by far less than a nat. At another's (10.0, 912, 1,783) the
     vibration is irregular and the same change moves it by hundreds of nats or more."""
