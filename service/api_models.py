@@ -147,8 +147,8 @@ class DiagnosisSpec(BaseModel):
     """What a diagnosis job stores (its table row and its store): the job it diagnoses, the settings, and how
     its batches are cut, fixed when it was submitted so that a resumed run asks for the same parts its store
     kept: ``parts`` equal parts a batch, one per worker thread of the cluster at submission
-    (:class:`vfcore.inference.importance.BalancedMap`), or chunks of ``chunk_size`` rows (both ``None``: chunks
-    sized from the cluster when it runs)."""
+    (:class:`vfcore.inference.importance.BalancedMap`), or chunks of ``chunk_size`` rows (both ``None``: one part
+    per worker thread of the cluster when it runs)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 

@@ -11,7 +11,6 @@ the resume store contributed), which go to the job's stats and are merged back w
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import secrets
@@ -122,20 +121,6 @@ def n_slots(client) -> int:
         return 1
 
 
-def n_workers(client) -> int:
-    if client is None:
-        return 1
-    try:
-        return max(1, len(client.scheduler_info()["workers"]))
-    except Exception:  # noqa: BLE001 - only used to size chunks
-        return 1
-
-
-def chunk_size_for(request, client) -> int:
-    """One part per worker in each SMC round."""
-    return max(1, math.ceil(request.n_particles / n_workers(client)))
-
-
 # ------------------------------------------------------------------------------------ the report in the store
 def split_clock(report: dict) -> tuple[dict, list]:
     """``report`` without its clock readings and run accounts (:data:`CLOCK_KEYS` at any depth, :data:`RUN_KEYS`
@@ -243,10 +228,10 @@ def run_diagnosis(client, job_id: str, store_path: Path, spec, problem, *, stop:
     from vfcore.inference.memo import CachedMap, account
     st.create_diagnosis_store(store_path, job_id, spec.to_json())
     cmap = CachedMap(dask_map(client, stop), resume_dir(store_path))
-    if spec.parts:                               # every batch in equal parts, one per worker thread
-        inner, chunk = BalancedMap(cmap, spec.parts), None
-    else:
-        inner, chunk = cmap, spec.chunk_size or chunk_size_for(spec.request, client)
+    if spec.chunk_size and not spec.parts:       # a spec stored with fixed chunks keeps them
+        inner, chunk = cmap, spec.chunk_size
+    else:                                        # every batch in equal parts, one per worker thread
+        inner, chunk = BalancedMap(cmap, spec.parts or n_slots(client)), None
     report = run_diagnose(problem, spec.request, map=cancellable(inner, stop), chunk_size=chunk, progress=progress,
                           base=base)
     d = account(report.to_dict(), cmap)          # a resumed run counts its earlier attempts' time
