@@ -167,14 +167,23 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     console.print(f"products written to {out}/; report: {out / 'index.html'}", highlight=False)
 
 
-def _port_free(host: str, port: int) -> bool:
+def _listen(host: str, port: int) -> socket.socket | None:
+    """A listening socket on ``host:port``, or None when it cannot be had. ``serve`` holds it from here on and
+    hands it to uvicorn, so nothing the service starts before it serves (its LocalCluster binds random ports)
+    can take the port in between."""
     try:
-        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            s.bind((host, port))
-        return True
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+        s = socket.socket(family, socket.SOCK_STREAM)
     except OSError:
-        return False
+        return None
+    try:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind((host, port))
+        s.listen(2048)
+        return s
+    except OSError:
+        s.close()
+        return None
 
 
 @app.command()
@@ -193,15 +202,18 @@ def serve(host: Annotated[str, typer.Option(help="address to listen on")] = "127
         socket.getaddrinfo(host, port)
     except OSError as exc:
         raise fail(f"--host {host!r}: {exc}") from None
-    if not _port_free(host, port):
-        raise fail(f"cannot listen on {host}:{port}: the port is in use or not allowed")
     try:
         settings = Settings.from_env(**({"n_workers": workers} if workers else {}))
     except ValueError as exc:
         raise fail(f"settings from the environment: {exc}") from None
+    sock = _listen(host, port)
+    if sock is None:
+        raise fail(f"cannot listen on {host}:{port}: the port is in use or not allowed")
     if not settings.users:
         warn("no tokens configured (VFINFER_TOKENS=user:token,...): every request will be 401")
-    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+    with sock:
+        server = uvicorn.Server(uvicorn.Config(create_app(settings), host=host, port=port, log_level="info"))
+        server.run(sockets=[sock])
 
 
 @app.command()

@@ -39,33 +39,41 @@ def toy_spec(n: int = 400, seed: int = 1, delay: float = 0.0, sampler: dict | No
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def start_service(data_dir: Path, port: int, script: list[str] | None = None, env: dict | None = None
-                  ) -> subprocess.Popen:
+def start_service(data_dir: Path, script: list[str] | None = None, env: dict | None = None
+                  ) -> tuple[subprocess.Popen, int]:
     """``vfinfer serve`` (or ``script``, a command line run with this Python that serves the same way) in its own
-    process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir``; returns once both
-    workers answer."""
+    process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir`` and a free port; returns
+    the process and its port once both workers answer. A port is free only until the service binds it, and
+    another process may take it in between: then the service exits at once with its one "in use" line, and it is
+    started again on another port."""
     env = {**os.environ, "VFINFER_DATA_DIR": str(data_dir), "VFINFER_ALLOW_TOY": "1", "VFINFER_N_WORKERS": "2",
            "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1", **PLUGIN_ENV,
            **(env or {})}
-    log = data_dir.parent / f"serve_{port}_{time.time_ns()}.log"       # kept for the error message
-    argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", str(port)]
-    with open(log, "wb") as fh:
-        p = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
     import httpx
-    t0 = time.time()
-    while True:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).json()["dask_workers"] == 2:
-                return p
-        except (httpx.HTTPError, KeyError, ValueError):
-            pass
-        if time.time() - t0 > 180 or p.poll() is not None:
-            rc = p.poll()
-            kill_service(p)
-            tail = log.read_text(errors="replace")[-3000:]
-            raise RuntimeError(f"service did not start on port {port} within {time.time() - t0:.0f} s "
-                               f"(exit code {rc}); its output:\n{tail}")
-        time.sleep(0.2)
+    for attempt in range(5):
+        port = free_port()
+        log = data_dir.parent / f"serve_{port}_{time.time_ns()}.log"       # kept for the error message
+        argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", str(port)]
+        with open(log, "wb") as fh:
+            p = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT,
+                                 start_new_session=True)
+        t0 = time.time()
+        while True:
+            try:
+                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).json()["dask_workers"] == 2:
+                    return p, port
+            except (httpx.HTTPError, KeyError, ValueError):
+                pass
+            if time.time() - t0 > 180 or p.poll() is not None:
+                rc = p.poll()
+                kill_service(p)
+                tail = log.read_text(errors="replace")[-3000:]
+                if rc == 2 and "in use" in tail and attempt < 4:
+                    break
+                raise RuntimeError(f"service did not start on port {port} within {time.time() - t0:.0f} s "
+                                   f"(exit code {rc}); its output:\n{tail}")
+            time.sleep(0.2)
+    raise AssertionError("unreachable")
 
 
 def kill_service(p: subprocess.Popen) -> None:

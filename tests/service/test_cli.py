@@ -166,3 +166,36 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
     assert r.exit_code == 2 and "--start" in r.output
     r = CliRunner().invoke(app, ["diagnosis", jid], env={**env, "VFINFER_TOKEN": TOKENS["alice"]})
     assert r.exit_code == 2 and "404" in r.output
+
+
+def test_serve_holds_its_port_before_the_app_starts(monkeypatch):
+    """``serve`` binds and listens before the app's startup (which starts a LocalCluster binding random ports), and
+    uvicorn serves on that very socket: nothing started in between can take the port."""
+    import socket
+
+    import uvicorn
+
+    import service.main as main
+    seen = {}
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+
+    def create_app(settings):
+        with socket.socket() as s:           # what a LocalCluster binding the same port would meet
+            seen["bind_refused"] = s.connect_ex(("127.0.0.1", port)) == 0
+        return object()
+
+    class Server:
+        def __init__(self, config):
+            pass
+
+        def run(self, sockets):
+            seen["served_on"] = [s.getsockname()[1] for s in sockets]
+
+    monkeypatch.setattr(main, "create_app", create_app)
+    monkeypatch.setattr(uvicorn, "Server", Server)
+    monkeypatch.setattr(uvicorn, "run", lambda *a, **k: seen.setdefault("bound_by_uvicorn", True))
+    r = CliRunner().invoke(app, ["serve", "--port", str(port)], env={"VFINFER_TOKENS": "user:a-long-token"})
+    assert r.exit_code == 0, r.output
+    assert seen == {"bind_refused": True, "served_on": [port]}

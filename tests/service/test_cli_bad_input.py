@@ -293,6 +293,7 @@ def guarded(monkeypatch, tmp_path):
     monkeypatch.setattr(pipeline, "diagnose", _never)
     monkeypatch.setattr(reach, "build_ensemble", _never)
     monkeypatch.setattr(uvicorn, "run", _never)
+    monkeypatch.setattr(uvicorn, "Server", _never)
     monkeypatch.setenv("VFINFER_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("VFINFER_DEBUG", raising=False)
     with socket.socket() as busy:

@@ -8,7 +8,7 @@ import httpx
 import numpy as np
 import zarr
 
-from svc_helpers import auth, free_port, kill_service, start_service, toy_spec, wait_done
+from svc_helpers import auth, kill_service, start_service, toy_spec, wait_done
 
 
 def test_service_restart_resumes_without_recomputing(tmp_path):
@@ -17,9 +17,8 @@ def test_service_restart_resumes_without_recomputing(tmp_path):
     from toy_model import ToyEvaluator
 
     data = tmp_path / "data"
-    port = free_port()
     spec = toy_spec(n=600, seed=33, delay=0.01, chunk_size=30)       # 20 chunks of ~0.3 s
-    p = start_service(data, port)
+    p, port = start_service(data)
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as http:
             job = http.post("/jobs", json=spec, headers=auth("bob")).json()["id"]
@@ -32,7 +31,7 @@ def test_service_restart_resumes_without_recomputing(tmp_path):
     store = data / "stores" / f"{job}.zarr"
     done_before = np.asarray(zarr.open_group(str(store), mode="r")["batches/0/done"][...])
     assert 0 < done_before.sum() < done_before.size
-    p = start_service(data, port)
+    p, port = start_service(data)
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as http:
             st = wait_done(http, job, "bob", timeout=120)

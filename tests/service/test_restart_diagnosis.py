@@ -14,7 +14,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from svc_helpers import auth, done_fe_job, free_port, kill_service, leaky_fe_spec, start_service
+from svc_helpers import auth, done_fe_job, kill_service, leaky_fe_spec, start_service
 
 HERE = Path(__file__).resolve().parent
 STAND_IN = {"script": [str(HERE / "serve_stand_in_diagnosis.py")], "body": {"seed": 3, "continuation": False},
@@ -43,8 +43,7 @@ def test_a_restart_during_a_diagnosis_resumes_it_and_stores_the_same_report_byte
     settings = Settings(data_dir=data)
     spec = leaky_fe_spec() if case is REAL else None
     interrupted, uninterrupted = (done_fe_job(settings, spec=spec) for _ in range(2))
-    port = free_port()
-    p = start_service(data, port, script=case["script"])
+    p, port = start_service(data, script=case["script"])
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as http:
             r = http.post(f"/jobs/{interrupted}/diagnose", json=case["body"], headers=auth("alice"))
@@ -58,7 +57,7 @@ def test_a_restart_during_a_diagnosis_resumes_it_and_stores_the_same_report_byte
     assert first["state"] == "running", first
     kept = len(list(resume_dir(data / "stores" / f"{diag}.zarr").rglob("*.pkl")))
     assert kept > 0 and report_bytes(data / "stores" / f"{diag}.zarr") is None     # killed in the middle
-    p = start_service(data, port, script=case["script"])
+    p, port = start_service(data, script=case["script"])
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as http:
             resumed = _wait(http, interrupted, case["timeout"])
