@@ -115,10 +115,8 @@ def n_slots(client) -> int:
     """Worker threads of the cluster (at least 1): the parts each batch of a diagnosis is cut into."""
     if client is None:
         return 1
-    try:
-        return max(1, sum(int(w.get("nthreads", 1)) for w in client.scheduler_info()["workers"].values()))
-    except Exception:  # noqa: BLE001 - only used to size parts
-        return 1
+    from worker.run import cluster_threads
+    return cluster_threads(client)
 
 
 # ------------------------------------------------------------------------------------ the report in the store

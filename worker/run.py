@@ -139,6 +139,26 @@ def chunk_size_for(spec: JobSpec) -> int:
     return int(size)
 
 
+def cluster_threads(client) -> int:
+    """Worker threads of the cluster (at least 1)."""
+    try:
+        return max(1, sum(int(n) for n in client.nthreads().values()))
+    except Exception:  # noqa: BLE001 - only used to size chunks
+        return 1
+
+
+def generation_chunk(spec: JobSpec, n: int, client) -> int | None:
+    """Rows per chunk of an SMC generation of ``n`` rows: one equal share per worker thread of the cluster
+    as it is when the batch is created (the batch keeps it, so a resume reads the same chunks), or None for
+    the job's fixed chunk size (a spec that sets ``chunk_size``; a GPU job, whose launch wants every row).
+    Why: a generation is small (100 particles), and fixed chunks of 32 go out as 32 + 32 + 32 + 4, so on 2
+    workers one does 64 rows while the other does 36; equal shares finish together, each one wider
+    lock-step block. A row's result does not depend on its neighbours, so no number changes."""
+    if spec.chunk_size or (spec.model == "fe" and job_device(spec) == "cuda"):
+        return None
+    return max(1, -(-int(n) // cluster_threads(client)))
+
+
 def evaluator_for(spec: JobSpec, problem: Problem) -> Callable[[np.ndarray], Evaluation]:
     """The job's model as a picklable batch function ``thetas (k, d) -> Evaluation`` (worker.models)."""
     return model_named(spec.model).evaluator(spec, problem)
@@ -204,10 +224,10 @@ class Progress:
 
 def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.ndarray, evaluator,
                prog: Progress, report: Callable[[Progress], None], control: JobControl,
-               seen_ll: RunningESS | None = None) -> Evaluation:
+               seen_ll: RunningESS | None = None, chunk_size: int | None = None) -> Evaluation:
     from distributed import as_completed
 
-    g = st.ensure_batch(root, b, thetas)
+    g = st.ensure_batch(root, b, thetas, chunk_size)
     cs = int(g.attrs["chunk_size"])
     n_chunks = int(g.attrs["n_chunks"])
     n = thetas.shape[0]
@@ -309,7 +329,8 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
                 prog.n_total += th.shape[0]
                 prog.generation = sampler.generation
                 fn = screen if sampler.stage == "screen" else evaluator
-                ev = _run_batch(client, root, sp, job_id, b, th, fn, prog, report, control)
+                ev = _run_batch(client, root, sp, job_id, b, th, fn, prog, report, control,
+                                chunk_size=generation_chunk(spec, th.shape[0], client))
                 sampler.tell(ev)
                 prog.ess = float(sampler.last_ess)
                 b += 1

@@ -27,7 +27,8 @@ A diagnosis job's store holds less (:func:`create_diagnosis_store`)::
       resume/                       finished simulations while it runs (vfcore.inference.memo.CachedMap;
                                     not Zarr, deleted once the report is written)
 
-Every array is chunked along its first axis with the job's ``chunk_size`` so each worker task
+Every array of a batch is chunked along its first axis with the batch's ``chunk_size`` (the job's, or an
+SMC generation's equal share per worker thread, fixed when the batch is created) so each worker task
 owns whole Zarr chunks: concurrent tasks never write the same object, and a recomputed task
 overwrites its region with identical bytes.  ``done`` has one element per Zarr chunk.
 """
@@ -82,9 +83,10 @@ def batch_path(b: int) -> str:
     return f"batches/{int(b)}"
 
 
-def ensure_batch(root, b: int, thetas: np.ndarray):
-    """Pre-allocate batch ``b`` for ``thetas`` (idempotent: an existing batch must hold the same thetas)."""
-    cs = int(root.attrs["chunk_size"])
+def ensure_batch(root, b: int, thetas: np.ndarray, chunk_size: int | None = None):
+    """Pre-allocate batch ``b`` for ``thetas`` (idempotent: an existing batch must hold the same thetas, and
+    keeps the chunking it was created with). ``chunk_size``: this batch's rows per chunk, else the job's."""
+    cs = int(chunk_size or root.attrs["chunk_size"])
     n_cmp = int(root.attrs["n_compare"])
     name = batch_path(b)
     n, d = thetas.shape

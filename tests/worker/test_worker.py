@@ -184,3 +184,25 @@ def test_a_spec_builds_its_problem_once(monkeypatch):
     assert again == spec and len(built) == 2
     moved = spec.model_copy(update={"sigma_e": 3.0})
     assert moved.to_problem().sigma_e == 3.0 and spec.to_problem().sigma_e == 10.0
+
+
+def test_an_smc_generation_is_cut_into_one_equal_chunk_per_worker_thread(tmp_path, client):
+    """Each SMC generation of a job without a fixed chunk size goes out as one chunk per worker thread of the
+    cluster (2 here), and the job's posterior is the one of the same job in fixed chunks of 7, bit for bit."""
+    sampler = {"kind": "smc", "n_particles": 40}
+    out = {}
+    for name, kw in (("balanced", {}), ("fixed", {"chunk_size": 7})):
+        spec = JobSpec.model_validate(toy_spec(sampler=sampler, **kw))
+        path = tmp_path / f"{name}.zarr"
+        prepare(path, name, spec)
+        run_job(client, name, path, spec)
+        batches = zarr.open_group(str(path), mode="r")["batches"]
+        out[name] = ([(int(g.attrs["n"]), int(g.attrs["n_chunks"])) for _, g in sorted(
+            batches.groups(), key=lambda kv: int(kv[0]))], st.read_posterior_arrays(path))
+    shapes, post = out["balanced"]
+    assert len(shapes) > 3 and all(c == min(2, n) for n, c in shapes), shapes
+    assert all(c == -(-n // 7) for n, c in out["fixed"][0])
+    assert [n for n, _ in shapes] == [n for n, _ in out["fixed"][0]]
+    assert post.keys() == out["fixed"][1].keys()
+    for k in post:
+        np.testing.assert_array_equal(post[k], out["fixed"][1][k])
