@@ -48,7 +48,7 @@ def _simulate_rows(args):
     return batch.simulate_many(rows, config, block=max(1, block))
 
 
-def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1, block: int = 32
+def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1, block: int = batch.LOCKSTEP_WIDTH
                    ) -> list[SimResult]:
     """Simulate many parameter vectors.
 

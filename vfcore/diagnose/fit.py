@@ -143,11 +143,11 @@ class ExtendedEvaluator:
         return get(self.name)            # looked up, not stored: catalogue entries hold closures
 
     def _simulate(self, base_params, phis, pairs: bool = False):
-        from ..batch import simulate_many
+        from ..batch import LOCKSTEP_WIDTH, simulate_many
         ext = self.extension
         cfg = self.problem.config
         if ext.kind == "observation":
-            return simulate_many(base_params, cfg, block=32)
+            return simulate_many(base_params, cfg, block=LOCKSTEP_WIDTH)
         if ext.name == "lr_stiffness":
             return self._simulate_pairs(base_params, phis, combine=not pairs)
         # forward-level: each draw has its own configuration; the lock-step kernel takes the
@@ -162,7 +162,7 @@ class ExtendedEvaluator:
                 out[i] = exc
         if rows:
             try:
-                res = simulate_many([base_params[i] for i in rows], block=32, configs=cfgs)
+                res = simulate_many([base_params[i] for i in rows], block=LOCKSTEP_WIDTH, configs=cfgs)
             except Exception:  # noqa: BLE001 - find the failing draw(s) one by one
                 from ..forward import simulate
                 res = []
@@ -180,11 +180,11 @@ class ExtendedEvaluator:
         rows in one lock-step batch; each draw's result is the left fold's with its area replaced
         by :func:`entrain_pair` (flow and contact stay the left fold's). ``combine=False``: the
         pair ``(left, right)`` per draw instead (the lag is then integrated by the caller)."""
-        from ..batch import simulate_many
+        from ..batch import LOCKSTEP_WIDTH, simulate_many
         cfg = self.problem.config
         n = len(base_params)
         rights = [right_fold_params(p, phi["log2_lr_Q"]) for p, phi in zip(base_params, phis)]
-        res = simulate_many(list(base_params) + rights, cfg, block=32)
+        res = simulate_many(list(base_params) + rights, cfg, block=LOCKSTEP_WIDTH)
         out: list = []
         for i, phi in enumerate(phis):
             left, right = res[i], res[n + i]

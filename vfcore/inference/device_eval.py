@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from vfcore.batch import LOCKSTEP_WIDTH
+
 from .problem import Evaluation, Problem, score_results
 
 #: Lock-step block of the CPU path (vfcore.batch.simulate_many); the GPU path takes every row at once.
-CPU_BLOCK = 32
+CPU_BLOCK = LOCKSTEP_WIDTH
 
 
 class DeviceEvaluator:

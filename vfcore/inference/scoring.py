@@ -72,15 +72,18 @@ def _simulate_rows(thetas, problem, simulate_fn: Callable | None, block: int):
     return out
 
 
-def evaluate(thetas, problem, simulate_fn: Callable | None = None, block: int = 32) -> Evaluation:
+def evaluate(thetas, problem, simulate_fn: Callable | None = None, block: int | None = None) -> Evaluation:
     """Run the forward model at each row of ``thetas`` (k, d) and score it against the data.
 
     A pure function of its inputs (the unit of work of one worker chunk). A simulation
     that fails (``ok`` False, an exception, non-finite output, or too short to align)
     gets log-likelihood ``-inf`` and a NaN prediction row; its reason is in ``messages``.
     ``simulate_fn(params, config) -> SimResult`` defaults to the FE model, run ``block``
-    rows at a time in lock-step (``block=1``: one :func:`vfcore.forward.simulate` per row).
+    rows at a time in lock-step (default :data:`vfcore.batch.LOCKSTEP_WIDTH`; ``block=1``: one
+    :func:`vfcore.forward.simulate` per row).
     """
+    if block is None:
+        from vfcore.batch import LOCKSTEP_WIDTH as block
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     return score_results(_simulate_rows(thetas, problem, simulate_fn, block), problem)
 
