@@ -37,7 +37,8 @@ MIN_LOCKSTEP = 5
 #: core, rows near Table 3, medium mesh at dt 5e-5 s: 50 rows in one block 3.60 s against 4.09 s as 32 + 18, 64
 #: rows 3.50 s against 3.83 s as 2 x 32, 100 rows 5.65 s in one block against 5.62 s as 2 x 50; coarse mesh at
 #: dt 1e-4 s: 64 rows 1.35 s against 1.43 s, 100 rows 2.49 s against 2.39 s. Past about 64 nothing more is
-#: gained. The blocking changes no result (the same bits as the scalar kernel, row by row).
+#: gained (``benchmarks/bench_block_width.py``). The blocking changes no result (the same bits as the scalar
+#: kernel, row by row).
 LOCKSTEP_WIDTH = 64
 
 #: SimConfig fields that may differ between the rows of one lock-step block.
