@@ -33,12 +33,13 @@ from .solver.system import get_system
 #: at 1.06-1.41x, the medium mesh at dt 5e-5 s alike). Single rows are what a Nelder-Mead polish evaluates.
 MIN_LOCKSTEP = 5
 
-#: Default rows per lock-step block. Wider blocks share more of each step's fixed cost: medians of 3 runs, one
-#: core, rows near Table 3, medium mesh at dt 5e-5 s: 50 rows in one block 3.60 s against 4.09 s as 32 + 18, 64
-#: rows 3.50 s against 3.83 s as 2 x 32, 100 rows 5.65 s in one block against 5.62 s as 2 x 50; coarse mesh at
-#: dt 1e-4 s: 64 rows 1.35 s against 1.43 s, 100 rows 2.49 s against 2.39 s. Past about 64 nothing more is
-#: gained (``benchmarks/bench_block_width.py``). The blocking changes no result (the same bits as the scalar
-#: kernel, row by row).
+#: Default rows per lock-step block. A generation cut into equal parts per worker gives parts of 40-50 rows, and in
+#: blocks of 32 those run as a full block and a narrow one: ``benchmarks/bench_block_width.py`` (rows near Table 3,
+#: one core, medians of 3; medium mesh, dt 5e-5 s): 40 rows in one block 1.99 s against 2.49 s as 2 x 20, 48 rows
+#: 2.41 against 2.74 s, 50 rows 2.89 against 3.44 s as 32 + 18. At 64 rows and beyond one block and two halves
+#: cost the same (64: 3.65 against 3.54 s; 100: 5.77 against 5.61 s; coarse mesh at dt 1e-4 s, 64 rows 1.32
+#: against 1.39 s, 100 rows 2.18 against 2.45 s), so 64 is as wide as a block needs to be. The blocking changes no
+#: result (the same bits as the scalar kernel, row by row).
 LOCKSTEP_WIDTH = 64
 
 #: SimConfig fields that may differ between the rows of one lock-step block.
