@@ -167,12 +167,11 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
     console.print(f"products written to {out}/; report: {out / 'index.html'}", highlight=False)
 
 
-def _listen(host: str, port: int) -> socket.socket | None:
-    """A listening socket on ``host:port``, or None when it cannot be had. ``serve`` holds it from here on and
-    hands it to uvicorn, so nothing the service starts before it serves (its LocalCluster binds random ports)
-    can take the port in between."""
+def _listen(host: str, port: int, family: int) -> socket.socket | None:
+    """A listening socket on ``host:port`` (address ``family``), or None when it cannot be had. ``serve`` holds
+    it from here on and hands it to uvicorn, so nothing the service starts before it serves (its LocalCluster
+    binds random ports) can take the port in between."""
     try:
-        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
         s = socket.socket(family, socket.SOCK_STREAM)
     except OSError:
         return None
@@ -199,14 +198,14 @@ def serve(host: Annotated[str, typer.Option(help="address to listen on")] = "127
     if not host.strip():
         raise fail("--host is empty")
     try:
-        socket.getaddrinfo(host, port)
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
     except OSError as exc:
         raise fail(f"--host {host!r}: {exc}") from None
     try:
         settings = Settings.from_env(**({"n_workers": workers} if workers else {}))
     except ValueError as exc:
         raise fail(f"settings from the environment: {exc}") from None
-    sock = _listen(host, port)
+    sock = _listen(host, port, family)
     if sock is None:
         raise fail(f"cannot listen on {host}:{port}: the port is in use or not allowed")
     if not settings.users:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from vfcore.strict_json import jsonable
 from worker import store as st
-from worker.run import JobCancelled
+from worker.run import JobCancelled, cluster_threads
 
 #: how often (s) a map waiting on a running simulation looks whether it was cancelled
 POLL_S = 0.25
@@ -109,14 +109,6 @@ def cancellable(inner, event: threading.Event):
         return out
     _map.inner = inner
     return _map
-
-
-def n_slots(client) -> int:
-    """Worker threads of the cluster (at least 1): the parts each batch of a diagnosis is cut into."""
-    if client is None:
-        return 1
-    from worker.run import cluster_threads
-    return cluster_threads(client)
 
 
 # ------------------------------------------------------------------------------------ the report in the store
@@ -229,7 +221,7 @@ def run_diagnosis(client, job_id: str, store_path: Path, spec, problem, *, stop:
     if spec.chunk_size and not spec.parts:       # a spec stored with fixed chunks keeps them
         inner, chunk = cmap, spec.chunk_size
     else:                                        # every batch in equal parts, one per worker thread
-        inner, chunk = BalancedMap(cmap, spec.parts or n_slots(client)), None
+        inner, chunk = BalancedMap(cmap, spec.parts or cluster_threads(client)), None
     report = run_diagnose(problem, spec.request, map=cancellable(inner, stop), chunk_size=chunk, progress=progress,
                           base=base)
     d = account(report.to_dict(), cmap)          # a resumed run counts its earlier attempts' time

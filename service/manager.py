@@ -21,7 +21,7 @@ from pathlib import Path
 
 from vfcore.strict_json import jsonable
 from worker.jobspec import JobSpec
-from worker.run import JobCancelled, JobControl, Progress, register_warm_up, run_job
+from worker.run import JobCancelled, JobControl, Progress, cluster_threads, register_warm_up, run_job
 from worker.store import create_diagnosis_store
 
 from . import diagnosis as dg
@@ -113,7 +113,7 @@ class JobManager:
     def submit_diagnosis(self, owner: str, job_id: str, request: DiagnoseRequest) -> str:
         """Queue a diagnosis of the finished job ``job_id``; it replaces the job's previous diagnosis and goes on
         from the simulations a failed one left. Raises :class:`DiagnosisRunning` while one is queued or running."""
-        spec = DiagnosisSpec(job=job_id, request=request, parts=dg.n_slots(self.client))
+        spec = DiagnosisSpec(job=job_id, request=request, parts=cluster_threads(self.client))
         diag_id = new_job_id()
         with self._submit_lock:
             earlier = self.db.children(job_id)

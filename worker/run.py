@@ -140,7 +140,9 @@ def chunk_size_for(spec: JobSpec) -> int:
 
 
 def cluster_threads(client) -> int:
-    """Worker threads of the cluster (at least 1)."""
+    """Worker threads of the cluster (at least 1; 1 without a client)."""
+    if client is None:
+        return 1
     try:
         return max(1, sum(int(n) for n in client.nthreads().values()))
     except Exception:  # noqa: BLE001 - only used to size chunks

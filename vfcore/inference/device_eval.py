@@ -9,9 +9,6 @@ from vfcore.batch import LOCKSTEP_WIDTH
 
 from .problem import Evaluation, Problem, score_results
 
-#: Lock-step block of the CPU path (vfcore.batch.simulate_many); the GPU path takes every row at once.
-CPU_BLOCK = LOCKSTEP_WIDTH
-
 
 class DeviceEvaluator:
     """Picklable batch function ``thetas -> Evaluation`` of ``problem`` with the FE rows simulated on ``device``.
@@ -36,7 +33,7 @@ class DeviceEvaluator:
             except Exception as exc:  # noqa: BLE001 - reported per draw
                 results[i] = exc
         if params:
-            sims = simulate_many([p for _, p in params], self.problem.config, block=CPU_BLOCK, device=self.device)
+            sims = simulate_many([p for _, p in params], self.problem.config, block=LOCKSTEP_WIDTH, device=self.device)
             for (i, _), r in zip(params, sims):
                 results[i] = r
         return score_results(results, self.problem)
