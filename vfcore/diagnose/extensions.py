@@ -27,17 +27,22 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
-           "apply_exposure", "apply_frame_rate", "leak_flow", "leak_extra", "RHO_AIR", "matching", "physics_of"]
+           "apply_exposure", "apply_frame_rate", "leak_flow", "leak_extra", "RHO_AIR", "SUB_LOG10_Z_OFF", "matching", "physics_of"]
 
 #: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
 RHO_AIR = 1.14
+
+#: Lower bound of the subglottal entry's log10 peak impedance (Pa s/m^3), taken as no coupling: a
+#: resonance of 100 Pa s/m^3 carries ~0.03 Pa at phonatory flows, and on Table 3 (medium mesh) moves
+#: the GAW by at most 0.002 mm^2, so the entry reaches the base model continuously and *is* it there.
+SUB_LOG10_Z_OFF = 2.0
 
 
 @dataclass(frozen=True)
 class ExtParam:
     """One extra parameter: uniform prior ``[lo, hi]`` in ``unit``. ``null``: the value at which
-    the extension is (or, for a bound, most nearly is) the base model; ``None`` where the prior
-    holds no such value (epithelium stiffness, a resonance frequency). Used by the naming rule to
+    the extension is the base model; ``None`` where the prior holds no such value (a membrane's
+    stiffness or a resonance frequency, which act only through a thickness or an impedance that has one). Used by the naming rule to
     tell a physics gain from a mode-finding gain (docs/diagnose.md, section 3)."""
     name: str
     lo: float
@@ -272,8 +277,12 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
     Extension(
         "epithelium", "forward",
         (ExtParam("E_epith_kpa", 5.0, 200.0, "kPa",
-                  "membrane stiffness of a 0.05-mm surface layer; vocal-fold epithelium is 0.03-0.1 mm thick "
-                  "and much stiffer than the SLP (chosen bounds, docs/diagnose.md)"),),
+                  "membrane stiffness of the surface layer; vocal-fold epithelium is much stiffer than the SLP "
+                  "(chosen bounds, docs/diagnose.md)"),
+         ExtParam("h_epith_mm", 0.0, 0.1, "mm",
+                  "membrane thickness; vocal-fold epithelium is 0.03-0.1 mm thick (Hirano 1981); 0 = no "
+                  "membrane, the base model (its stiffness and damping both vanish with the thickness)",
+                  null=0.0)),
         ("closing", "closed", "opening"), ("closing_quotient", "naq", "hrf_db", "f0_hz", "amplitude_mm2"),
         "stiffer thin surface layer: higher f0 for the same bulk moduli, sharper closure, more HF energy",
         True, None),
@@ -295,8 +304,9 @@ CATALOGUE: dict[str, Extension] = {e.name: e for e in [
         "subglottal", "forward",
         (ExtParam("f_sub_hz", 200.0, 900.0, "Hz",
                   "first subglottal resonance: ~500-700 Hz in humans, lower in rigs with long subglottal tubes"),
-         ExtParam("log10_Z_sub", 5.0, 7.0, "log10(Pa s/m^3)", "peak input impedance of the resonance (chosen bounds)",
-                  null=5.0)),
+         ExtParam("log10_Z_sub", SUB_LOG10_Z_OFF, 7.0, "log10(Pa s/m^3)",
+                  "peak input impedance of the resonance: ~1e6 for a human trachea; the lower bound stands for no "
+                  "coupling, the base model (docs/diagnose.md, section 4)", null=SUB_LOG10_Z_OFF)),
         ("opening", "peak", "closing"), ("hrf_db", "f0_hz", "shr", "amplitude_mm2"),
         "ripple at the subglottal resonance superposed on the GAW; f0 and amplitude change (p_in varies)",
         True, None),

@@ -30,7 +30,7 @@ import numpy as np
 from ..result import HR_OVERSAMPLE
 from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
-from .extensions import Extension, get
+from .extensions import SUB_LOG10_Z_OFF, Extension, get
 from .observers import entrain_pair, observe_extended, observer, pair_observer, right_fold_params
 
 __all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "observer", "extended_config", "fit_extended",
@@ -90,9 +90,13 @@ def extended_config(config, name: str, phi: dict):
     if name == "sep_ratio":
         return dataclasses.replace(config, sep_ratio=phi["sep_ratio"])
     if name == "epithelium":
-        return dataclasses.replace(config, epithelium_E_kpa=phi["E_epith_kpa"],
-                                   epithelium_h_mm=phi.get("h_epith_mm", 0.05))
+        h = phi.get("h_epith_mm", 0.05)
+        if h <= 0.0:                      # no membrane: the base model
+            return config
+        return dataclasses.replace(config, epithelium_E_kpa=phi["E_epith_kpa"], epithelium_h_mm=h)
     if name == "subglottal":
+        if phi["log10_Z_sub"] <= SUB_LOG10_Z_OFF:     # no coupling: the base model
+            return config
         return dataclasses.replace(config, subglottal_modes=(
             (phi["f_sub_hz"], phi.get("zeta_sub", 0.1), 10.0 ** phi["log10_Z_sub"]),))
     raise ValueError(f"{name!r} is not a forward-level extension")

@@ -365,7 +365,10 @@ def test_null_consistent_posteriors():
     assert not null_consistent(names, [10.0, 0.01, 0.7], [1.0, 0.01, 0.03], "asymmetry")
     assert null_consistent(("sep_ratio",), [1.31], [0.02], "sep_ratio")
     assert not null_consistent(("sep_ratio",), [1.15], [0.02], "sep_ratio")
-    # no null value in the prior (epithelium stiffness): never null-consistent
+    # a parameter without a null (membrane stiffness) is not tested; the membrane's thickness decides
+    assert null_consistent(("E_epith_kpa", "h_epith_mm"), [50.0, 0.004], [50.0, 0.003], "epithelium")
+    assert not null_consistent(("E_epith_kpa", "h_epith_mm"), [50.0, 0.05], [50.0, 0.01], "epithelium")
+    # an extension without any null would never be
     assert not null_consistent(("E_epith_kpa",), [5.0], [50.0], "epithelium")
     # two modes either side of the null (an integrated lag at equal stiffness): mean +- 2 sd
     # straddles 0, but the likelihood at 0 is far below the best, and that decides

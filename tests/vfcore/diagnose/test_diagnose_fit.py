@@ -86,8 +86,11 @@ def test_forward_extension_configs():
     assert c.sep_ratio == 1.45
     c = extended_config(CFG, "subglottal", {"f_sub_hz": 500.0, "log10_Z_sub": 6.0})
     assert c.subglottal_modes == ((500.0, 0.1, 1e6),)
-    c = extended_config(CFG, "epithelium", {"E_epith_kpa": 30.0})
-    assert c.epithelium_E_kpa == 30.0
+    c = extended_config(CFG, "epithelium", {"E_epith_kpa": 30.0, "h_epith_mm": 0.04})
+    assert c.epithelium_E_kpa == 30.0 and c.epithelium_h_mm == 0.04
+    # each entry's null is the base model itself: no membrane, no coupling
+    assert extended_config(CFG, "epithelium", {"E_epith_kpa": 30.0, "h_epith_mm": 0.0}) == CFG
+    assert extended_config(CFG, "subglottal", {"f_sub_hz": 500.0, "log10_Z_sub": 2.0}) == CFG
 
 
 def test_extended_likelihood_equals_base_at_the_null_extension(base_run):
