@@ -14,7 +14,7 @@ import numpy as np
 from .extensions import get
 from .fit import ExtendedPrior
 from .refits import keep_if_higher
-from .search import continuation_search, continued_fit
+from .search import continuation_search, continuation_searches, continued_fit
 from .state import DiagnosisState, Run
 from .summary import best_particles
 
@@ -74,23 +74,31 @@ def continue_all(run: Run, st: DiagnosisState) -> None:
         st.notes.append(f"continuation: the base model searched by window continuation (best log-likelihood "
                         f"{fb.loglik:.1f}, {fb.n_simulations} simulations) and fitted from there: log Z = {zc:.1f} "
                         f"+- {sc:.1f}, residual {sn['residual_rms']:.3f} mm^2")
+    if not entries:
+        return
+    # every entry's search at once (their starts share the cluster), then each entry's fit in turn
+    run.track.at("continuation", "entries", 1, len(entries))
+    o = run.options
+    jobs = []
     for j, name in enumerate(entries):
+        prior_e = ExtendedPrior(bounds={}, base=st.problem.prior, extension=name, integrate=bool(o.integrate))
+        starts = [th for th in best_particles(st.refits[name], 1) if th.size == prior_e.ndim]
+        if fb is not None:
+            own = {p.name: (p.null if p.null is not None else 0.5 * (p.lo + p.hi)) for p in get(name).params}
+            starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base:]]]))
+        jobs.append((name, starts, sd + 97 * (j + 1)))
+    found = continuation_searches(st.problem, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
+                                  **copts)
+    for j, (name, fe) in enumerate(zip(entries, found)):
         run.track.at("continuation", name, j + 1, len(entries))
-        _continue_entry(run, st, name, fb, sd + 97 * (j + 1), copts)
+        _fit_entry(run, st, name, fe, sd + 97 * (j + 1))
 
 
-def _continue_entry(run: Run, st: DiagnosisState, name: str, fb, sd: int, copts: dict) -> None:
-    """Entry ``name`` searched from its refit's best particle (and from the base's optimum ``fb``
-    with the entry at its null value) and fitted from the optimum; kept when higher."""
+def _fit_entry(run: Run, st: DiagnosisState, name: str, fe, sd: int) -> None:
+    """Entry ``name``'s fit from the optimum its search found (from its refit's best particle and
+    from the base's optimum with the entry at its null value); kept when higher."""
     o = run.options
     t1 = time.perf_counter()
-    prior_e = ExtendedPrior(bounds={}, base=st.problem.prior, extension=name, integrate=bool(o.integrate))
-    starts = [th for th in best_particles(st.refits[name], 1) if th.size == prior_e.ndim]
-    if fb is not None:
-        own = {p.name: (p.null if p.null is not None else 0.5 * (p.lo + p.hi)) for p in get(name).params}
-        starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base:]]]))
-    fe = continuation_search(st.problem, name, starts=starts, seed=sd, map=run.map, chunk_size=o.chunk_size,
-                             integrate=o.integrate, **copts)
     st.n_simulations += fe.n_simulations
     if not math.isfinite(fe.loglik):
         st.notes.append(f"continuation: the {name} search found no finite log-likelihood")

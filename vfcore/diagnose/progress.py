@@ -8,7 +8,8 @@ simulations returns:
 - ``stage``: ``"base fit"``, ``"regularity check"``, ``"screening"``, ``"refit"``, ``"rescue"``,
   ``"shared mode"``, ``"continuation"``, ``"mode check"``, ``"nested check"`` or ``"done"``;
 - ``entry``: the catalogue entry the stage works on (``"base"`` for the base model's
-  continuation search; None where none);
+  continuation search, ``"entries"`` for the searches of every continued entry, which run
+  together; None where none);
 - ``step`` / ``steps``: the entry's place among the stage's entries (None where not counted);
 - ``simulations``: rows of parameters evaluated through the diagnosis' ``map`` so far (forward
   simulations, or rows read back from a resume store); screening's few simulations, run in the

@@ -34,7 +34,7 @@ from ..inference.problem import Evaluation, Problem, ProblemEvaluator
 from ..measures import estimate_f0
 
 __all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "windows", "window_problems",
-           "continuation_search", "continued_fit"]
+           "continuation_search", "continuation_searches", "continued_fit"]
 
 #: default search: Sobol design points, starts kept from it, first window in cycles, Nelder-Mead
 #: evaluations on window k (``maxfev0 + maxfev_step * k``) and its initial simplex step in unit
@@ -222,6 +222,30 @@ class SearchResult:
                 "start_logliks": [float(v) for v in self.start_logliks]}
 
 
+class _ManyContinuer:
+    """Picklable batch function over the starts of several searches at once: a row is ``[job, u
+    (padded with nan to the widest search)]``; each start is continued by its own search's
+    :class:`_Continuer`. Returns ``extra = [n, u (padded)]`` per row: the simulations spent and the
+    best point, in the job's unit coordinates."""
+
+    def __init__(self, continuers):
+        self.continuers = continuers
+
+    def __call__(self, rows) -> Evaluation:
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        width = rows.shape[1]
+        ll = np.full(len(rows), -np.inf)
+        extra = np.full((len(rows), width), np.nan)
+        for i, row in enumerate(rows):
+            job = self.continuers[int(row[0])]
+            d = job.s["prior"].ndim
+            r = job(row[1:1 + d][None, :])
+            ll[i] = r.loglik[0]
+            extra[i, 0] = r.extra[0, d]
+            extra[i, 1:1 + d] = r.extra[0, :d]
+        return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=extra)
+
+
 def continuation_search(problem: Problem, extension: str | None = None, *, starts=(), seed: int = 0,
                         map=map, chunk_size: int = 40, integrate: bool = True, **settings) -> SearchResult:
     """Window-continuation search (module docstring) for the base model (``extension=None``) or
@@ -230,39 +254,77 @@ def continuation_search(problem: Problem, extension: str | None = None, *, start
     best particle), continued besides the design's ``n_keep`` best. ``settings`` override
     :data:`CONTINUATION`. Deterministic for a given ``seed``; the starts run in parallel through
     ``map``."""
+    return continuation_searches(problem, [(extension, starts, seed)], map=map, chunk_size=chunk_size,
+                                 integrate=integrate, **settings)[0]
+
+
+def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 40, integrate: bool = True,
+                          **settings) -> list[SearchResult]:
+    """:func:`continuation_search` for several models of one recording at once: ``jobs`` is a
+    sequence of ``(extension, starts, seed)``. Each job's Sobol design is evaluated in turn, then the
+    starts of every job go through ``map`` together, one start a part, so a cluster stays busy while
+    the slowest start of one search runs (a search has four to six starts; two workers would
+    otherwise wait on each search's last). Each start is continued exactly as alone, so every
+    result equals its own :func:`continuation_search` bit for bit. The halving search
+    (``halving=True``) drops starts window by window within a search and runs the jobs in turn."""
     from scipy.stats import qmc
     s = {**CONTINUATION, **settings}
     unknown = set(settings) - set(CONTINUATION)
     if unknown:
         raise ValueError(f"unknown continuation settings {sorted(unknown)}; known: {sorted(CONTINUATION)}")
-    prior = model_prior(problem, extension, integrate)
-    probs = window_problems(problem, float(s["cycles0"]))
-    evs = [model_evaluator(p, extension, integrate) for p in probs]
-    d = prior.ndim
-    U = qmc.Sobol(d, scramble=True, seed=int(seed)).random(int(s["n_design"])) if s["n_design"] > 0 else \
-        np.empty((0, d))
-    n_sims = 0
-    chosen = []
-    if len(U):
-        first = map_evaluate(evs[0], prior.lo + U * prior.width, map=map, chunk_size=chunk_size)
-        n_sims += len(U)
-        order = [j for j in np.argsort(-first.loglik, kind="stable") if math.isfinite(first.loglik[j])]
-        chosen += [U[j] for j in order[: int(s["n_keep"])]]
-    for th in np.atleast_2d(np.asarray(starts, dtype=float)) if len(starts) else []:
-        if th.size != d:
-            raise ValueError(f"a start has {th.size} parameters; the prior has {d} ({prior.names})")
-        chosen.append(np.clip((th - prior.lo) / prior.width, 0.0, 1.0))
-    if not chosen:
-        return SearchResult(tuple(prior.names), np.full(d, np.nan), -math.inf, n_sims, [p.n_compare for p in probs])
+    plans = []
+    for extension, starts, seed in jobs:
+        prior = model_prior(problem, extension, integrate)
+        probs = window_problems(problem, float(s["cycles0"]))
+        evs = [model_evaluator(p, extension, integrate) for p in probs]
+        d = prior.ndim
+        U = qmc.Sobol(d, scramble=True, seed=int(seed)).random(int(s["n_design"])) if s["n_design"] > 0 else \
+            np.empty((0, d))
+        n_sims = 0
+        chosen = []
+        if len(U):
+            first = map_evaluate(evs[0], prior.lo + U * prior.width, map=map, chunk_size=chunk_size)
+            n_sims += len(U)
+            order = [j for j in np.argsort(-first.loglik, kind="stable") if math.isfinite(first.loglik[j])]
+            chosen += [U[j] for j in order[: int(s["n_keep"])]]
+        for th in np.atleast_2d(np.asarray(starts, dtype=float)) if len(starts) else []:
+            if th.size != d:
+                raise ValueError(f"a start has {th.size} parameters; the prior has {d} ({prior.names})")
+            chosen.append(np.clip((th - prior.lo) / prior.width, 0.0, 1.0))
+        plans.append({"prior": prior, "probs": probs, "evs": evs, "chosen": chosen, "n": n_sims, "res": None})
     if s["halving"]:
-        res = _halving_search(evs, np.array(chosen), {**s, "prior": prior}, map)
+        for pl in plans:
+            if pl["chosen"]:
+                pl["res"] = _halving_search(pl["evs"], np.array(pl["chosen"]), {**s, "prior": pl["prior"]}, map)
     else:
-        res = map_evaluate(_Continuer(evs, {**s, "prior": prior}), np.array(chosen), map=map, chunk_size=1)
-    n_sims += int(np.nansum(res.extra[:, d]))
-    j = int(np.argmax(res.loglik))
-    theta = prior.lo + res.extra[j, :d] * prior.width
-    return SearchResult(tuple(prior.names), theta, float(res.loglik[j]), n_sims,
-                        [int(p.obs_gaw.size) for p in probs], [float(v) for v in res.loglik])
+        live = [k for k, pl in enumerate(plans) if pl["chosen"]]
+        if live:
+            width = 1 + max(plans[k]["prior"].ndim for k in live)
+            rows = [np.concatenate([[pos], u, np.full(width - 1 - u.size, np.nan)])
+                    for pos, k in enumerate(live) for u in plans[k]["chosen"]]
+            fn = _ManyContinuer([_Continuer(plans[k]["evs"], {**s, "prior": plans[k]["prior"]}) for k in live])
+            res = map_evaluate(fn, np.array(rows), map=map, chunk_size=1)
+            at = 0
+            for k in live:
+                pl, m, d = plans[k], len(plans[k]["chosen"]), plans[k]["prior"].ndim
+                ex = res.extra[at:at + m]
+                pl["res"] = Evaluation(loglik=res.loglik[at:at + m], ok=res.ok[at:at + m],
+                                       extra=np.hstack([ex[:, 1:1 + d], ex[:, :1]]))
+                at += m
+    out = []
+    for pl in plans:
+        prior, probs, res = pl["prior"], pl["probs"], pl["res"]
+        d = prior.ndim
+        if res is None:
+            out.append(SearchResult(tuple(prior.names), np.full(d, np.nan), -math.inf, pl["n"],
+                                    [p.n_compare for p in probs]))
+            continue
+        n_sims = pl["n"] + int(np.nansum(res.extra[:, d]))
+        j = int(np.argmax(res.loglik))
+        theta = prior.lo + res.extra[j, :d] * prior.width
+        out.append(SearchResult(tuple(prior.names), theta, float(res.loglik[j]), n_sims,
+                                [int(p.obs_gaw.size) for p in probs], [float(v) for v in res.loglik]))
+    return out
 
 
 def continued_fit(problem: Problem, found: SearchResult, extension: str | None = None, *, n_particles: int,

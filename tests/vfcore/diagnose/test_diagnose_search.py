@@ -79,6 +79,30 @@ def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically
     assert again.theta.tobytes() == found.theta.tobytes() and again.loglik == found.loglik
 
 
+def test_searches_run_together_give_each_search_exactly(scaled_problem):
+    """The continuation stage sends the starts of every entry's search through the map at once
+    (search.continuation_searches): each result equals that search run alone, bit for bit, whatever
+    order the parts run in, and searches of different dimension (scale: E_cover, the scale
+    integrated; the separation ratio: E_cover and the ratio) keep their own coordinates."""
+    from vfcore.diagnose.search import continuation_searches
+
+    def reversed_map(fn, parts):                 # runs the last part first, returns them in order
+        parts = list(parts)
+        return [r for r in reversed([fn(p) for p in reversed(parts)])]
+
+    start = np.array([[600.0, 1.2]])
+    small = {**SMALL, "maxfev0": 8, "maxfev_step": 4}
+    alone = [continuation_search(scaled_problem, "scale", seed=4, **small),
+             continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small)]
+    together = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)], map=reversed_map,
+                                     **small)
+    for a, b in zip(alone, together):
+        assert a.names == b.names and a.theta.tobytes() == b.theta.tobytes(), (a, b)
+        assert (a.loglik, a.n_simulations, a.start_logliks) == (b.loglik, b.n_simulations, b.start_logliks)
+    assert together[1].names == ("E_cover", "sep_ratio") and len(together[1].start_logliks) == small["n_keep"] + 1
+    assert together[0].theta.tobytes() != together[1].theta[:1].tobytes()
+
+
 class _Quadratic:
     """A stand-in window log-likelihood: -((x - centre) / w)^2 summed over the coordinates; a
     ``spike`` is flat (-1000) beyond distance ``w``, so no polish can find it from afar."""
