@@ -138,6 +138,8 @@ class _Continuer:
     whose ``loglik`` is the best whole-window log-likelihood reached from it and whose ``extra``
     holds that point (unit coordinates) and the simulations spent."""
 
+    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
+
     def __init__(self, evaluators, settings: dict):
         self.evaluators = evaluators
         self.s = settings
@@ -164,6 +166,8 @@ class _WindowStep:
     """Picklable batch function of the halving search: one window's polish of each start. A row is
     ``[u (d), n, best_v, best_u (d)]`` (``n = 0``: a new start, whose whole-window value is taken
     first); returns the updated rows in ``extra`` and the window's optimum in ``loglik``."""
+
+    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
 
     def __init__(self, evaluators, k: int, settings: dict):
         self.evaluators, self.k, self.s = evaluators, k, settings
@@ -227,6 +231,8 @@ class _ManyContinuer:
     (padded with nan to the widest search)]``; each start is continued by its own search's
     :class:`_Continuer`. Returns ``extra = [n, u (padded)]`` per row: the simulations spent and the
     best point, in the job's unit coordinates."""
+
+    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
 
     def __init__(self, continuers):
         self.continuers = continuers

@@ -79,7 +79,12 @@ class BalancedMap:
     larger lock-step block (:func:`vfcore.batch.simulate_many`), which runs faster per simulation.
     A row's result does not depend on the rows simulated beside it, so the split changes no result
     (tests/vfcore/inference/test_balanced_map.py). ``workers``: an int, or a callable read at
-    each batch (a cluster that grows or shrinks)."""
+    each batch (a cluster that grows or shrinks).
+
+    A batch function with ``row_tasks = True`` (a continuation search's starts: each row a
+    Nelder-Mead run of hundreds of simulations, of unequal length) gets one row a part instead,
+    so the pool hands the next start to whichever worker is free; equal parts of such rows would
+    leave a worker idle while the other finishes its longer share."""
 
     def __init__(self, inner: Callable, workers):
         self.inner, self.workers = inner, workers
@@ -95,8 +100,8 @@ class BalancedMap:
         rows = np.concatenate(parts)
         if rows.shape[0] == 0:
             return [Evaluation.coerce(r) for r in self.inner(fn, parts)]
-        ev = Evaluation.concat([Evaluation.coerce(r) for r in
-                                self.inner(fn, np.array_split(rows, min(self._n(), rows.shape[0])))])
+        n = rows.shape[0] if getattr(fn, "row_tasks", False) else min(self._n(), rows.shape[0])
+        ev = Evaluation.concat([Evaluation.coerce(r) for r in self.inner(fn, np.array_split(rows, n))])
         edges = np.cumsum([0] + [p.shape[0] for p in parts])
         return [ev.take(np.arange(a, b)) for a, b in zip(edges[:-1], edges[1:])]
 

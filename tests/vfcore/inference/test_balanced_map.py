@@ -48,6 +48,28 @@ def test_worker_count_is_read_at_each_batch_and_never_exceeds_the_rows():
     assert bm(_loglik, []) == []
 
 
+class _LongRows:
+    """A batch function whose rows are long jobs of their own (a continuation start)."""
+    row_tasks = True
+
+    def __call__(self, rows):
+        return _loglik(rows)
+
+
+def test_rows_that_are_long_jobs_go_to_the_pool_one_a_part():
+    """A continuation search's starts run hundreds of simulations each, for unequal times: the pool
+    gets them one a part (it hands each to the next free worker), and the caller still one result per
+    part it gave, with the same values."""
+    seen = []
+    bm = BalancedMap(_recording_map(seen), 2)
+    rows = np.arange(14.0).reshape(7, 2)
+    ev = map_evaluate(_LongRows(), rows, map=ProgressTracker(None, 0.0).wrap(bm), chunk_size=1)
+    np.testing.assert_array_equal(ev.loglik, _loglik(rows).loglik)
+    ev = map_evaluate(_LongRows(), rows, map=bm, chunk_size=3)
+    np.testing.assert_array_equal(ev.loglik, _loglik(rows).loglik)
+    assert seen == [[1] * 7, [1] * 7]
+
+
 def test_fe_rows_give_the_same_bits_in_balanced_parts_as_in_fixed_chunks():
     """24 FE rows as 20 + 4 (a lock-step block of 20, four rows on the scalar kernel) and as 12 + 12
     (two lock-step blocks): a row's log-likelihood and GAW do not depend on the rows beside it."""
