@@ -227,7 +227,8 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     stages = [(e["stage"], e["entry"], e["step"], e["steps"]) for e in events]
     assert [s for i, s in enumerate(stages) if i == 0 or s != stages[i - 1]] == [
         ("base fit", None, None, None), ("regularity check", None, None, None), ("screening", None, None, 1),
-        ("refit", "scale", 1, 1), ("continuation", "base", 0, 1), ("continuation", "scale", 1, 1),
+        ("refit", "scale", 1, 1), ("continuation", "base", 0, 1), ("continuation", "entries", 1, 1),
+        ("continuation", "scale", 1, 1),
         ("mode check", "scale", None, None), ("done", None, None, None)]
     sims = [e["simulations"] for e in events]
     assert sims == sorted(sims) and sims[-1] >= n and len(set(sims)) == n + 1
@@ -235,7 +236,7 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     # the report's cost: every row evaluated is booked to exactly one stage and one entry
     cost = json.loads(ref)["cost"]
     assert set(cost["by_stage"]) == {"base fit", "regularity check", "screening", "refit", "continuation", "mode check"}
-    assert set(cost["by_entry"]) == {"-", "scale", "base"}
+    assert set(cost["by_entry"]) == {"-", "scale", "base", "entries"}
     for book in cost.values():
         assert sum(v["simulations"] for v in book.values()) == sims[-1]
 
