@@ -27,7 +27,8 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
-           "apply_exposure", "apply_frame_rate", "leak_flow", "leak_extra", "RHO_AIR", "SUB_LOG10_Z_OFF", "matching", "physics_of"]
+           "apply_exposure", "apply_frame_rate", "leak_flow", "leak_extra", "RHO_AIR", "SUB_LOG10_Z_OFF", "matching",
+           "physics_of"]
 
 #: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
 RHO_AIR = 1.14
@@ -42,8 +43,9 @@ SUB_LOG10_Z_OFF = 2.0
 class ExtParam:
     """One extra parameter: uniform prior ``[lo, hi]`` in ``unit``. ``null``: the value at which
     the extension is the base model; ``None`` where the prior holds no such value (a membrane's
-    stiffness or a resonance frequency, which act only through a thickness or an impedance that has one). Used by the naming rule to
-    tell a physics gain from a mode-finding gain (docs/diagnose.md, section 3)."""
+    stiffness or a resonance frequency, which act only through a thickness or an impedance that has
+    one). Used by the naming rule to tell a physics gain from a mode-finding gain (docs/diagnose.md,
+    section 3)."""
     name: str
     lo: float
     hi: float

@@ -94,8 +94,9 @@ class ProgressTracker:
     def cost(self) -> dict:
         """``{"by_stage": {stage: {"wall_s", "simulations", "visits"}}, "by_entry": {entry: ...}}``
         for the stages closed so far (``"-"``: stages without an entry; ``"base"``: the base
-        model's continuation search; ``"entries"``: the continued entries' searches, run together). Rows counted as in the events; screening's own few
-        simulations are in its wall time, not its count."""
+        model's continuation search; ``"entries"``: the continued entries' searches, run together).
+        Rows counted as in the events; screening's own few simulations are in its wall time, not its
+        count."""
         return {"by_stage": {k: dict(v) for k, v in self._stages.items()},
                 "by_entry": {k: dict(v) for k, v in self._entries.items()}}
 
