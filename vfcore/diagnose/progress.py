@@ -11,9 +11,10 @@ simulations returns:
   continuation search, ``"entries"`` for the searches of every continued entry, which run
   together; None where none);
 - ``step`` / ``steps``: the entry's place among the stage's entries (None where not counted);
-- ``simulations``: rows of parameters evaluated through the diagnosis' ``map`` so far (forward
-  simulations, or rows read back from a resume store); screening's few simulations, run in the
-  main process, are not counted;
+- ``simulations``: forward simulations evaluated through the diagnosis' ``map`` so far (one a
+  row, or what the batch function reports for a row that runs many, a continuation search's
+  start; rows read back from a resume store count alike); screening's few simulations, run in
+  the main process, are not counted;
 - ``elapsed_s``: seconds since the diagnosis started.
 
 The tracker also keeps where the time went: :meth:`ProgressTracker.cost` gives the wall time and
@@ -102,13 +103,19 @@ class ProgressTracker:
 
     def wrap(self, inner: Callable) -> Callable:
         """A ``map(fn, parts)`` that passes everything to ``inner`` unchanged and reports after each
-        part's result arrives (results in order, one per part, as :func:`map_evaluate` needs)."""
+        part's result arrives (results in order, one per part, as :func:`map_evaluate` needs).
+
+        A part counts one simulation a row, unless the batch function says what a result cost:
+        ``fn.simulations(part, result)`` (a continuation search's row is a start that runs hundreds
+        of simulations, and its result carries their number)."""
         def counted(fn, parts):
             parts = list(parts)
             out = []
+            cost = getattr(fn, "simulations", None)
             for part, result in zip(parts, inner(fn, parts)):
                 out.append(result)
-                self.simulations += int(np.shape(part)[0]) if np.ndim(part) >= 1 else 1
+                self.simulations += int(cost(part, result)) if cost is not None else \
+                    (int(np.shape(part)[0]) if np.ndim(part) >= 1 else 1)
                 self.emit()
             if len(out) != len(parts):
                 raise RuntimeError(f"the map returned {len(out)} results for {len(parts)} parts")

@@ -144,6 +144,10 @@ class _Continuer:
         self.evaluators = evaluators
         self.s = settings
 
+    def simulations(self, part, result) -> int:
+        """Simulations a result cost (the progress tracker's count)."""
+        return int(np.nansum(np.asarray(Evaluation.coerce(result).extra)[:, self.s["prior"].ndim]))
+
     def __call__(self, starts) -> Evaluation:
         starts = np.atleast_2d(np.asarray(starts, dtype=float))
         k_all = len(self.evaluators)
@@ -171,6 +175,12 @@ class _WindowStep:
 
     def __init__(self, evaluators, k: int, settings: dict):
         self.evaluators, self.k, self.s = evaluators, k, settings
+
+    def simulations(self, part, result) -> int:
+        """Simulations a result cost: the rows' running counts, after less before."""
+        d = self.s["prior"].ndim
+        after = np.asarray(Evaluation.coerce(result).extra)[:, d]
+        return int(np.nansum(after) - np.nansum(np.atleast_2d(np.asarray(part, dtype=float))[:, d]))
 
     def __call__(self, rows) -> Evaluation:
         rows = np.atleast_2d(np.asarray(rows, dtype=float))
@@ -236,6 +246,10 @@ class _ManyContinuer:
 
     def __init__(self, continuers):
         self.continuers = continuers
+
+    def simulations(self, part, result) -> int:
+        """Simulations a result cost (the progress tracker's count)."""
+        return int(np.nansum(np.asarray(Evaluation.coerce(result).extra)[:, 0]))
 
     def __call__(self, rows) -> Evaluation:
         rows = np.atleast_2d(np.asarray(rows, dtype=float))

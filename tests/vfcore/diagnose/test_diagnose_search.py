@@ -84,6 +84,7 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
     (search.continuation_searches): each result equals that search run alone, bit for bit, whatever
     order the parts run in, and searches of different dimension (scale: E_cover, the scale
     integrated; the separation ratio: E_cover and the ratio) keep their own coordinates."""
+    from vfcore.diagnose.progress import ProgressTracker
     from vfcore.diagnose.search import continuation_searches
 
     def reversed_map(fn, parts):                 # runs the last part first, returns them in order
@@ -94,13 +95,22 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
     small = {**SMALL, "maxfev0": 8, "maxfev_step": 4}
     alone = [continuation_search(scaled_problem, "scale", seed=4, **small),
              continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small)]
-    together = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)], map=reversed_map,
-                                     **small)
+    track = ProgressTracker(None, 0.0)
+    together = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)],
+                                     map=track.wrap(reversed_map), **small)
     for a, b in zip(alone, together):
         assert a.names == b.names and a.theta.tobytes() == b.theta.tobytes(), (a, b)
         assert (a.loglik, a.n_simulations, a.start_logliks) == (b.loglik, b.n_simulations, b.start_logliks)
     assert together[1].names == ("E_cover", "sep_ratio") and len(together[1].start_logliks) == small["n_keep"] + 1
     assert together[0].theta.tobytes() != together[1].theta[:1].tobytes()
+    # the progress count is the simulations run, not the starts: a start's Nelder-Mead runs many
+    n_starts = 2 * small["n_keep"] + 1
+    assert track.simulations == sum(r.n_simulations for r in together) > 2 * small["n_design"] + n_starts
+    # and so for the halving search, whose rows carry running counts from window to window
+    track = ProgressTracker(None, 0.0)
+    halved = continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, map=track.wrap(map),
+                                 halving=True, **small)
+    assert track.simulations == halved.n_simulations
 
 
 class _Quadratic:
