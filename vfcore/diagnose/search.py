@@ -138,15 +138,9 @@ class _Continuer:
     whose ``loglik`` is the best whole-window log-likelihood reached from it and whose ``extra``
     holds that point (unit coordinates) and the simulations spent."""
 
-    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
-
     def __init__(self, evaluators, settings: dict):
         self.evaluators = evaluators
         self.s = settings
-
-    def simulations(self, part, result) -> int:
-        """Simulations a result cost (the progress tracker's count)."""
-        return int(np.nansum(np.asarray(Evaluation.coerce(result).extra)[:, self.s["prior"].ndim]))
 
     def __call__(self, starts) -> Evaluation:
         starts = np.atleast_2d(np.asarray(starts, dtype=float))
