@@ -165,16 +165,8 @@ class _WindowStep:
     ``[u (d), n, best_v, best_u (d)]`` (``n = 0``: a new start, whose whole-window value is taken
     first); returns the updated rows in ``extra`` and the window's optimum in ``loglik``."""
 
-    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
-
     def __init__(self, evaluators, k: int, settings: dict):
         self.evaluators, self.k, self.s = evaluators, k, settings
-
-    def simulations(self, part, result) -> int:
-        """Simulations a result cost: the rows' running counts, after less before."""
-        d = self.s["prior"].ndim
-        after = np.asarray(Evaluation.coerce(result).extra)[:, d]
-        return int(np.nansum(after) - np.nansum(np.atleast_2d(np.asarray(part, dtype=float))[:, d]))
 
     def __call__(self, rows) -> Evaluation:
         rows = np.atleast_2d(np.asarray(rows, dtype=float))
@@ -199,17 +191,69 @@ def _halving_search(evs, chosen: np.ndarray, s: dict, map) -> Evaluation:
     of them (by that window's optimum, at least one) goes on. Returns, per start, the same
     ``Evaluation`` as :class:`_Continuer` (a dropped start keeps the best it had: ``-inf`` unless
     its whole-window start value was finite) with its simulations."""
-    d = s["prior"].ndim
-    rows = np.hstack([chosen, np.zeros((len(chosen), 1)), np.full((len(chosen), 1), -np.inf), chosen])
-    alive = np.arange(len(chosen))
-    for k in range(len(evs)):
-        res = map_evaluate(_WindowStep(evs, k, s), rows[alive], map=map, chunk_size=1)
-        rows[alive] = res.extra
-        if k < len(evs) - 1 and len(alive) > 1:
-            order = np.argsort(-res.loglik, kind="stable")
-            alive = np.sort(alive[order[: max(1, math.ceil(len(alive) / 2))]])
-    ll = rows[:, d + 1]
-    return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=np.hstack([rows[:, d + 2:], rows[:, d:d + 1]]))
+    return _halving_searches([evs], [np.asarray(chosen, dtype=float)], [s], map)[0]
+
+
+class _ManyWindowStep:
+    """Picklable batch function of the joint halving search: one window's polish of the starts of
+    several searches. A row is ``[job, halving row (padded with nan)]`` (:class:`_WindowStep`'s
+    rows); returns ``extra = [simulations spent, updated row (padded)]`` and the window's optimum in
+    ``loglik``."""
+
+    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
+
+    def __init__(self, steps):
+        self.steps = steps
+
+    def simulations(self, part, result) -> int:
+        """Simulations a result cost (the progress tracker's count)."""
+        return int(np.nansum(np.asarray(Evaluation.coerce(result).extra)[:, 0]))
+
+    def __call__(self, rows) -> Evaluation:
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        ll = np.full(len(rows), -np.inf)
+        extra = np.full(rows.shape, np.nan)
+        for i, row in enumerate(rows):
+            step = self.steps[int(row[0])]
+            d = step.s["prior"].ndim
+            r = step(row[1:2 * d + 3][None, :])
+            ll[i] = r.loglik[0]
+            extra[i, 0] = r.extra[0, d] - row[1 + d]
+            extra[i, 1:2 * d + 3] = r.extra[0]
+        return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=extra)
+
+
+def _halving_searches(evs_list, chosen_list, settings_list, map) -> list[Evaluation]:
+    """:func:`_halving_search` for several searches of one recording at once (their windows are the
+    same): at each window the surviving starts of every search go through ``map`` together, one
+    start a part, then each search keeps its own better half. A start's path is the one it takes
+    alone, so each result equals its own :func:`_halving_search` bit for bit."""
+    K = len(evs_list[0])
+    if any(len(evs) != K for evs in evs_list):
+        raise ValueError("searches run together must share their windows")
+    dims = [st["prior"].ndim for st in settings_list]
+    rows = [np.hstack([c, np.zeros((len(c), 1)), np.full((len(c), 1), -np.inf), c]) for c in chosen_list]
+    alive = [np.arange(len(c)) for c in chosen_list]
+    width = 1 + max(2 * d + 2 for d in dims)
+    for k in range(K):
+        fn = _ManyWindowStep([_WindowStep(evs, k, st) for evs, st in zip(evs_list, settings_list)])
+        batch = [np.concatenate([[j], r, np.full(width - 1 - r.size, np.nan)])
+                 for j in range(len(rows)) for r in rows[j][alive[j]]]
+        res = map_evaluate(fn, np.array(batch), map=map, chunk_size=1)
+        at = 0
+        for j, d in enumerate(dims):
+            m = len(alive[j])
+            rows[j][alive[j]] = res.extra[at:at + m, 1:2 * d + 3]
+            val = res.loglik[at:at + m]
+            at += m
+            if k < K - 1 and m > 1:
+                order = np.argsort(-val, kind="stable")
+                alive[j] = np.sort(alive[j][order[: max(1, math.ceil(m / 2))]])
+    out = []
+    for r, d in zip(rows, dims):
+        ll = r[:, d + 1]
+        out.append(Evaluation(loglik=ll, ok=np.isfinite(ll), extra=np.hstack([r[:, d + 2:], r[:, d:d + 1]])))
+    return out
 
 
 @dataclass
@@ -280,7 +324,8 @@ def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 
     the slowest start of one search runs (a search has four to six starts; two workers would
     otherwise wait on each search's last). Each start is continued exactly as alone, so every
     result equals its own :func:`continuation_search` bit for bit. The halving search
-    (``halving=True``) drops starts window by window within a search and runs the jobs in turn."""
+    (``halving=True``) goes window by window, every job's surviving starts together, each job
+    dropping its own worse half (:func:`_halving_searches`)."""
     from scipy.stats import qmc
     s = {**CONTINUATION, **settings}
     unknown = set(settings) - set(CONTINUATION)
@@ -306,25 +351,25 @@ def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 
                 raise ValueError(f"a start has {th.size} parameters; the prior has {d} ({prior.names})")
             chosen.append(np.clip((th - prior.lo) / prior.width, 0.0, 1.0))
         plans.append({"prior": prior, "probs": probs, "evs": evs, "chosen": chosen, "n": n_sims, "res": None})
-    if s["halving"]:
-        for pl in plans:
-            if pl["chosen"]:
-                pl["res"] = _halving_search(pl["evs"], np.array(pl["chosen"]), {**s, "prior": pl["prior"]}, map)
-    else:
-        live = [k for k, pl in enumerate(plans) if pl["chosen"]]
-        if live:
-            width = 1 + max(plans[k]["prior"].ndim for k in live)
-            rows = [np.concatenate([[pos], u, np.full(width - 1 - u.size, np.nan)])
-                    for pos, k in enumerate(live) for u in plans[k]["chosen"]]
-            fn = _ManyContinuer([_Continuer(plans[k]["evs"], {**s, "prior": plans[k]["prior"]}) for k in live])
-            res = map_evaluate(fn, np.array(rows), map=map, chunk_size=1)
-            at = 0
-            for k in live:
-                pl, m, d = plans[k], len(plans[k]["chosen"]), plans[k]["prior"].ndim
-                ex = res.extra[at:at + m]
-                pl["res"] = Evaluation(loglik=res.loglik[at:at + m], ok=res.ok[at:at + m],
-                                       extra=np.hstack([ex[:, 1:1 + d], ex[:, :1]]))
-                at += m
+    live = [k for k, pl in enumerate(plans) if pl["chosen"]]
+    if live and s["halving"]:
+        got = _halving_searches([plans[k]["evs"] for k in live], [np.array(plans[k]["chosen"]) for k in live],
+                                [{**s, "prior": plans[k]["prior"]} for k in live], map)
+        for k, r in zip(live, got):
+            plans[k]["res"] = r
+    elif live:
+        width = 1 + max(plans[k]["prior"].ndim for k in live)
+        rows = [np.concatenate([[pos], u, np.full(width - 1 - u.size, np.nan)])
+                for pos, k in enumerate(live) for u in plans[k]["chosen"]]
+        fn = _ManyContinuer([_Continuer(plans[k]["evs"], {**s, "prior": plans[k]["prior"]}) for k in live])
+        res = map_evaluate(fn, np.array(rows), map=map, chunk_size=1)
+        at = 0
+        for k in live:
+            pl, m, d = plans[k], len(plans[k]["chosen"]), plans[k]["prior"].ndim
+            ex = res.extra[at:at + m]
+            pl["res"] = Evaluation(loglik=res.loglik[at:at + m], ok=res.ok[at:at + m],
+                                   extra=np.hstack([ex[:, 1:1 + d], ex[:, :1]]))
+            at += m
     out = []
     for pl in plans:
         prior, probs, res = pl["prior"], pl["probs"], pl["res"]

@@ -81,9 +81,10 @@ def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically
 
 def test_searches_run_together_give_each_search_exactly(scaled_problem):
     """The continuation stage sends the starts of every entry's search through the map at once
-    (search.continuation_searches): each result equals that search run alone, bit for bit, whatever
-    order the parts run in, and searches of different dimension (scale: E_cover, the scale
-    integrated; the separation ratio: E_cover and the ratio) keep their own coordinates."""
+    (search.continuation_searches), with halving or without: each result equals that search run
+    alone, bit for bit, whatever order the parts run in, and searches of different dimension (scale:
+    E_cover, the scale integrated; the separation ratio: E_cover and the ratio) keep their own
+    coordinates."""
     from vfcore.diagnose.progress import ProgressTracker
     from vfcore.diagnose.search import continuation_searches
 
@@ -106,11 +107,18 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
     # the progress count is the simulations run, not the starts: a start's Nelder-Mead runs many
     n_starts = 2 * small["n_keep"] + 1
     assert track.simulations == sum(r.n_simulations for r in together) > 2 * small["n_design"] + n_starts
-    # and so for the halving search, whose rows carry running counts from window to window
+    # the halving search runs its jobs together window by window, each as alone; its rows carry
+    # running counts from window to window, and the count is still the simulations run
+    halved = [continuation_search(scaled_problem, "scale", seed=4, halving=True, **small),
+              continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, halving=True, **small)]
     track = ProgressTracker(None, 0.0)
-    halved = continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, map=track.wrap(map),
-                                 halving=True, **small)
-    assert track.simulations == halved.n_simulations
+    joint = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)],
+                                  map=track.wrap(reversed_map), halving=True, **small)
+    for a, b in zip(halved, joint):
+        assert a.names == b.names and a.theta.tobytes() == b.theta.tobytes(), (a, b)
+        assert (a.loglik, a.n_simulations, a.start_logliks) == (b.loglik, b.n_simulations, b.start_logliks)
+    assert track.simulations == sum(r.n_simulations for r in joint)
+    assert joint[1].n_simulations < together[1].n_simulations     # a start was dropped after a window
 
 
 class _Quadratic:
