@@ -86,7 +86,7 @@ def run(a) -> None:
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
                                shared_mode=a.shared_mode, continuation=a.continuation,
                                continuation_entries=a.continuation_entries or None,
-                               continuation_options={"halving": True} if a.halving else None)
+                               continuation_options={"halving": bool(a.halving)})
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
             d["runner"] = {"continuation": a.continuation, "continuation_entries": a.continuation_entries, "halving": a.halving, "shared_mode": a.shared_mode,
@@ -174,9 +174,10 @@ def main(argv=None) -> int:
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods': 1.5 periods only")
-    ap.add_argument("--halving", action="store_true",
-                    help="continuation search with successive halving of its starts (off by default; "
-                         "docs/diagnose.md section 4)")
+    from vfcore.diagnose.search import CONTINUATION
+    ap.add_argument("--halving", action=argparse.BooleanOptionalAction, default=bool(CONTINUATION["halving"]),
+                    help="continuation search with successive halving of its starts (default: "
+                         "vfcore.diagnose.search.CONTINUATION; docs/diagnose.md section 4)")
     ap.add_argument("--continuation-entries", type=int, default=d.continuation_entries,
                     help="refitted entries searched by continuation, largest refit evidence first (0: all; "
                          "default: vfcore.diagnose.DiagnoseOptions().continuation_entries)")

@@ -93,7 +93,7 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
         return [r for r in reversed([fn(p) for p in reversed(parts)])]
 
     start = np.array([[600.0, 1.2]])
-    small = {**SMALL, "maxfev0": 8, "maxfev_step": 4}
+    small = {**SMALL, "maxfev0": 8, "maxfev_step": 4, "halving": False}
     alone = [continuation_search(scaled_problem, "scale", seed=4, **small),
              continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small)]
     track = ProgressTracker(None, 0.0)
@@ -109,11 +109,12 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
     assert track.simulations == sum(r.n_simulations for r in together) > 2 * small["n_design"] + n_starts
     # the halving search runs its jobs together window by window, each as alone; its rows carry
     # running counts from window to window, and the count is still the simulations run
-    halved = [continuation_search(scaled_problem, "scale", seed=4, halving=True, **small),
-              continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, halving=True, **small)]
+    small["halving"] = True
+    halved = [continuation_search(scaled_problem, "scale", seed=4, **small),
+              continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small)]
     track = ProgressTracker(None, 0.0)
     joint = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)],
-                                  map=track.wrap(reversed_map), halving=True, **small)
+                                  map=track.wrap(reversed_map), **small)
     for a, b in zip(halved, joint):
         assert a.names == b.names and a.theta.tobytes() == b.theta.tobytes(), (a, b)
         assert (a.loglik, a.n_simulations, a.start_logliks) == (b.loglik, b.n_simulations, b.start_logliks)
