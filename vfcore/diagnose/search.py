@@ -197,16 +197,15 @@ def _halving_search(evs, chosen: np.ndarray, s: dict, map) -> Evaluation:
     return _halving_searches([evs], [np.asarray(chosen, dtype=float)], [s], map)[0]
 
 
-class _ManyWindowStep:
-    """Picklable batch function of the joint halving search: one window's polish of the starts of
-    several searches. A row is ``[job, halving row (padded with nan)]`` (:class:`_WindowStep`'s
-    rows); returns ``extra = [simulations spent, updated row (padded)]`` and the window's optimum in
-    ``loglik``."""
+class _ManyJobs:
+    """Picklable batch function over the starts of several searches at once: a row is ``[job, the
+    job's own row (padded with nan to the widest)]``, handed to ``jobs[job]`` by :meth:`_one`, which
+    returns the row's log-likelihood and ``[simulations spent, the job's result (padded)]``."""
 
     row_tasks = True        # each row a long search of its own (importance.BalancedMap)
 
-    def __init__(self, steps):
-        self.steps = steps
+    def __init__(self, jobs):
+        self.jobs = jobs
 
     def simulations(self, part, result) -> int:
         """Simulations a result cost (the progress tracker's count)."""
@@ -217,13 +216,20 @@ class _ManyWindowStep:
         ll = np.full(len(rows), -np.inf)
         extra = np.full(rows.shape, np.nan)
         for i, row in enumerate(rows):
-            step = self.steps[int(row[0])]
-            d = step.s["prior"].ndim
-            r = step(row[1:2 * d + 3][None, :])
-            ll[i] = r.loglik[0]
-            extra[i, 0] = r.extra[0, d] - row[1 + d]
-            extra[i, 1:2 * d + 3] = r.extra[0]
+            job = self.jobs[int(row[0])]
+            ll[i], out = self._one(job, job.s["prior"].ndim, row[1:])
+            extra[i, :out.size] = out
         return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=extra)
+
+
+class _ManyWindowStep(_ManyJobs):
+    """The joint halving search's window: each row's job is a :class:`_WindowStep`, its row that
+    step's ``[u, n, best_v, best_u]``; ``extra`` carries the updated row."""
+
+    @staticmethod
+    def _one(step, d, row):
+        r = step(row[:2 * d + 2][None, :])
+        return r.loglik[0], np.concatenate([[r.extra[0, d] - row[d]], r.extra[0]])
 
 
 def _halving_searches(evs_list, chosen_list, settings_list, map) -> list[Evaluation]:
@@ -277,34 +283,15 @@ class SearchResult:
                 "start_logliks": [float(v) for v in self.start_logliks]}
 
 
-class _ManyContinuer:
-    """Picklable batch function over the starts of several searches at once: a row is ``[job, u
-    (padded with nan to the widest search)]``; each start is continued by its own search's
-    :class:`_Continuer`. Returns ``extra = [n, u (padded)]`` per row: the simulations spent and the
-    best point, in the job's unit coordinates."""
+class _ManyContinuer(_ManyJobs):
+    """The joint search without halving: each row's job is a :class:`_Continuer`, its row a start
+    ``u``; ``extra = [n, u (padded)]``: the simulations spent and the best point, in the job's unit
+    coordinates."""
 
-    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
-
-    def __init__(self, continuers):
-        self.continuers = continuers
-
-    def simulations(self, part, result) -> int:
-        """Simulations a result cost (the progress tracker's count)."""
-        return int(np.nansum(np.asarray(Evaluation.coerce(result).extra)[:, 0]))
-
-    def __call__(self, rows) -> Evaluation:
-        rows = np.atleast_2d(np.asarray(rows, dtype=float))
-        width = rows.shape[1]
-        ll = np.full(len(rows), -np.inf)
-        extra = np.full((len(rows), width), np.nan)
-        for i, row in enumerate(rows):
-            job = self.continuers[int(row[0])]
-            d = job.s["prior"].ndim
-            r = job(row[1:1 + d][None, :])
-            ll[i] = r.loglik[0]
-            extra[i, 0] = r.extra[0, d]
-            extra[i, 1:1 + d] = r.extra[0, :d]
-        return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=extra)
+    @staticmethod
+    def _one(job, d, row):
+        r = job(row[:d][None, :])
+        return r.loglik[0], np.concatenate([[r.extra[0, d]], r.extra[0, :d]])
 
 
 def continuation_search(problem: Problem, extension: str | None = None, *, starts=(), seed: int = 0,
