@@ -253,6 +253,8 @@ def _submit(http, spec, user="alice") -> str:
     return r.json()["id"]
 
 
+# Separate scheduler, worker and API processes start and stop here: `make test-all` runs it.
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 @pytest.mark.skipif(not DASK.exists(), reason=f"no `dask` command line in {BIN} (dask[distributed] not installed here)")
 def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive_a_worker_kill(tmp_path, service):

@@ -7,6 +7,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from svc_helpers import TOKENS, auth, toy_spec, wait_done
 
@@ -55,6 +56,8 @@ def test_worker_killed_mid_job_bit_identical(service):
     client.wait_for_workers(n_workers, timeout=60)                   # the nanny restarted it
 
 
+# A load test (20 jobs through one service): about a minute on 2 cores, so `make test-all` runs it.
+@pytest.mark.slow
 def test_twenty_concurrent_submissions_and_fast_status(service):
     from vfcore.inference.importance import importance_sample
     from worker.jobspec import JobSpec
