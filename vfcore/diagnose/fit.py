@@ -34,7 +34,8 @@ from .extensions import SUB_LOG10_Z_OFF, Extension, get
 from .observers import entrain_pair, observe_extended, observer, pair_observer, right_fold_params
 
 __all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "observer", "extended_config", "fit_extended",
-           "entrain_pair", "pair_observer", "right_fold_params", "integrated_summary", "param_table"]
+           "entrain_pair", "pair_observer", "right_fold_params", "integrated_summary", "param_table",
+           "finish_extended", "simulate_rows"]
 
 
 # ------------------------------------------------------------------------------------ prior
@@ -117,6 +118,26 @@ def quad_cells(name: str, d: int):
     return QUAD_CELLS.get(name, QUAD_CELLS_1D if d == 1 else QUAD_CELLS_2D)
 
 
+def simulate_rows(rows: list, configs: list) -> list:
+    """``simulate_many`` of the rows, each with its configuration, in lock-step blocks; where the
+    batch raises (a configuration the kernel refuses), row by row, so each failing row is reported
+    as its own exception and the others still run."""
+    from ..batch import LOCKSTEP_WIDTH, simulate_many
+    if not rows:
+        return []
+    try:
+        return simulate_many(rows, block=LOCKSTEP_WIDTH, configs=configs)
+    except Exception:  # noqa: BLE001 - find the failing row(s) one by one
+        from ..forward import simulate
+        out: list = []
+        for p, c in zip(rows, configs):
+            try:
+                out.append(simulate(p, c))
+            except Exception as exc:  # noqa: BLE001 - reported per row
+                out.append(exc)
+        return out
+
+
 class ExtendedEvaluator:
     """Picklable batch function ``thetas (k, d) -> Evaluation`` for an extended model; the
     likelihood, compared frames and alignment are the base ``problem``'s.
@@ -146,82 +167,86 @@ class ExtendedEvaluator:
     def extension(self) -> Extension:
         return get(self.name)            # looked up, not stored: catalogue entries hold closures
 
-    def _simulate(self, base_params, phis, pairs: bool = False):
-        from ..batch import LOCKSTEP_WIDTH, simulate_many
+    def _plan(self, base_params, phis, pairs: bool = False) -> tuple[list, list, list]:
+        """What the draws need simulated: ``(rows, configs, slots)``, the simulations' parameters and
+        configurations, and per draw the exception that stopped it (a configuration that cannot be
+        built) or the indices of the rows its result reads (two for ``lr_stiffness``: left, right).
+        Every configuration differs from the problem's only in ``vfcore.batch.PER_SAMPLE_FIELDS``,
+        so the rows of every entry can share lock-step blocks (:class:`ExtendedPool`)."""
         ext = self.extension
         cfg = self.problem.config
+        n = len(base_params)
         if ext.kind == "observation":
-            return simulate_many(base_params, cfg, block=LOCKSTEP_WIDTH)
+            return list(base_params), [cfg] * n, [(i,) for i in range(n)]
         if ext.name == "lr_stiffness":
-            return self._simulate_pairs(base_params, phis, combine=not pairs)
+            rights = [right_fold_params(p, phi["log2_lr_Q"]) for p, phi in zip(base_params, phis)]
+            return list(base_params) + rights, [cfg] * (2 * n), [(i, n + i) for i in range(n)]
         # forward-level: each draw has its own configuration; the lock-step kernel takes the
         # extensions per row, so the draws still run in blocks
-        out: list = [None] * len(base_params)
-        rows, cfgs = [], []
-        for i, (p, phi) in enumerate(zip(base_params, phis)):
+        rows, cfgs, slots = [], [], []
+        for p, phi in zip(base_params, phis):
             try:
-                cfgs.append(extended_config(cfg, ext.name, phi))
-                rows.append(i)
+                c = extended_config(cfg, ext.name, phi)
             except Exception as exc:  # noqa: BLE001 - reported per draw
-                out[i] = exc
-        if rows:
-            try:
-                res = simulate_many([base_params[i] for i in rows], block=LOCKSTEP_WIDTH, configs=cfgs)
-            except Exception:  # noqa: BLE001 - find the failing draw(s) one by one
-                from ..forward import simulate
-                res = []
-                for i, c in zip(rows, cfgs):
-                    try:
-                        res.append(simulate(base_params[i], c))
-                    except Exception as exc:  # noqa: BLE001 - reported per draw
-                        res.append(exc)
-            for i, r in zip(rows, res):
-                out[i] = r
-        return out
+                slots.append(exc)
+                continue
+            slots.append((len(rows),))
+            rows.append(p)
+            cfgs.append(c)
+        return rows, cfgs, slots
 
-    def _simulate_pairs(self, base_params, phis, combine: bool = True):
-        """Two folds per draw (left: the base parameters; right: :func:`right_fold_params`), all
-        rows in one lock-step batch; each draw's result is the left fold's with its area replaced
-        by :func:`entrain_pair` (flow and contact stay the left fold's). ``combine=False``: the
-        pair ``(left, right)`` per draw instead (the lag is then integrated by the caller)."""
-        from ..batch import LOCKSTEP_WIDTH, simulate_many
-        cfg = self.problem.config
-        n = len(base_params)
-        rights = [right_fold_params(p, phi["log2_lr_Q"]) for p, phi in zip(base_params, phis)]
-        res = simulate_many(list(base_params) + rights, cfg, block=LOCKSTEP_WIDTH)
+    def _assemble(self, sims: list, slots: list, phis, pairs: bool = False) -> list:
+        """Per draw, what :meth:`_score` reads: a ``SimResult`` or an exception; for ``lr_stiffness``
+        the left fold's result with its area replaced by :func:`entrain_pair` (flow and contact stay
+        the left fold's), or with ``pairs=True`` the pair ``(left, right)`` (the lag is then
+        integrated by :meth:`_integrated`)."""
+        if self.name != "lr_stiffness":
+            return [s if isinstance(s, BaseException) else sims[s[0]] for s in slots]
+        fps = self.problem.config.fps
         out: list = []
-        for i, phi in enumerate(phis):
-            left, right = res[i], res[n + i]
-            if not left.ok:
+        for (i, j), phi in zip(slots, phis):
+            left, right = sims[i], sims[j]
+            if isinstance(left, BaseException) or not left.ok:
                 out.append(left)
                 continue
-            if not right.ok:
-                out.append(RuntimeError(f"right fold: {right.message}"))
+            if isinstance(right, BaseException) or not right.ok:
+                msg = right if isinstance(right, BaseException) else right.message
+                out.append(RuntimeError(f"right fold: {msg}"))
                 continue
-            if not combine:
+            if pairs:
                 out.append((left, right))
                 continue
             try:
-                hr = entrain_pair(left.gaw_hr, right.gaw_hr, cfg.fps, phi["lr_lag"])
+                hr = entrain_pair(left.gaw_hr, right.gaw_hr, fps, phi["lr_lag"])
                 out.append(dataclasses.replace(left, gaw_hr=hr, gaw=hr[::HR_OVERSAMPLE].copy()))
             except Exception as exc:  # noqa: BLE001 - reported per draw
                 out.append(exc)
         return out
 
-    def __call__(self, thetas) -> Evaluation:
-        pb = self.problem
-        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-        splits = [self.prior.split(th) for th in thetas]
-        base_params = [pb.prior.to_params(b) for b, _ in splits]
+    def _simulate(self, base_params, phis, pairs: bool = False) -> list:
+        rows, cfgs, slots = self._plan(base_params, phis, pairs)
+        return self._assemble(simulate_rows(rows, cfgs), slots, phis, pairs)
+
+    def _score(self, results: list, splits: list) -> Evaluation:
         phis = [phi for _, phi in splits]
         if self.integrated:
-            return self._integrated(self._simulate(base_params, phis, pairs=True), phis)
-        results = self._simulate(base_params, phis)
+            return self._integrated(results, phis)
+        pb = self.problem
         observe = None
         if self.extension.kind == "observation":
             def observe(i, hr):
                 return observe_extended(self.name, hr, pb.fps, splits[i][1], pb.config.length_mm)
         return score_results(results, pb, observe)
+
+    def _draws(self, thetas) -> tuple[list, list, list]:
+        """``(splits, base parameters, extension parameters)`` of the draws ``thetas`` (k, d)."""
+        splits = [self.prior.split(th) for th in np.atleast_2d(np.asarray(thetas, dtype=float))]
+        return splits, [self.problem.prior.to_params(b) for b, _ in splits], [phi for _, phi in splits]
+
+    def __call__(self, thetas) -> Evaluation:
+        splits, base_params, phis = self._draws(thetas)
+        pairs = bool(self.integrated)
+        return self._score(self._simulate(base_params, phis, pairs=pairs), splits)
 
     def _integrated(self, results, phis) -> Evaluation:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
@@ -354,10 +379,15 @@ def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, see
     ev = ExtendedEvaluator(problem, extension, integrate=integrate)
     post = smc(ev, prior=ev.prior, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
                **smc_options)
+    return finish_extended(post, problem, ev)
+
+
+def finish_extended(post, problem: Problem, ev: ExtendedEvaluator):
+    """An extended fit's posterior with the problem's observation and what the evaluator integrated out."""
     post.obs_gaw = problem.obs_compared
     post.fps = problem.fps
     post.area_scale = problem.area_scale
-    post.info["extension"] = extension
+    post.info["extension"] = ev.name
     if ev.integrated:
         post.info["integrated"] = integrated_summary(post, ev.integrated)
     return post

@@ -8,8 +8,8 @@ simulations returns:
 - ``stage``: ``"base fit"``, ``"regularity check"``, ``"screening"``, ``"refit"``, ``"rescue"``,
   ``"shared mode"``, ``"continuation"``, ``"mode check"``, ``"nested check"`` or ``"done"``;
 - ``entry``: the catalogue entry the stage works on (``"base"`` for the base model's
-  continuation search, ``"entries"`` for the searches of every continued entry, which run
-  together; None where none);
+  continuation search, ``"entries"`` for the searches of every continued entry, or the refits of
+  every chosen entry, which run together; None where none);
 - ``step`` / ``steps``: the entry's place among the stage's entries (None where not counted);
 - ``simulations``: forward simulations evaluated through the diagnosis' ``map`` so far (one a
   row, or what the batch function reports for a row that runs many, a continuation search's
@@ -95,7 +95,8 @@ class ProgressTracker:
     def cost(self) -> dict:
         """``{"by_stage": {stage: {"wall_s", "simulations", "visits"}}, "by_entry": {entry: ...}}``
         for the stages closed so far (``"-"``: stages without an entry; ``"base"``: the base
-        model's continuation search; ``"entries"``: the continued entries' searches, run together).
+        model's continuation search; ``"entries"``: the continued entries' searches, or the chosen
+        entries' refits, run together).
         Rows counted as in the events; screening's own few simulations are in its wall time, not its
         count."""
         return {"by_stage": {k: dict(v) for k, v in self._stages.items()},

@@ -12,23 +12,42 @@ from .locate import locate
 from .rank import null_consistent, residual_removed
 from .state import DiagnosisState, Run
 from .summary import predicted_gaws
+from .together import TOGETHER_UNSUPPORTED, fit_extended_many
 
 __all__ = ["refit_chosen", "summarise", "keep_if_higher"]
 
 
 def refit_chosen(run: Run, st: DiagnosisState) -> None:
-    """An SMC fit of every chosen entry (``st.refits``, summaries in ``st.after``)."""
+    """An SMC fit of every chosen entry (``st.refits``, summaries in ``st.after``), all run together
+    (:func:`.together.fit_extended_many`: each fit as alone, every generation of every entry in one
+    batch); with SMC options that only a whole run takes (``together.TOGETHER_UNSUPPORTED``), one after
+    another. A summary's ``wall_s`` is the time from the stage's start to its fit's end."""
     o, pb = run.options, st.problem
     g = predicted_gaws(st.base)
     st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
-    for i, name in enumerate(st.chosen):
+    seeds = [o.seed + 101 * (i + 1) for i in range(len(st.chosen))]
+    smc = run.smc
+    if st.chosen and not set(smc) & set(TOGETHER_UNSUPPORTED):
         t1 = time.perf_counter()
-        run.track.at("refit", name, i + 1, len(st.chosen))
-        post = fit_extended(pb, name, n_particles=st.refit_n, seed=o.seed + 101 * (i + 1), map=run.map,
-                            chunk_size=o.chunk_size, integrate=o.integrate, **run.smc)
-        st.refits[name] = post
-        st.n_simulations += int(post.n_simulations)
-        st.after[name] = summarise(run, st, name, post, t1)
+        run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
+        ends: dict[int, float] = {}
+        posts = fit_extended_many(pb, [(name, st.refit_n, sd) for name, sd in zip(st.chosen, seeds)], map=run.map,
+                                  chunk_size=o.chunk_size, integrate=o.integrate,
+                                  on_done=lambda i, _: ends.setdefault(i, time.perf_counter()), **smc)
+        for i, (name, post) in enumerate(zip(st.chosen, posts)):
+            st.refits[name] = post
+            st.n_simulations += int(post.n_simulations)
+            st.after[name] = summarise(run, st, name, post, t1)
+            st.after[name]["wall_s"] = ends[i] - t1
+    else:
+        for i, name in enumerate(st.chosen):
+            t1 = time.perf_counter()
+            run.track.at("refit", name, i + 1, len(st.chosen))
+            post = fit_extended(pb, name, n_particles=st.refit_n, seed=seeds[i], map=run.map,
+                                chunk_size=o.chunk_size, integrate=o.integrate, **smc)
+            st.refits[name] = post
+            st.n_simulations += int(post.n_simulations)
+            st.after[name] = summarise(run, st, name, post, t1)
     if st.tau > 0.0:
         st.notes.append(f"between-run Monte Carlo error of a log-evidence: {st.tau:.2f} nats (spread of the "
                         "independent base runs beyond their reported errors), added in quadrature to every fit's "

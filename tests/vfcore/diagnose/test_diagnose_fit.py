@@ -19,6 +19,24 @@ CFG = SimConfig(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
 SMC_ONLY = dict(continuation=False, continuation_entries=None, refit_particles=None)
 
 
+def route_refits(monkeypatch, fit_one):
+    """Every extended fit of the refit stage and of the refits near a mode through ``fit_one`` (called as
+    ``fit_extended``). The refit stage runs its fits together, each equal to its fit alone
+    (tests/vfcore/diagnose/test_diagnose_together.py), so here they run one after another, in order."""
+    from vfcore.diagnose import mode_fits, refits
+
+    def many(problem, jobs, *, on_done=None, **kw):
+        posts = []
+        for i, (name, n, seed) in enumerate(jobs):
+            posts.append(fit_one(problem, name, n_particles=n, seed=seed, **kw))
+            if on_done is not None:
+                on_done(i, posts[-1])
+        return posts
+    monkeypatch.setattr(refits, "fit_extended", fit_one)
+    monkeypatch.setattr(refits, "fit_extended_many", many)
+    monkeypatch.setattr(mode_fits, "fit_extended", fit_one)
+
+
 @pytest.fixture(scope="module")
 def base_run():
     return simulate(TABLE3, CFG)
@@ -243,7 +261,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     import dataclasses as dc
     import math
 
-    from vfcore.diagnose import baseline, fit, mode_fits, pipeline, refits
+    from vfcore.diagnose import baseline, fit, pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(5)
     run = simulate(TABLE3, dc.replace(CFG, sep_ratio=1.1))
@@ -257,8 +275,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
             post.log_evidence = float(post.log_evidence) - 5000.0
         return post
 
-    for module in (refits, mode_fits):              # the first refits and the refits near a mode
-        monkeypatch.setattr(module, "fit_extended", failing_first)
+    route_refits(monkeypatch, failing_first)          # the first refits and the refits near a mode
     pb = Problem(y, FPS, prior, config=CFG)
     fail = True
     rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
@@ -295,7 +312,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     threshold, a verdict decided by the last bits of the arithmetic; the box is therefore re-centred
     until the posterior is off its edges, and both rescues recover the truth.
     With ``rescue_observation=False`` the failed refit stays and nothing is named."""
-    from vfcore.diagnose import baseline, fit, mode_fits, pipeline, refits
+    from vfcore.diagnose import baseline, fit, pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -308,8 +325,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
             post.log_evidence = float(post.log_evidence) - 5000.0
         return post
 
-    for module in (refits, mode_fits):              # the first refits and the refits near a mode
-        monkeypatch.setattr(module, "fit_extended", failing_first)
+    route_refits(monkeypatch, failing_first)          # the first refits and the refits near a mode
     pb = Problem(y, FPS, prior, config=CFG)
     rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1)
     assert calls == ["scale", "scale"], calls
@@ -344,7 +360,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     the asymmetry is refitted from the scale fit's material mode: the new fit sits in that mode
     (E_cover within 5 % of the leader's), its evidence is far above the stuck one and replaces it,
     and the report records both. With ``shared_mode=False`` (the default) the stuck fit stays."""
-    from vfcore.diagnose import baseline, fit, mode_fits, pipeline, refits
+    from vfcore.diagnose import baseline, fit, pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -365,8 +381,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
         base_z["z"] = float(out[0].log_evidence)
         return out
 
-    for module in (refits, mode_fits):
-        monkeypatch.setattr(module, "fit_extended", stuck_asymmetry)
+    route_refits(monkeypatch, stuck_asymmetry)          # the first refits and the refits near a mode
     monkeypatch.setattr(baseline, "base_fit", base_fit)
     pb = Problem(y, FPS, prior, config=CFG)
     kw = dict(SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
