@@ -51,7 +51,7 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
     ``runs_out``: a list, extended with ``(log Z, se)`` of every run (the best-of-base rule,
     :func:`.rank.rank_best_of_base`).
     """
-    from ..inference.smc import smc
+    from ..inference.smc import smc, smc_many
 
     def best(ps):
         return max(ps, key=lambda p: p.log_evidence if math.isfinite(p.log_evidence) else -math.inf)
@@ -59,18 +59,22 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
     def fmt(ps):
         return ", ".join(f"{p.log_evidence:.1f} +- {p.log_evidence_se:.1f}" for p in ps)
 
-    runs, notes, factor = [], [], 1
-    for k in range(max(1, int(base_runs))):
-        runs.append(smc(problem, n_particles=n_particles, seed=seed + SEED_STRIDE * k, map=map, chunk_size=chunk_size,
-                        **smc_options))
+    def made(jobs):
+        """The runs ``(particles, seed)``, together (:func:`vfcore.inference.smc.smc_many`: each as alone, one
+        batch a round) unless an option only a whole run takes asks for one after another."""
+        if set(smc_options) & {"screen", "runs", "run_rule", "run_gap"}:
+            return [smc(problem, n_particles=n, seed=s, map=map, chunk_size=chunk_size, **smc_options) for n, s in jobs]
+        return smc_many(problem, jobs, map=map, chunk_size=chunk_size, **smc_options)
+
+    notes, factor = [], 1
+    runs = made([(n_particles, seed + SEED_STRIDE * k) for k in range(max(1, int(base_runs)))])
     n_sims = sum(int(p.n_simulations) for p in runs)
     tau = between_run_sd(runs)
     if len(runs) > 1:
         notes.append(f"base runs log-evidence: {fmt(runs)}; the largest kept")
     if escalate_tau is not None and len(runs) > 1 and tau > escalate_tau and int(escalate_factor) > 1:
         factor = int(escalate_factor)
-        big = [smc(problem, n_particles=n_particles * factor, seed=seed + SEED_STRIDE * (k + len(runs)), map=map,
-                   chunk_size=chunk_size, **smc_options) for k in range(max(2, int(base_runs)))]
+        big = made([(n_particles * factor, seed + SEED_STRIDE * (k + len(runs))) for k in range(max(2, int(base_runs)))])
         n_sims += sum(int(p.n_simulations) for p in big)
         notes.append(f"base runs disagree (between-run error {tau:.1f} nats > {escalate_tau:g}): "
                      f"{factor}x particles from here on; larger base runs: {fmt(big)}")

@@ -114,7 +114,7 @@ def fit_extended_many(problem: Problem, jobs: Sequence[tuple[str, int, int]], *,
     :class:`ExtendedPool` rows. Returns the posteriors in ``jobs`` order, each equal to its fit alone;
     ``on_done(i, posterior)`` is called as fit ``i`` finishes. ``smc_options`` are the sampler's
     (:class:`vfcore.inference.smc.SMCSampler`; those of :data:`TOGETHER_UNSUPPORTED` are refused)."""
-    from ..inference.smc import SMCSampler
+    from ..inference.smc import SMCSampler, run_together
     bad = sorted(set(smc_options) & set(TOGETHER_UNSUPPORTED))
     if bad:
         raise ValueError(f"fits run together take the sampler's options only; not {bad}")
@@ -122,31 +122,19 @@ def fit_extended_many(problem: Problem, jobs: Sequence[tuple[str, int, int]], *,
     evs = [ExtendedEvaluator(problem, name, integrate=integrate) for name, _, _ in jobs]
     pool = ExtendedPool(evs)
     samplers = [SMCSampler(ev.prior, int(n), int(seed), **smc_options) for ev, (_, n, seed) in zip(evs, jobs)]
-    posts: list[Posterior | None] = [None] * len(jobs)
+    posts: list = [None] * len(jobs)
+
+    def evaluate(pending):
+        rows, where = pool.rows(pending)
+        ev = map_evaluate(pool, rows, map=map, chunk_size=chunk_size)
+        return [pool.take(ev, i, idx) for (i, _), idx in zip(pending, where)]
 
     def finish(i: int) -> None:
-        s = samplers[i]
-        post = s.result()
-        post.area_scale = None
+        post = samplers[i].result()
+        post.area_scale = None                  # what smc() records of a target that is not a Problem
         post.model = None
         posts[i] = finish_extended(post, problem, evs[i])
         if on_done is not None:
             on_done(i, posts[i])
-
-    while True:
-        batches = []
-        for i, s in enumerate(samplers):
-            if posts[i] is not None:
-                continue
-            th = s.ask()
-            if th is None:
-                finish(i)
-                continue
-            batches.append((i, th))
-        if not batches:
-            return posts  # type: ignore[return-value]
-        rows, where = pool.rows(batches)
-        ev = map_evaluate(pool, rows, map=map, chunk_size=chunk_size)
-        for (i, _), idx in zip(batches, where):
-            samplers[i].tell(pool.take(ev, i, idx))
-
+    run_together(samplers, evaluate, finish)
+    return posts

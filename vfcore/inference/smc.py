@@ -399,17 +399,82 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
         return pool_runs(posts, seed=seed, rule=run_rule, gap=run_gap)
     prior, obs, fps, fn = resolve_target(target, prior)
     cheap = resolve_target(screen, prior)[3] if screen is not None else None
-    if symmetry not in ("auto", None):
-        raise ValueError(f"symmetry must be 'auto' or None, got {symmetry!r}")
-    group = None
-    if symmetry == "auto" and isinstance(target, Problem) and prior.names == target.prior.names:
-        from .symmetry import scale_group
-        group = scale_group(target)
+    group = _scale_group(target, prior, symmetry)
     sampler = SMCSampler(prior, n_particles, seed, delayed=cheap is not None, symmetry=group, **options)
     while (th := sampler.ask()) is not None:
         f = cheap if sampler.stage == "screen" else fn
         sampler.tell(map_evaluate(f, th, map=map, chunk_size=chunk_size))
+    return _finished(sampler, target, obs, fps)
+
+
+def _scale_group(target, prior: Prior, symmetry: str | None):
+    """The exact scale symmetry the walk uses (``symmetry="auto"``, a Problem estimating all six), or None."""
+    if symmetry not in ("auto", None):
+        raise ValueError(f"symmetry must be 'auto' or None, got {symmetry!r}")
+    if symmetry == "auto" and isinstance(target, Problem) and prior.names == target.prior.names:
+        from .symmetry import scale_group
+        return scale_group(target)
+    return None
+
+
+def _finished(sampler: SMCSampler, target, obs, fps) -> Posterior:
     post = sampler.result(obs_gaw=obs, fps=fps)
     post.area_scale = getattr(target, "area_scale", None) if isinstance(target, Problem) else None
     post.model = model_record(target)
     return post
+
+
+def run_together(samplers: list, evaluate: Callable, on_done: Callable[[int], None]) -> None:
+    """Advance ``samplers`` (:class:`SMCSampler`) together to the end: at each round every unfinished
+    sampler's pending batch, as ``(i, thetas)`` pairs, goes to ``evaluate`` in one call, which returns one
+    Evaluation per pair; ``on_done(i)`` as sampler ``i`` finishes. Each sampler's run is the one it makes
+    alone: its randomness is its own seed's, and its batches are the ones it asks for."""
+    done = [False] * len(samplers)
+    while True:
+        pending = []
+        for i, s in enumerate(samplers):
+            if done[i]:
+                continue
+            th = s.ask()
+            if th is None:
+                done[i] = True
+                on_done(i)
+                continue
+            pending.append((i, th))
+        if not pending:
+            return
+        evs = evaluate(pending)
+        if len(evs) != len(pending):
+            raise RuntimeError(f"{len(evs)} evaluations for {len(pending)} batches")
+        for (i, _), ev in zip(pending, evs):
+            samplers[i].tell(ev)
+
+
+def smc_many(target, jobs, prior: Prior | None = None, *, map: Callable = map, chunk_size: int = 32,
+             symmetry: str | None = "auto", on_done: Callable[[int, Posterior], None] | None = None,
+             **options) -> list[Posterior]:
+    """Several runs of :func:`smc` on one target (``jobs``: ``(n_particles, seed)`` each), run together
+    (:func:`run_together`): at each round the pending batch of every unfinished run goes to ``map`` as one
+    batch, so a worker's lock-step blocks are wider (docs/model.md, "Speed") and a cluster has every run's
+    rows at once. Each posterior equals ``smc(target, prior, n_particles, seed, ...)`` alone, bit for bit.
+    ``on_done(i, posterior)`` as run ``i`` finishes. ``options`` are the sampler's
+    (:class:`SMCSampler`); a cheaper ``screen`` target and pooled ``runs`` are :func:`smc`'s only."""
+    bad = sorted(set(options) & {"screen", "runs", "run_rule", "run_gap"})
+    if bad:
+        raise ValueError(f"runs made together take the sampler's options only; not {bad}")
+    prior, obs, fps, fn = resolve_target(target, prior)
+    group = _scale_group(target, prior, symmetry)
+    samplers = [SMCSampler(prior, int(n), int(s), symmetry=group, **options) for n, s in jobs]
+    posts: list = [None] * len(samplers)
+
+    def evaluate(pending):
+        ev = map_evaluate(fn, np.concatenate([th for _, th in pending]), map=map, chunk_size=chunk_size)
+        edges = np.cumsum([0] + [th.shape[0] for _, th in pending])
+        return [ev.take(np.arange(a, b)) for a, b in zip(edges[:-1], edges[1:])]
+
+    def finish(i):
+        posts[i] = _finished(samplers[i], target, obs, fps)
+        if on_done is not None:
+            on_done(i, posts[i])
+    run_together(samplers, evaluate, finish)
+    return posts

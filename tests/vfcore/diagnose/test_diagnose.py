@@ -514,7 +514,11 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
         z = (-100.0 - 500.0 * (seed % 2)) if n_particles == 40 else -90.0 - 0.1 * (seed % 3)
         return SimpleNamespace(log_evidence=z, log_evidence_se=1.0, n_simulations=10 * n_particles)
 
+    def together(fake):                                   # runs made together: each as alone (test_smc_many)
+        return lambda problem, jobs, **kw: [fake(problem, n, s) for n, s in jobs]
+
     monkeypatch.setattr(smc_mod, "smc", fake_smc)
+    monkeypatch.setattr(smc_mod, "smc_many", together(fake_smc))
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)   # seeds 0, 7919
     assert factor == 2 and [c[0] for c in calls] == [40, 40, 80, 80]
     assert len({c[1] for c in calls}) == 4                        # every run its own seed
@@ -522,8 +526,11 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
     assert any("disagree" in s for s in notes)
 
     calls.clear()
-    monkeypatch.setattr(smc_mod, "smc", lambda problem, n_particles, seed, **kw: calls.append(seed) or SimpleNamespace(
-        log_evidence=-100.0 + 0.5 * (seed % 2), log_evidence_se=1.0, n_simulations=5))
+    def agreeing(problem, n_particles, seed, **kw):
+        calls.append(seed)
+        return SimpleNamespace(log_evidence=-100.0 + 0.5 * (seed % 2), log_evidence_se=1.0, n_simulations=5)
+    monkeypatch.setattr(smc_mod, "smc", agreeing)
+    monkeypatch.setattr(smc_mod, "smc_many", together(agreeing))
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)
     assert factor == 1 and len(calls) == 2 and tau == 0.0 and base.log_evidence == -99.5
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0, escalate_tau=None)

@@ -58,7 +58,7 @@ def test_the_pool_scores_each_row_as_its_own_evaluator(problem):
 
 
 def test_fits_run_together_equal_each_fit_alone(problem):
-    jobs = [(n, 12, 40 + i) for i, n in enumerate(ENTRIES)]
+    jobs = [(n, 10, 40 + i) for i, n in enumerate(ENTRIES[:3])]
     split = BalancedMap(map, 2)                           # every batch in two equal parts, as on 2 workers
     batches = []
 
@@ -74,7 +74,7 @@ def test_fits_run_together_equal_each_fit_alone(problem):
     alone = [fit_extended(problem, n, n_particles=k, seed=s, map=split, chunk_size=8, max_moves=2) for n, k, s in jobs]
     for a, b in zip(together, alone):
         _same(a, b)
-    assert sorted(done) == [0, 1, 2, 3]
+    assert sorted(done) == [0, 1, 2]
     # one map call a round: as many as the longest fit's batches, not the sum of all fits'
     per_fit = [int(p.info["n_generations"]) for p in alone]
     assert n_together < sum(per_fit) * 2

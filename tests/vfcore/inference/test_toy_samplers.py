@@ -118,6 +118,36 @@ def test_smc_deterministic_and_map_independent(prior3):
     assert all(np.diff(a.info["temperatures"]) > 0)
 
 
+def test_smc_many_gives_each_run_as_alone(prior3):
+    """Runs made together (one batch a round through the map) equal each run made alone, bit for bit, and
+    go through the map in as many calls as the longest run's batches, not the sum of all runs'."""
+    from vfcore.inference.smc import smc_many
+    toy = LinearGaussianToy(prior3, seed=2)
+    jobs = [(40, 3), (60, 8), (40, 11)]
+    calls = []
+
+    def counting(fn, parts):
+        parts = list(parts)
+        calls.append(sum(np.shape(p)[0] for p in parts))
+        return map(fn, parts)
+
+    finished = []
+    posts = smc_many(toy, jobs, prior3, map=counting, chunk_size=1000, on_done=lambda i, p: finished.append(i))
+    alone = [smc(toy, prior3, n_particles=n, seed=sd, chunk_size=7) for n, sd in jobs]
+    for a, b in zip(posts, alone):
+        assert a.samples.tobytes() == b.samples.tobytes() and a.resampled.tobytes() == b.resampled.tobytes()
+        assert a.log_evidence == b.log_evidence and a.log_evidence_se == b.log_evidence_se
+        assert a.n_simulations == b.n_simulations and a.info["temperatures"] == b.info["temperatures"]
+    assert sorted(finished) == [0, 1, 2]
+    assert sum(calls) == sum(int(p.n_simulations) for p in alone)
+    # one batch for the first population, then one a move step (a step whose proposals all left the
+    # prior asks for none)
+    batches = [1 + sum(h["moves"] for h in p.info["generations"]) for p in alone]
+    assert max(batches) <= len(calls) < sum(batches)
+    with pytest.raises(ValueError, match="screen"):
+        smc_many(toy, jobs, prior3, screen=toy)
+
+
 def test_smc_ask_tell_and_failures(prior3):
     toy = LinearGaussianToy(prior3, seed=2)
 
