@@ -13,7 +13,7 @@ from ..inference.problem import Problem
 from ..inference.runs import SEED_STRIDE
 from .fit import fit_extended
 
-__all__ = ["base_near", "reference_refit", "shared_mode_refit"]
+__all__ = ["base_near", "reference_refit", "reference_refits", "shared_mode_refit"]
 
 
 def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int, map=map, chunk_size: int = 40,
@@ -108,6 +108,28 @@ def reference_refit(problem: Problem, post: Posterior, extension: str, *, n_part
                         integrate=integrate, reference=ref, **smc_options)
     near.info["reference"] = {"inflate": inflate, "p_inside": ref.p_inside}
     return float(near.log_evidence), float(near.log_evidence_se), near
+
+
+def reference_refits(problem: Problem, post: Posterior, jobs, *, map=map, chunk_size: int = 40, inflate: float = 2.0,
+                     integrate: bool = True, **smc_options) -> list[tuple[float, float, Posterior]]:
+    """:func:`reference_refit` of each ``(extension, n_particles, seed)`` of ``jobs``, all run together
+    (:func:`.together.fit_extended_many`: each fit as alone, one batch a round), or one after another when
+    an SMC option only a whole run takes is given. Returns ``(log Z, se, posterior)`` per job."""
+    from ..inference.reference import reference_from_posterior
+    from .fit import ExtendedPrior
+    from .together import TOGETHER_UNSUPPORTED, fit_extended_many
+    if set(smc_options) & set(TOGETHER_UNSUPPORTED):
+        return [reference_refit(problem, post, e, n_particles=n, seed=s, map=map, chunk_size=chunk_size,
+                                inflate=inflate, integrate=integrate, **smc_options) for e, n, s in jobs]
+    refs = [reference_from_posterior(ExtendedPrior(bounds={}, base=problem.prior, extension=e, integrate=bool(integrate)),
+                                     post, inflate=inflate, seed=s) for e, _, s in jobs]
+    posts = fit_extended_many(problem, [(e, n, s, {"reference": r}) for (e, n, s), r in zip(jobs, refs)], map=map,
+                              chunk_size=chunk_size, integrate=integrate, **smc_options)
+    out = []
+    for near, ref in zip(posts, refs):
+        near.info["reference"] = {"inflate": inflate, "p_inside": ref.p_inside}
+        out.append((float(near.log_evidence), float(near.log_evidence_se), near))
+    return out
 
 
 def _material_view(post: Posterior, n_base: int):

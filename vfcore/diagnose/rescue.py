@@ -11,7 +11,7 @@ from typing import Callable
 
 from ..inference.posterior import Posterior
 from .extensions import get
-from .mode_fits import base_near, reference_refit
+from .mode_fits import base_near, reference_refit, reference_refits
 from .refits import keep_if_higher
 from .state import DiagnosisState, Run
 
@@ -22,7 +22,9 @@ __all__ = ["Rescue", "RESCUES", "rescue_refits"]
 class Rescue:
     """How a failed refit is refitted: ``refit(run, state, name, seed) -> (log Z, se, posterior)``, the
     report's words for it (``how``, and ``relation`` of the new value to the evidence: an estimate or a
-    bound), the ``info`` tag of the new fit, and ``record(posterior)``: what the report keeps of it."""
+    bound), the ``info`` tag of the new fit, and ``record(posterior)``: what the report keeps of it.
+    ``refit_many(run, state, [(name, seed), ...])``, where given, refits several entries together, each
+    as ``refit`` would alone (one batch a round through the map)."""
 
     method: str
     how: str
@@ -30,6 +32,7 @@ class Rescue:
     tag: str
     refit: Callable
     record: Callable[[Posterior], dict]
+    refit_many: Callable | None = None
 
 
 def _from_reference(run: Run, st: DiagnosisState, name: str, seed: int):
@@ -38,6 +41,14 @@ def _from_reference(run: Run, st: DiagnosisState, name: str, seed: int):
     o = run.options
     return reference_refit(st.problem, st.base, name, n_particles=st.refit_n, seed=seed, map=run.map,
                            chunk_size=o.chunk_size, inflate=o.rescue_inflate, integrate=o.integrate, **run.smc)
+
+
+def _from_reference_together(run: Run, st: DiagnosisState, jobs: list[tuple[str, int]]):
+    """:func:`_from_reference` of every ``(entry, seed)``, the fits run together
+    (:func:`.mode_fits.reference_refits`; each as alone)."""
+    o = run.options
+    return reference_refits(st.problem, st.base, [(name, st.refit_n, seed) for name, seed in jobs], map=run.map,
+                            chunk_size=o.chunk_size, inflate=o.rescue_inflate, integrate=o.integrate, **run.smc)
 
 
 def _on_box(run: Run, st: DiagnosisState, name: str, seed: int):
@@ -56,7 +67,7 @@ def _box_record(near: Posterior) -> dict:
 #: The rescue strategy of each ``DiagnoseOptions.rescue_method``.
 RESCUES = {
     "reference": Rescue("reference", "from the base posterior (reference-started SMC)", "=", "reference_refit_of",
-                        _from_reference, lambda near: {}),
+                        _from_reference, lambda near: {}, _from_reference_together),
     "box": Rescue("box", "around the base's material mode", ">=", "box_refit_of", _on_box, _box_record),
 }
 
@@ -70,14 +81,24 @@ def rescue_refits(run: Run, st: DiagnosisState) -> None:
     strategy = RESCUES[o.rescue_method]
     rescuable = [n for n in st.chosen if (o.rescue_forward if get(n).kind == "forward" else o.rescue_observation)]
     z0, s0 = float(st.base.log_evidence), float(st.base.log_evidence_se)
+    due = []
     for j, name in enumerate(rescuable):
         z1, s1 = float(st.refits[name].log_evidence), float(st.refits[name].log_evidence_se)
         if math.isfinite(z1) and z1 >= z0 - max(o.min_gain, o.k_se * math.hypot(s0, s1)):
             continue
+        due.append((name, o.seed + 262147 + j, z1, s1, int(st.refits[name].n_simulations)))
+    together = None
+    if strategy.refit_many is not None and len(due) > 1:
         t1 = time.perf_counter()
-        run.track.at("rescue", name)
-        first_sims = int(st.refits[name].n_simulations)
-        zb, sb, near = strategy.refit(run, st, name, o.seed + 262147 + j)
+        run.track.at("rescue", "entries")
+        together = strategy.refit_many(run, st, [(name, seed) for name, seed, *_ in due])
+    for k, (name, seed, z1, s1, first_sims) in enumerate(due):
+        if together is None:
+            t1 = time.perf_counter()
+            run.track.at("rescue", name)
+            zb, sb, near = strategy.refit(run, st, name, seed)
+        else:
+            zb, sb, near = together[k]
         st.n_simulations += int(near.n_simulations)
         kept = keep_if_higher(run, st, name, near, zb, t1, **{strategy.tag: "base"}) is not None
         st.notes.append(f"rescue: the {name} refit ended at log Z {z1:.1f}, below the base's {z0:.1f}; refitted "

@@ -106,11 +106,11 @@ class ExtendedPool:
         return whole.take(inverse)
 
 
-def fit_extended_many(problem: Problem, jobs: Sequence[tuple[str, int, int]], *, map: Callable = map,
+def fit_extended_many(problem: Problem, jobs: Sequence[tuple], *, map: Callable = map,
                       chunk_size: int = 40, integrate: bool = True,
                       on_done: Callable[[int, Posterior], None] | None = None, **smc_options) -> list[Posterior]:
-    """The fits :func:`.fit.fit_extended` of ``jobs`` (``(extension, n_particles, seed)`` each), run
-    together: at each round the pending batch of every unfinished fit goes to ``map`` as one batch of
+    """The fits :func:`.fit.fit_extended` of ``jobs`` (``(extension, n_particles, seed)`` each, or with a
+    fourth item, a dict of that fit's own sampler options such as its ``reference``), run together: at each round the pending batch of every unfinished fit goes to ``map`` as one batch of
     :class:`ExtendedPool` rows. Returns the posteriors in ``jobs`` order, each equal to its fit alone;
     ``on_done(i, posterior)`` is called as fit ``i`` finishes. ``smc_options`` are the sampler's
     (:class:`vfcore.inference.smc.SMCSampler`; those of :data:`TOGETHER_UNSUPPORTED` are refused)."""
@@ -119,9 +119,10 @@ def fit_extended_many(problem: Problem, jobs: Sequence[tuple[str, int, int]], *,
     if bad:
         raise ValueError(f"fits run together take the sampler's options only; not {bad}")
     smc_options = {k: v for k, v in smc_options.items() if k != "symmetry"}   # no scale group: not a Problem
-    evs = [ExtendedEvaluator(problem, name, integrate=integrate) for name, _, _ in jobs]
+    evs = [ExtendedEvaluator(problem, job[0], integrate=integrate) for job in jobs]
     pool = ExtendedPool(evs)
-    samplers = [SMCSampler(ev.prior, int(n), int(seed), **smc_options) for ev, (_, n, seed) in zip(evs, jobs)]
+    samplers = [SMCSampler(ev.prior, int(job[1]), int(job[2]), **{**smc_options, **(job[3] if len(job) > 3 else {})})
+                for ev, job in zip(evs, jobs)]
     posts: list = [None] * len(jobs)
 
     def evaluate(pending):

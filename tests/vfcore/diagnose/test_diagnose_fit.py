@@ -20,20 +20,21 @@ SMC_ONLY = dict(continuation=False, continuation_entries=None, refit_particles=N
 
 
 def route_refits(monkeypatch, fit_one):
-    """Every extended fit of the refit stage and of the refits near a mode through ``fit_one`` (called as
-    ``fit_extended``). The refit stage runs its fits together, each equal to its fit alone
+    """Every extended fit of the refit stage, the rescues and the refits near a mode through ``fit_one``
+    (called as ``fit_extended``). The refit stage and the rescues run their fits together, each equal to its fit alone
     (tests/vfcore/diagnose/test_diagnose_together.py), so here they run one after another, in order."""
-    from vfcore.diagnose import mode_fits, refits
+    from vfcore.diagnose import mode_fits, refits, together
 
     def many(problem, jobs, *, on_done=None, **kw):
         posts = []
-        for i, (name, n, seed) in enumerate(jobs):
-            posts.append(fit_one(problem, name, n_particles=n, seed=seed, **kw))
+        for i, (name, n, seed, *own) in enumerate(jobs):
+            posts.append(fit_one(problem, name, n_particles=n, seed=seed, **kw, **(own[0] if own else {})))
             if on_done is not None:
                 on_done(i, posts[-1])
         return posts
     monkeypatch.setattr(refits, "fit_extended", fit_one)
     monkeypatch.setattr(refits, "fit_extended_many", many)
+    monkeypatch.setattr(together, "fit_extended_many", many)        # the rescues run together
     monkeypatch.setattr(mode_fits, "fit_extended", fit_one)
 
 

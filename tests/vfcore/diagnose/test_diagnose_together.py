@@ -13,7 +13,7 @@ from vfcore.params import PARAM_NAMES, TABLE3
 from vfcore.result import HR_OVERSAMPLE
 
 FPS = 2000.0
-CFG = SimConfig(mesh="coarse", dt=1e-4, duration=0.3, discard=0.15)
+CFG = SimConfig(mesh="coarse", dt=1e-4, duration=0.25, discard=0.15)
 #: one entry of each way an entry simulates: the base model (scale, asymmetry: observation), its own
 #: configuration per draw (sep_ratio), two folds per draw (lr_stiffness)
 ENTRIES = ("scale", "sep_ratio", "lr_stiffness", "asymmetry")
@@ -24,7 +24,7 @@ def problem():
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_cover", "p_sub")})
     run = simulate(TABLE3, CFG)
     rng = np.random.default_rng(3)
-    y = 1.05 * np.asarray(run.gaw_hr[37::HR_OVERSAMPLE][:120]) + 0.4 * rng.standard_normal(120)
+    y = 1.05 * np.asarray(run.gaw_hr[37::HR_OVERSAMPLE][:100]) + 0.4 * rng.standard_normal(100)
     return Problem(y, FPS, prior, config=CFG)
 
 
@@ -84,3 +84,21 @@ def test_fits_run_together_equal_each_fit_alone(problem):
 def test_fits_run_together_refuse_options_that_are_not_the_samplers(problem):
     with pytest.raises(ValueError, match="screen"):
         fit_extended_many(problem, [("scale", 12, 1)], screen=problem)
+
+
+def test_rescues_run_together_equal_each_rescue_alone(problem):
+    """Reference-started refits (the rescue) of two entries, run together, equal each one alone."""
+    from types import SimpleNamespace
+
+    from vfcore.diagnose.mode_fits import reference_refit, reference_refits
+    names = problem.prior.names
+    mid = 0.5 * (problem.prior.lo + problem.prior.hi)
+    base = SimpleNamespace(names=names, mean=mid, cov=np.diag((0.05 * problem.prior.width) ** 2))
+    jobs = [("scale", 10, 7), ("sep_ratio", 10, 9)]
+    together = reference_refits(problem, base, jobs, map=BalancedMap(map, 2), chunk_size=8, max_moves=2)
+    for (name, n, seed), (z, se, post) in zip(jobs, together):
+        z1, se1, alone = reference_refit(problem, base, name, n_particles=n, seed=seed, map=BalancedMap(map, 2),
+                                         chunk_size=8, max_moves=2)
+        assert (z, se) == (z1, se1)
+        _same(post, alone)
+        assert post.info["reference"] == alone.info["reference"]
