@@ -14,7 +14,7 @@ import numpy as np
 from .extensions import get
 from .fit import ExtendedPrior
 from .refits import keep_if_higher
-from .search import continuation_search, continuation_searches, continued_fit
+from .search import continuation_search, continuation_searches, continued_fit, continued_fits
 from .state import DiagnosisState, Run
 from .summary import best_particles
 
@@ -89,22 +89,27 @@ def continue_all(run: Run, st: DiagnosisState) -> None:
         jobs.append((name, starts, sd + 97 * (j + 1)))
     found = continuation_searches(st.problem, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
                                   **copts)
-    for j, (name, fe) in enumerate(zip(entries, found)):
-        run.track.at("continuation", name, j + 1, len(entries))
-        _fit_entry(run, st, name, fe, sd + 97 * (j + 1))
-
-
-def _fit_entry(run: Run, st: DiagnosisState, name: str, fe, sd: int) -> None:
-    """Entry ``name``'s fit from the optimum its search found (from its refit's best particle and
-    from the base's optimum with the entry at its null value); kept when higher."""
-    o = run.options
+    # then every entry's fit from its optimum, the fits run together (each as alone)
     t1 = time.perf_counter()
-    st.n_simulations += fe.n_simulations
-    if not math.isfinite(fe.loglik):
-        st.notes.append(f"continuation: the {name} search found no finite log-likelihood")
-        return
-    zc, sc, pc = continued_fit(st.problem, fe, name, n_particles=st.refit_n, seed=sd, map=run.map,
-                               chunk_size=o.chunk_size, integrate=o.integrate, **run.smc)
+    ok = [j for j, fe in enumerate(found) if math.isfinite(fe.loglik)]
+    fits: dict = {}
+    if ok:
+        run.track.at("continuation", entries[ok[0]] if len(ok) == 1 else "entries", 1, len(entries))
+        fits = dict(zip(ok, continued_fits(st.problem, [(found[j], entries[j], sd + 97 * (j + 1)) for j in ok],
+                                           n_particles=st.refit_n, map=run.map, chunk_size=o.chunk_size,
+                                           integrate=o.integrate, **run.smc)))
+    for j, (name, fe) in enumerate(zip(entries, found)):
+        st.n_simulations += fe.n_simulations
+        if j in fits:
+            _keep_entry(run, st, name, fe, fits[j], t1)
+        else:
+            st.notes.append(f"continuation: the {name} search found no finite log-likelihood")
+
+
+def _keep_entry(run: Run, st: DiagnosisState, name: str, fe, fit: tuple, t1: float) -> None:
+    """Entry ``name``'s fit ``fit = (log Z, se, posterior)`` from the optimum its search found (from its
+    refit's best particle and from the base's optimum with the entry at its null value); kept when higher."""
+    zc, sc, pc = fit
     st.n_simulations += int(pc.n_simulations)
     z1 = float(st.refits[name].log_evidence)
     kept = keep_if_higher(run, st, name, pc, zc, t1, record=("continuation", fe.to_dict()), continued=True) is not None

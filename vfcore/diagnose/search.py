@@ -34,7 +34,7 @@ from ..inference.problem import Evaluation, Problem, ProblemEvaluator
 from ..measures import estimate_f0
 
 __all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "windows", "window_problems",
-           "continuation_search", "continuation_searches", "continued_fit"]
+           "continuation_search", "continuation_searches", "continued_fit", "continued_fits"]
 
 #: default search: Sobol design points, starts kept from it, first window in cycles, Nelder-Mead
 #: evaluations on window k (``maxfev0 + maxfev_step * k``) and its initial simplex step in unit
@@ -389,16 +389,9 @@ def continued_fit(problem: Problem, found: SearchResult, extension: str | None =
     optimum (residual 0.52 mm^2) this fit reached log Z -459.7 +- 0.4 with residual 0.59 mm^2 and
     the leak's area 2.11 mm^2 (truth 2.105) in 384 simulations; the best SMC refit from the prior
     reached -838."""
-    from ..inference.reference import GaussianReference
     from ..inference.smc import smc
     from .fit import fit_extended
-    prior = model_prior(problem, extension, integrate)
-    if tuple(found.names) != tuple(prior.names):
-        raise ValueError(f"the search was over {found.names}, this model's parameters are {prior.names}")
-    if not np.all(np.isfinite(found.theta)):
-        raise ValueError("the search found no point with a finite log-likelihood")
-    ref = GaussianReference(prior, np.asarray(found.theta, dtype=float), np.diag((floor * prior.width) ** 2),
-                            eps=0.1, seed=seed)
+    ref = _continued_reference(problem, found, extension, integrate, floor, seed)
     if extension is None:
         post = smc(problem, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, reference=ref,
                    **smc_options)
@@ -407,3 +400,36 @@ def continued_fit(problem: Problem, found: SearchResult, extension: str | None =
                             integrate=integrate, reference=ref, **smc_options)
     post.info["continuation"] = found.to_dict()
     return float(post.log_evidence), float(post.log_evidence_se), post
+
+
+def _continued_reference(problem: Problem, found: SearchResult, extension: str | None, integrate: bool,
+                         floor: float, seed: int):
+    """The narrow Gaussian reference of :func:`continued_fit` about the search's optimum."""
+    from ..inference.reference import GaussianReference
+    prior = model_prior(problem, extension, integrate)
+    if tuple(found.names) != tuple(prior.names):
+        raise ValueError(f"the search was over {found.names}, this model's parameters are {prior.names}")
+    if not np.all(np.isfinite(found.theta)):
+        raise ValueError("the search found no point with a finite log-likelihood")
+    return GaussianReference(prior, np.asarray(found.theta, dtype=float), np.diag((floor * prior.width) ** 2),
+                             eps=0.1, seed=seed)
+
+
+def continued_fits(problem: Problem, jobs, *, n_particles: int, map=map, chunk_size: int = 40,
+                   integrate: bool = True, floor: float = 0.002, **smc_options) -> list[tuple[float, float, object]]:
+    """:func:`continued_fit` of every ``(found, extension, seed)`` of ``jobs`` (entries, not the base model),
+    the fits run together (:func:`.together.fit_extended_many`: each as alone, one batch a round), or one
+    after another when an SMC option only a whole run takes is given. Returns ``(log Z, se, posterior)``
+    per job."""
+    from .together import TOGETHER_UNSUPPORTED, fit_extended_many
+    if set(smc_options) & set(TOGETHER_UNSUPPORTED):
+        return [continued_fit(problem, f, e, n_particles=n_particles, seed=s, map=map, chunk_size=chunk_size,
+                              integrate=integrate, floor=floor, **smc_options) for f, e, s in jobs]
+    refs = [_continued_reference(problem, f, e, integrate, floor, s) for f, e, s in jobs]
+    posts = fit_extended_many(problem, [(e, n_particles, s, {"reference": r}) for (_, e, s), r in zip(jobs, refs)],
+                              map=map, chunk_size=chunk_size, integrate=integrate, **smc_options)
+    out = []
+    for (f, _, _), post in zip(jobs, posts):
+        post.info["continuation"] = f.to_dict()
+        out.append((float(post.log_evidence), float(post.log_evidence_se), post))
+    return out

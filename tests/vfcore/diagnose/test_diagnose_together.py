@@ -102,3 +102,20 @@ def test_rescues_run_together_equal_each_rescue_alone(problem):
         assert (z, se) == (z1, se1)
         _same(post, alone)
         assert post.info["reference"] == alone.info["reference"]
+
+
+def test_continued_fits_run_together_equal_each_fit_alone(problem):
+    """The continuation stage's fits from each entry's optimum, run together, equal each fit alone."""
+    from vfcore.diagnose.search import SearchResult, continued_fit, continued_fits, model_prior
+    jobs = []
+    for k, (name, seed) in enumerate((("scale", 3), ("sep_ratio", 4))):
+        prior = model_prior(problem, name)
+        theta = prior.lo + (0.4 + 0.1 * k) * prior.width
+        jobs.append((SearchResult(tuple(prior.names), theta, -100.0, 50), name, seed))
+    together = continued_fits(problem, jobs, n_particles=10, map=BalancedMap(map, 2), chunk_size=8, max_moves=2)
+    for (found, name, seed), (z, se, post) in zip(jobs, together):
+        z1, se1, alone = continued_fit(problem, found, name, n_particles=10, seed=seed, map=BalancedMap(map, 2),
+                                       chunk_size=8, max_moves=2)
+        assert (z, se) == (z1, se1)
+        _same(post, alone)
+        assert post.info["continuation"] == alone.info["continuation"]
