@@ -51,7 +51,7 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
     ``runs_out``: a list, extended with ``(log Z, se)`` of every run (the best-of-base rule,
     :func:`.rank.rank_best_of_base`).
     """
-    from ..inference.smc import smc, smc_many
+    from ..inference.smc import WHOLE_RUN_OPTIONS, smc, smc_many
 
     def best(ps):
         return max(ps, key=lambda p: p.log_evidence if math.isfinite(p.log_evidence) else -math.inf)
@@ -62,7 +62,7 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
     def made(jobs):
         """The runs ``(particles, seed)``, together (:func:`vfcore.inference.smc.smc_many`: each as alone, one
         batch a round) unless an option only a whole run takes asks for one after another."""
-        if set(smc_options) & {"screen", "runs", "run_rule", "run_gap"}:
+        if set(smc_options) & set(WHOLE_RUN_OPTIONS):
             return [smc(problem, n_particles=n, seed=s, map=map, chunk_size=chunk_size, **smc_options) for n, s in jobs]
         return smc_many(problem, jobs, map=map, chunk_size=chunk_size, **smc_options)
 

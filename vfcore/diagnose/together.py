@@ -22,6 +22,7 @@ import numpy as np
 from ..inference.evaluation import Evaluation
 from ..inference.importance import map_evaluate
 from ..inference.posterior import Posterior
+from ..inference.smc import WHOLE_RUN_OPTIONS
 from ..inference.problem import Problem
 from .fit import ExtendedEvaluator, finish_extended, simulate_rows
 
@@ -29,7 +30,7 @@ __all__ = ["ExtendedPool", "fit_extended_many", "TOGETHER_UNSUPPORTED"]
 
 #: options of :func:`vfcore.inference.smc.smc` that are not the sampler's: a call with any of them runs
 #: the fits one after another (:func:`.fit.fit_extended`)
-TOGETHER_UNSUPPORTED = ("screen", "runs", "run_rule", "run_gap")
+TOGETHER_UNSUPPORTED = WHOLE_RUN_OPTIONS
 
 
 class ExtendedPool:

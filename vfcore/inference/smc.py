@@ -59,6 +59,10 @@ _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
 
 DEFAULT_PARTICLES = 300
 
+#: options of :func:`smc` that act on a whole run, not on the sampler: runs made together
+#: (:func:`smc_many`, :func:`run_together`) do not take them
+WHOLE_RUN_OPTIONS = ("screen", "runs", "run_rule", "run_gap")
+
 
 class SMCSampler:
     """Ask/tell likelihood-tempered SMC.
@@ -459,7 +463,7 @@ def smc_many(target, jobs, prior: Prior | None = None, *, map: Callable = map, c
     rows at once. Each posterior equals ``smc(target, prior, n_particles, seed, ...)`` alone, bit for bit.
     ``on_done(i, posterior)`` as run ``i`` finishes. ``options`` are the sampler's
     (:class:`SMCSampler`); a cheaper ``screen`` target and pooled ``runs`` are :func:`smc`'s only."""
-    bad = sorted(set(options) & {"screen", "runs", "run_rule", "run_gap"})
+    bad = sorted(set(options) & set(WHOLE_RUN_OPTIONS))
     if bad:
         raise ValueError(f"runs made together take the sampler's options only; not {bad}")
     prior, obs, fps, fn = resolve_target(target, prior)
