@@ -38,7 +38,6 @@ from pathlib import Path
 import numpy as np
 
 from vfcore import TABLE3, Params, SimConfig, simulate
-from vfcore.diagnose.search import windows  # the diagnosis's own continuation windows
 from vfcore.measures import estimate_f0
 from vfcore.result import HR_OVERSAMPLE
 
@@ -148,6 +147,24 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
 #: default continuation search of the presence audit: design points, how many of them (best on the
 #: first window) are continued, the cycles of the first window, Nelder–Mead evaluations per window
 CONTINUATION_SEARCH = {"n_sobol": 256, "n_keep": 3, "cycles0": 3.0, "maxfev": 30}
+
+
+def windows(n: int, frames_per_cycle: float, cycles0: float) -> list[int]:
+    """Window lengths (frames) of the continuation: ``cycles0`` cycles, doubled until ``n``.
+
+    >>> windows(400, 15.0, 3.0)
+    [46, 92, 184, 368, 400]
+    """
+    if n < 2:
+        raise ValueError(f"need at least 2 frames, got {n}")
+    if not (math.isfinite(frames_per_cycle) and frames_per_cycle > 0):
+        return [n]
+    w = max(4, int(math.ceil(cycles0 * frames_per_cycle)) + 1)
+    out = []
+    while w < n:
+        out.append(w)
+        w *= 2
+    return out + [n]
 
 
 def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list[dict] | tuple = (),
