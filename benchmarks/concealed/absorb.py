@@ -149,6 +149,8 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
 CONTINUATION_SEARCH = {"n_sobol": 256, "n_keep": 3, "cycles0": 3.0, "maxfev": 30}
 
 
+# The diagnosis's own windows (vfcore.diagnose.search.windows), written again: the generator and its audit
+# import nothing of vfcore.diagnose (tests/benchmarks/test_concealed_generator.py).
 def windows(n: int, frames_per_cycle: float, cycles0: float) -> list[int]:
     """Window lengths (frames) of the continuation: ``cycles0`` cycles, doubled until ``n``.
 

@@ -124,6 +124,7 @@ def simulated():
     return _run_script(_SIM_SCRIPT, SIM_TIMEOUT_S, NUMBA_ENABLE_CUDASIM="1")
 
 
+@pytest.mark.slow                      # half a minute compiling the kernel for the simulator
 def test_simulator_matches_the_cpu_lockstep_kernel(simulated):
     """On the simulator each thread runs the CPU's integrate_ws on its columns of the interleaved arrays: the
     results equal the CPU lock-step kernel's bit for bit (flags, messages, GAW, contact, p_in, trajectories,
@@ -140,10 +141,12 @@ def test_simulator_matches_the_cpu_lockstep_kernel(simulated):
         assert r["identical"], (name, r)
 
 
+@pytest.mark.slow                      # half a minute compiling the kernel for the simulator
 def test_device_zero_fill(simulated):
     assert simulated[0]["fill_zero"]
 
 
+@pytest.mark.slow                      # half a minute compiling the kernel for the simulator
 def test_device_evaluator_scores_as_the_cpu_evaluator(simulated):
     res, _ = simulated
     ev = res["evaluator"]

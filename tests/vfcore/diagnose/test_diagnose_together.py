@@ -86,6 +86,7 @@ def test_fits_run_together_refuse_options_that_are_not_the_samplers(problem):
         fit_extended_many(problem, [("scale", 12, 1)], screen=problem)
 
 
+@pytest.mark.slow          # the same machinery as the refits together, with a reference per fit
 def test_rescues_run_together_equal_each_rescue_alone(problem):
     """Reference-started refits (the rescue) of two entries, run together, equal each one alone."""
     from types import SimpleNamespace
@@ -104,6 +105,7 @@ def test_rescues_run_together_equal_each_rescue_alone(problem):
         assert post.info["reference"] == alone.info["reference"]
 
 
+@pytest.mark.slow          # the same machinery as the refits together, with a reference per fit
 def test_continued_fits_run_together_equal_each_fit_alone(problem):
     """The continuation stage's fits from each entry's optimum, run together, equal each fit alone."""
     from vfcore.diagnose.search import SearchResult, continued_fit, continued_fits, model_prior
