@@ -100,12 +100,23 @@ def reference_refit(problem: Problem, post: Posterior, extension: str, *, n_part
     the extension's sampled parameters are uniform over their prior). The result's log-evidence
     estimates the extended model's evidence (generalized stepping-stone path), not a bound.
     Returns ``(log Z, se, posterior)``."""
+    ref = _reference(problem, post, extension, inflate, integrate, seed)
+    near = fit_extended(problem, extension, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
+                        integrate=integrate, reference=ref, **smc_options)
+    return _referenced(near, ref, inflate)
+
+
+def _reference(problem: Problem, post: Posterior, extension: str, inflate: float, integrate: bool, seed: int):
+    """The Gaussian reference of :func:`reference_refit`: ``post``'s material particles, inflated, on the
+    extended prior."""
     from ..inference.reference import reference_from_posterior
     from .fit import ExtendedPrior
     prior = ExtendedPrior(bounds={}, base=problem.prior, extension=extension, integrate=bool(integrate))
-    ref = reference_from_posterior(prior, post, inflate=inflate, seed=seed)
-    near = fit_extended(problem, extension, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
-                        integrate=integrate, reference=ref, **smc_options)
+    return reference_from_posterior(prior, post, inflate=inflate, seed=seed)
+
+
+def _referenced(near: Posterior, ref, inflate: float) -> tuple[float, float, Posterior]:
+    """``(log Z, se, posterior)`` of a reference-started fit, its reference recorded in its ``info``."""
     near.info["reference"] = {"inflate": inflate, "p_inside": ref.p_inside}
     return float(near.log_evidence), float(near.log_evidence_se), near
 
@@ -115,21 +126,15 @@ def reference_refits(problem: Problem, post: Posterior, jobs, *, map=map, chunk_
     """:func:`reference_refit` of each ``(extension, n_particles, seed)`` of ``jobs``, all run together
     (:func:`.together.fit_extended_many`: each fit as alone, one batch a round), or one after another when
     an SMC option only a whole run takes is given. Returns ``(log Z, se, posterior)`` per job."""
-    from ..inference.reference import reference_from_posterior
-    from .fit import ExtendedPrior
-    from .together import TOGETHER_UNSUPPORTED, fit_extended_many
-    if set(smc_options) & set(TOGETHER_UNSUPPORTED):
+    from ..inference.smc import WHOLE_RUN_OPTIONS
+    from .together import fit_extended_many
+    if set(smc_options) & set(WHOLE_RUN_OPTIONS):
         return [reference_refit(problem, post, e, n_particles=n, seed=s, map=map, chunk_size=chunk_size,
                                 inflate=inflate, integrate=integrate, **smc_options) for e, n, s in jobs]
-    refs = [reference_from_posterior(ExtendedPrior(bounds={}, base=problem.prior, extension=e, integrate=bool(integrate)),
-                                     post, inflate=inflate, seed=s) for e, _, s in jobs]
+    refs = [_reference(problem, post, e, inflate, integrate, s) for e, _, s in jobs]
     posts = fit_extended_many(problem, [(e, n, s, {"reference": r}) for (e, n, s), r in zip(jobs, refs)], map=map,
                               chunk_size=chunk_size, integrate=integrate, **smc_options)
-    out = []
-    for near, ref in zip(posts, refs):
-        near.info["reference"] = {"inflate": inflate, "p_inside": ref.p_inside}
-        out.append((float(near.log_evidence), float(near.log_evidence_se), near))
-    return out
+    return [_referenced(near, ref, inflate) for near, ref in zip(posts, refs)]
 
 
 def _material_view(post: Posterior, n_base: int):

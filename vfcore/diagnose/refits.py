@@ -7,12 +7,13 @@ import math
 import time
 
 from ..inference.posterior import Posterior
+from ..inference.smc import WHOLE_RUN_OPTIONS
 from .fit import fit_extended, null_drops, param_table
 from .locate import locate
 from .rank import null_consistent, residual_removed
 from .state import DiagnosisState, Run
 from .summary import predicted_gaws
-from .together import TOGETHER_UNSUPPORTED, fit_extended_many
+from .together import fit_extended_many
 
 __all__ = ["refit_chosen", "summarise", "keep_if_higher"]
 
@@ -20,14 +21,14 @@ __all__ = ["refit_chosen", "summarise", "keep_if_higher"]
 def refit_chosen(run: Run, st: DiagnosisState) -> None:
     """An SMC fit of every chosen entry (``st.refits``, summaries in ``st.after``), all run together
     (:func:`.together.fit_extended_many`: each fit as alone, every generation of every entry in one
-    batch); with SMC options that only a whole run takes (``together.TOGETHER_UNSUPPORTED``), one after
+    batch); with SMC options that only a whole run takes (``vfcore.inference.smc.WHOLE_RUN_OPTIONS``), one after
     another. A summary's ``wall_s`` is the time from the stage's start to its fit's end."""
     o, pb = run.options, st.problem
     g = predicted_gaws(st.base)
     st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
     seeds = [o.seed + 101 * (i + 1) for i in range(len(st.chosen))]
     smc = run.smc
-    if st.chosen and not set(smc) & set(TOGETHER_UNSUPPORTED):
+    if st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
         t1 = time.perf_counter()
         run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
         ends: dict[int, float] = {}

@@ -421,8 +421,9 @@ def continued_fits(problem: Problem, jobs, *, n_particles: int, map=map, chunk_s
     the fits run together (:func:`.together.fit_extended_many`: each as alone, one batch a round), or one
     after another when an SMC option only a whole run takes is given. Returns ``(log Z, se, posterior)``
     per job."""
-    from .together import TOGETHER_UNSUPPORTED, fit_extended_many
-    if set(smc_options) & set(TOGETHER_UNSUPPORTED):
+    from ..inference.smc import WHOLE_RUN_OPTIONS
+    from .together import fit_extended_many
+    if set(smc_options) & set(WHOLE_RUN_OPTIONS):
         return [continued_fit(problem, f, e, n_particles=n_particles, seed=s, map=map, chunk_size=chunk_size,
                               integrate=integrate, floor=floor, **smc_options) for f, e, s in jobs]
     refs = [_continued_reference(problem, f, e, integrate, floor, s) for f, e, s in jobs]

@@ -22,15 +22,11 @@ import numpy as np
 from ..inference.evaluation import Evaluation
 from ..inference.importance import map_evaluate
 from ..inference.posterior import Posterior
-from ..inference.smc import WHOLE_RUN_OPTIONS
 from ..inference.problem import Problem
+from ..inference.smc import WHOLE_RUN_OPTIONS
 from .fit import ExtendedEvaluator, finish_extended, simulate_rows
 
-__all__ = ["ExtendedPool", "fit_extended_many", "TOGETHER_UNSUPPORTED"]
-
-#: options of :func:`vfcore.inference.smc.smc` that are not the sampler's: a call with any of them runs
-#: the fits one after another (:func:`.fit.fit_extended`)
-TOGETHER_UNSUPPORTED = WHOLE_RUN_OPTIONS
+__all__ = ["ExtendedPool", "fit_extended_many"]
 
 
 class ExtendedPool:
@@ -114,9 +110,9 @@ def fit_extended_many(problem: Problem, jobs: Sequence[tuple], *, map: Callable 
     fourth item, a dict of that fit's own sampler options such as its ``reference``), run together: at each round the pending batch of every unfinished fit goes to ``map`` as one batch of
     :class:`ExtendedPool` rows. Returns the posteriors in ``jobs`` order, each equal to its fit alone;
     ``on_done(i, posterior)`` is called as fit ``i`` finishes. ``smc_options`` are the sampler's
-    (:class:`vfcore.inference.smc.SMCSampler`; those of :data:`TOGETHER_UNSUPPORTED` are refused)."""
+    (:class:`vfcore.inference.smc.SMCSampler`; ``vfcore.inference.smc.WHOLE_RUN_OPTIONS`` are refused)."""
     from ..inference.smc import SMCSampler, run_together
-    bad = sorted(set(smc_options) & set(TOGETHER_UNSUPPORTED))
+    bad = sorted(set(smc_options) & set(WHOLE_RUN_OPTIONS))
     if bad:
         raise ValueError(f"fits run together take the sampler's options only; not {bad}")
     smc_options = {k: v for k, v in smc_options.items() if k != "symmetry"}   # no scale group: not a Problem
