@@ -87,13 +87,17 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
     folded into rows of ``q``). Equal to the direct sum to ~1e-11 relative (cancellation in
     ``S2 - 2C``); 1.7-1.9x faster than ``q`` direct correlations of the decimated record (400
     frames, 200 lags of 10 fine steps; ``benchmarks/bench_alignment.py``), which are 5x faster
-    than gathering every window."""
+    than gathering every window.
+
+    ``hr`` may hold several records, one per row (``(m, N)``; scores ``(m, j_max + 1)``): the
+    transforms and sums then run over all rows at once, and each row's scores are the same bytes
+    as its own call's (every step acts on a row alone, in the same order)."""
     from scipy import fft as sfft
     n = tmpl.size
     span = j_max + q * (n - 1) + 1                     # the samples any window reads
-    if hr.size < span:
-        raise ValueError(f"record of {hr.size} samples is too short for lags up to {j_max} of a {n}-frame window")
-    x = hr[:span]
+    if hr.shape[-1] < span:
+        raise ValueError(f"record of {hr.shape[-1]} samples is too short for lags up to {j_max} of a {n}-frame window")
+    x = hr[..., :span]
     nfft = sfft.next_fast_len(span, real=True)        # circular wrap cannot reach lags <= j_max
     key = (q, nfft, tmpl.tobytes())
     spec = _TEMPLATE_SPECTRA.get(key)
@@ -104,13 +108,61 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
         if len(_TEMPLATE_SPECTRA) >= 8:
             _TEMPLATE_SPECTRA.clear()
         _TEMPLATE_SPECTRA[key] = spec
-    c = sfft.irfft(sfft.rfft(x, nfft) * spec, nfft)[: j_max + 1]
+    c = sfft.irfft(sfft.rfft(x, nfft, axis=-1) * spec, nfft, axis=-1)[..., : j_max + 1]
     rows = -(-span // q)
-    y = np.zeros(rows * q)
-    y[:span] = x * x
-    e = np.concatenate([np.zeros(q), np.cumsum(y.reshape(rows, q), axis=0).ravel()])  # e[k q + r]: sum of y[k' q + r], k' < k
-    s2 = e[q * n: q * n + j_max + 1] - e[: j_max + 1]
+    lead = x.shape[:-1]
+    y = np.zeros(lead + (rows * q,))
+    y[..., :span] = x * x
+    # e[..., k q + r]: sum of y[..., k' q + r] over k' < k
+    e = np.concatenate([np.zeros(lead + (q,)),
+                        np.cumsum(y.reshape(lead + (rows, q)), axis=-2).reshape(lead + (rows * q,))], axis=-1)
+    s2 = e[..., q * n: q * n + j_max + 1] - e[..., : j_max + 1]
     return -(s2 - 2.0 * c + float(tmpl @ tmpl))
+
+
+def _read_at_best(cs: np.ndarray, js: np.ndarray, hr: np.ndarray, q: int, n_cmp: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's aligned segment from its fine-lag scores ``cs`` (m, len(js)) over the records
+    ``hr`` (m, N): the best fine lag, refined by a parabola through it and its neighbours, and the
+    segment read there by linear interpolation. Returns (segments (m, n_cmp), lags in frames (m,))."""
+    m = np.argmax(cs, axis=-1)
+    rows = np.arange(cs.shape[0])
+    inner = (m > 0) & (m < cs.shape[-1] - 1)
+    mi = np.clip(m, 1, max(1, cs.shape[-1] - 2))
+    frac = np.zeros(cs.shape[0])
+    if cs.shape[-1] >= 3:
+        c0, c1, c2 = cs[rows, mi - 1], cs[rows, mi], cs[rows, mi + 1]
+        den = c0 - 2.0 * c1 + c2
+        use = inner & (den < 0)
+        frac[use] = np.clip(0.5 * (c0[use] - c2[use]) / den[use], -0.5, 0.5)
+    pos = js[m] + frac                       # fine-grid position of the aligned start
+    x = pos[:, None] + q * np.arange(n_cmp)[None, :]
+    i0 = np.minimum(np.floor(x).astype(np.int64), hr.shape[-1] - 2)
+    w = x - i0
+    seg = (1.0 - w) * np.take_along_axis(hr, i0, axis=-1) + w * np.take_along_axis(hr, i0 + 1, axis=-1)
+    return seg, pos / q
+
+
+def align_many(sims_hr: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int], oversample: int,
+               method: str = "profile") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`align` of several oversampled simulated GAWs of one length, ``sims_hr`` (m, N), to one
+    observation: the many waveforms one simulation yields under an extension's parameters. Each
+    row's segment and lag are the same bytes as :func:`align` of that row alone (``sim`` its
+    every ``oversample``-th sample). Returns (segments (m, n_compare), lags in frames (m,))."""
+    if method not in ALIGNMENTS:
+        raise ValueError(f"alignment method must be one of {ALIGNMENTS}, got {method!r}")
+    hr = np.atleast_2d(np.asarray(sims_hr, dtype=float))
+    q = int(oversample) if oversample is not None else 0
+    if q < 1 or hr.shape[-1] < 1:
+        raise ValueError(f"oversample must be >= 1, got {oversample!r}")
+    n_sim = (hr.shape[-1] - 1) // q + 1
+    if method == "xcorr":
+        out = [align(h[::q], obs, fps, window, sim_hr=h, oversample=q, method=method) for h in hr]
+        return (np.array([o[0] for o in out]).reshape(hr.shape[0], -1), np.array([o[2] for o in out]))
+    obs = np.asarray(obs, dtype=float)
+    max_lag, n_cmp = window
+    js = np.arange(0, min(q * max_lag, q * (n_sim - n_cmp)) + 1)
+    cs = _profile_scores(hr, obs[:n_cmp], q, int(js[-1]))
+    return _read_at_best(cs, js, hr, q, n_cmp)
 
 
 def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,
@@ -172,16 +224,5 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
     else:
         cs = np.concatenate([score(hr[js[b:b + 64, None] + q * np.arange(n_tmpl)[None, :]])
                              for b in range(0, js.size, 64)])
-    m = int(np.argmax(cs))
-    frac = 0.0
-    if 0 < m < cs.size - 1:
-        c0, c1, c2 = cs[m - 1], cs[m], cs[m + 1]
-        den = c0 - 2.0 * c1 + c2
-        if den < 0:
-            frac = float(np.clip(0.5 * (c0 - c2) / den, -0.5, 0.5))
-    pos = js[m] + frac                       # fine-grid position of the aligned start
-    x = pos + q * np.arange(n_cmp)
-    i0 = np.minimum(np.floor(x).astype(np.int64), hr.size - 2)
-    w = x - i0
-    seg = (1.0 - w) * hr[i0] + w * hr[i0 + 1]
-    return seg, obs[:n_cmp], pos / q
+    seg, lag = _read_at_best(cs[None, :], js, hr[None, :], q, n_cmp)
+    return seg[0], obs[:n_cmp], float(lag[0])

@@ -250,7 +250,7 @@ class ExtendedEvaluator:
 
     def _integrated(self, results, phis) -> Evaluation:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
-        from ..inference.scoring import aligned_loglik, contact_means, cycle_means
+        from ..inference.scoring import aligned_loglik, aligned_logliks, contact_means, cycle_means
         from . import quadrature as _q
         pb = self.problem
         ext = self.extension
@@ -286,19 +286,30 @@ class ExtendedEvaluator:
                     obs_fn = observer(self.name, np.asarray(r.gaw_hr, dtype=float), pb.fps, pb.config.length_mm)
                     fwd = dict(phis[i])          # an observation entry's sampled parameters, if any
 
-                def score(point, obs_fn=obs_fn, fwd=fwd):
+                def look(point, obs_fn=obs_fn, fwd=fwd):
                     hr = obs_fn({**fwd, **dict(zip(names, map(float, point)))})
                     if hr[::HR_OVERSAMPLE].size < max_lag + n_cmp or not np.all(np.isfinite(hr)):
                         raise RuntimeError("observed GAW too short or not finite")
-                    return aligned_loglik(hr, pb)
+                    return hr
 
-                def fn(points, score=score):
-                    out = np.empty(len(points))
+                def score(point, look=look):
+                    return aligned_loglik(look(point), pb)
+
+                def fn(points, look=look):
+                    # every point's waveform aligned in one batch (the same bytes as one by one)
+                    out = np.full(len(points), -np.inf)
+                    seen, at = [], []
                     for j, pt in enumerate(points):
                         try:
-                            out[j] = score(pt)[0]
+                            seen.append(look(pt))
+                            at.append(j)
                         except (RuntimeError, ValueError):
-                            out[j] = -np.inf
+                            pass
+                    if seen:
+                        try:
+                            out[at] = aligned_logliks(np.stack(seen), pb)[0]
+                        except (RuntimeError, ValueError):
+                            pass
                     return out
                 q = _q.integrate_loglik(fn, lo, hi, n0=cells)
                 if not math.isfinite(q.log_mean):

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..config import SimConfig
 from ..measures import estimate_f0
-from ..observe import ALIGNMENTS, LAG_SEARCHES, align, alignment_window
+from ..observe import ALIGNMENTS, LAG_SEARCHES, align, align_many, alignment_window
 from ..params import PARAM_NAMES, PARAM_UNITS, Params
 from .likelihood import (gaussian_loglik, marginal_gaussian_loglik,  # noqa: F401 (re-exported)
                          sample_area_scale, scaled_gaussian_loglik, scaled_marginal_gaussian_loglik)
@@ -305,14 +305,36 @@ class Problem:
         seg, _, _ = align(sim, self.obs_gaw, self.fps, self.window, method=self.alignment, **kw)
         if self.area_scale is None or self.alignment != "profile":
             return seg
-        obs = self.obs_compared
-        ss = float(np.dot(seg, seg))
-        k = float(np.dot(obs, seg)) / ss if ss > 0 else 0.0
-        if not (math.isfinite(k) and k > 0):
+        k = self._first_scale(seg)
+        if k is None:
             return seg
-        k = min(max(k, self.area_scale[0]), self.area_scale[1])
         seg, _, _ = align(sim, self.obs_gaw / k, self.fps, self.window, method=self.alignment, **kw)
         return seg
+
+    def _first_scale(self, seg) -> float | None:
+        """The first lag's best area scale ``k_hat`` for :meth:`align`'s second search, clipped to the
+        prior's box; None where it is not a positive number (the first lag stands)."""
+        ss = float(np.dot(seg, seg))
+        k = float(np.dot(self.obs_compared, seg)) / ss if ss > 0 else 0.0
+        if not (math.isfinite(k) and k > 0):
+            return None
+        return min(max(k, self.area_scale[0]), self.area_scale[1])
+
+    def align_many(self, sims_hr, oversample: int) -> np.ndarray:
+        """:meth:`align` of several oversampled simulated GAWs of one length (rows of ``sims_hr``), each
+        row the same bytes as its own call: segments (m, n_compare). With ``area_scale`` and the
+        ``"profile"`` alignment each row's second lag search, against its own scaled observation, runs
+        row by row."""
+        hr = np.atleast_2d(np.asarray(sims_hr, dtype=float))
+        segs, _ = align_many(hr, self.obs_gaw, self.fps, self.window, oversample, method=self.alignment)
+        if self.area_scale is None or self.alignment != "profile":
+            return segs
+        for i, h in enumerate(hr):
+            k = self._first_scale(segs[i])
+            if k is not None:
+                segs[i] = align(h[::oversample], self.obs_gaw / k, self.fps, self.window, method=self.alignment,
+                                sim_hr=h, oversample=oversample)[0]
+        return segs
 
 
 def validate_area_scale(area_scale) -> tuple[float, float] | None:
