@@ -156,7 +156,7 @@ def test_device_evaluator_scores_as_the_cpu_evaluator(simulated):
 
 def test_worker_passes_a_jobs_device_through():
     """A job whose spec names a device gets the device evaluator and GPU-sized chunks; a spec without the
-    field (today's JobSpec) runs on the CPU as before."""
+    field (a JobSpec made before it existed) runs on the CPU as before."""
     from types import SimpleNamespace
 
     from vfcore.inference.device_eval import DeviceEvaluator
