@@ -20,7 +20,6 @@ means and sds, predictions). One process, one core.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -31,7 +30,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.suite import case_problem  # noqa: E402
+from benchmarks.suite import case_problem, one_case  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -49,11 +48,11 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args(argv)
     cases_dir = Path(a.cases)
-    meta = json.loads((cases_dir / "cases.json").read_text())
-    by_id = {c["id"]: c for c in meta["cases"]}
-    if a.id not in by_id:
-        ap.error(f"no case {a.id!r} in {cases_dir / 'cases.json'}")
-    pb = case_problem(meta, by_id[a.id], cases_dir, None, 1.0)
+    try:
+        meta, case = one_case(cases_dir, a.id)
+    except ValueError as exc:
+        ap.error(str(exc))
+    pb = case_problem(meta, case, cases_dir, None, 1.0)
     names = [n.strip() for n in a.entries.split(",") if n.strip()] or [n for n in implemented() if get(n).integrable]
     batched = scoring.aligned_logliks
 
