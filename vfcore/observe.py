@@ -152,9 +152,11 @@ def align_many(sims_hr: np.ndarray, obs: np.ndarray, fps: float, window: tuple[i
         raise ValueError(f"alignment method must be one of {ALIGNMENTS}, got {method!r}")
     hr = np.atleast_2d(np.asarray(sims_hr, dtype=float))
     q = int(oversample) if oversample is not None else 0
-    if q < 1 or hr.shape[-1] < 1:
+    if q < 1:
         raise ValueError(f"oversample must be >= 1, got {oversample!r}")
     n_sim = (hr.shape[-1] - 1) // q + 1
+    if n_sim < window[1]:
+        raise ValueError(f"records of {n_sim} frames are shorter than the {window[1]} frames to compare")
     if method == "xcorr":
         out = [align(h[::q], obs, fps, window, sim_hr=h, oversample=q, method=method) for h in hr]
         return (np.array([o[0] for o in out]).reshape(hr.shape[0], -1), np.array([o[2] for o in out]))

@@ -197,3 +197,12 @@ def test_a_problems_batch_alignment_and_likelihoods_equal_its_one_by_one(area_sc
         assert np.array_equal(one, segs[k]) and np.array_equal(one, segs2[k])
         assert ll[k] == aligned_loglik(row, pb)[0]
     assert len(set(ll.tolist())) == 5
+
+
+def test_aligning_many_refuses_records_shorter_than_the_window():
+    from vfcore.observe import align_many
+    hr = _signal(n=200)
+    with pytest.raises(ValueError, match="shorter than the 300 frames"):
+        align_many(np.stack([hr, hr]), hr[::HR_OVERSAMPLE], FPS, (40, 300), HR_OVERSAMPLE)
+    with pytest.raises(ValueError, match="oversample"):
+        align_many(np.stack([hr, hr]), hr[::HR_OVERSAMPLE], FPS, (40, 100), 0)

@@ -99,7 +99,6 @@ def aligned_loglik(hr: np.ndarray, problem, params=None) -> tuple[float, np.ndar
     return problem.loglik(seg, params), seg
 
 
-
 def aligned_logliks(hrs, problem) -> tuple[np.ndarray, np.ndarray]:
     """:func:`aligned_loglik` (without the measurements' term) of several oversampled simulated areas of
     one length, the rows of ``hrs``, aligned together (:meth:`Problem.align_many`); each row's value and
@@ -107,6 +106,7 @@ def aligned_logliks(hrs, problem) -> tuple[np.ndarray, np.ndarray]:
     from vfcore.result import HR_OVERSAMPLE
     segs = problem.align_many(hrs, HR_OVERSAMPLE)
     return np.array([problem.loglik(seg) for seg in segs], dtype=float), segs
+
 
 def score_results(results, problem, observe: Callable | None = None) -> Evaluation:
     """Score simulation results (SimResults, or the exceptions their runs raised) against
