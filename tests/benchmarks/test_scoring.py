@@ -258,6 +258,18 @@ def test_problem_carries_lag_search(tmp_path, search):
     assert type(pb).from_dict(pb.to_dict()).lag_search == search
 
 
+
+def test_one_case_reads_the_asked_case_and_names_a_missing_one(tmp_path):
+    import json
+
+    from benchmarks.suite import one_case
+    meta = {"model": {}, "cases": [{"id": "00", "file": "a.csv"}, {"id": "07", "file": "b.csv"}]}
+    (tmp_path / "cases.json").write_text(json.dumps(meta))
+    got, case = one_case(tmp_path, "07")
+    assert case["file"] == "b.csv" and got == meta
+    with pytest.raises(ValueError, match="no case '7' in"):
+        one_case(tmp_path, "7")
+
 def test_pairs_outside_effects_and_no_fit_verdicts_are_scored_apart(tmp_path):
     no_fit = {"fit_check": {"fits": False}}
     cdir, odir = _suite(tmp_path, "full", {
