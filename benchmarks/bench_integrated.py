@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     print(f"case {a.id} of {cases_dir}: window {pb.window} (max lag, compared frames); {a.rows} simulations per entry")
     for name in names:
         ev = ExtendedEvaluator(pb, name, integrate=True)
-        splits, base, phis = ev._draws(ev.prior.sample(a.rows, np.random.default_rng(0)))
+        _, base, phis = ev._draws(ev.prior.sample(a.rows, np.random.default_rng(0)))
         pairs = bool(ev.integrated)
         ev._simulate(base[:2], phis[:2], pairs=pairs)            # compiled kernels
         t0 = time.perf_counter()
