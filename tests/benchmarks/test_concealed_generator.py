@@ -282,6 +282,7 @@ def test_presence_threshold_is_the_30_percent_bound():
     assert np.isclose(1 - s / np.hypot(s, e), 0.30)
 
 
+@pytest.mark.slow      # 20 s on 2 cores; make test-all runs it
 def test_unabsorbed_rms_control_and_scale(base):
     """The base model absorbs its own waveform exactly and most of a 15 % scale error (p_sub and
     the moduli trade amplitude for shape): the unabsorbed part is far below the effect itself."""

@@ -79,6 +79,7 @@ def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically
     assert again.theta.tobytes() == found.theta.tobytes() and again.loglik == found.loglik
 
 
+@pytest.mark.slow      # 27 s on 2 cores; make test-all runs it
 def test_searches_run_together_give_each_search_exactly(scaled_problem):
     """The continuation stage sends the starts of every entry's search through the map at once
     (search.continuation_searches), with halving or without: each result equals that search run
