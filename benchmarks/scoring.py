@@ -25,7 +25,13 @@ Two presence checks beside the generator's own:
   extension could reach against the diagnosis' own reference fit (no fit goes below the noise).
   Below 30 % the diagnosis' base model has absorbed the effect to within the noise,
   whatever the generator's search found; misses are split by it. It reads the diagnosis'
-  reports, so it explains misses and is never used to decide which cases count.
+  reports, so it explains misses and is never used to decide which cases count;
+- the **absorption certificate** (``absorption.json`` beside the reports, ``generate.py --certify``,
+  after the diagnosis): the base model polished from each report's base posterior on the clean
+  waveform. A point within the presence threshold proves the effect absorbable, so the secondary
+  rate "present under the audit and not absorbed" leaves such cases out; a larger misfit proves
+  nothing, so it never adds a case. A secondary count, after the fact: the protocol's rate is the
+  audit's.
 
 A suite whose reports were not kept is scored from the per-case table that ``--score`` printed
 (a text file) and the regenerated suite: :func:`load_table`, used when ``--out`` names a file. Each row's truth
@@ -86,6 +92,7 @@ class CaseRecord:
     wall_by_stage: dict = field(default_factory=dict)   # report "cost" (absent from older reports): stage -> seconds
     no_fit: bool = False                          # the verdict was "the model does not fit"
     material: bool = False                        # the verdict said the fixed parameters were wrong
+    base_absorbed: bool | None = None             # absorption.json: absorbed from the diagnosis's base fit
 
     @property
     def outside(self) -> bool:
@@ -153,6 +160,8 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
     from vfcore.diagnose.extensions import physics_of
     cases_dir, out_dir = Path(cases_dir), Path(out_dir)
     truth, audit = _suite_truth(cases_dir)
+    cert_path = out_dir / "absorption.json"
+    cert = json.loads(cert_path.read_text())["cases"] if cert_path.exists() else {}
     suite = suite or cases_dir.name
     recs = []
     for cid, t in sorted(truth.items()):
@@ -187,7 +196,8 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
             wall_by_stage={k: float(v.get("wall_s") or 0.0)
                            for k, v in ((d.get("cost") or {}).get("by_stage") or {}).items()},
             no_fit=bool(d.get("fit_check") and not d["fit_check"]["fits"]),
-            material=bool((d.get("material") or {}).get("found"))))
+            material=bool((d.get("material") or {}).get("found")),
+            base_absorbed=None if control or cid not in cert else bool(cert[cid]["absorbed"])))
     return recs
 
 
@@ -210,6 +220,8 @@ def load_table(cases_dir, table, *, suite: str | None = None, rtol: float = 1e-4
     from vfcore.diagnose.extensions import physics_of
     cases_dir = Path(cases_dir)
     truth, audit = _suite_truth(cases_dir)
+    cert_path = out_dir / "absorption.json"
+    cert = json.loads(cert_path.read_text())["cases"] if cert_path.exists() else {}
     suite = suite or cases_dir.name
     recs = []
     for line in Path(table).read_text().splitlines():
@@ -290,6 +302,9 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
     audited = [r for r in eff if r.audit_present is not None]
     # suites with an audit: its presence; the others keep the generator's
     audit_present = [r for r in eff if (r.present if r.audit_present is None else r.audit_present)]
+    certified = [r for r in eff if r.base_absorbed is not None]
+    # present under the audit (or the generator's rule) and not shown absorbable from the diagnosis's base fit
+    not_absorbed = [r for r in audit_present if not r.base_absorbed]
     missed = [r for r in present if not r.ok]
     shortlist = [r for r in present if r.ok or (r.physics is not None and r.label in r.rivals)]
     return {
@@ -318,6 +333,10 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
         "rescues": resc,
         "audited_cases": len(audited),
         "present_under_audit": _rate(audit_present),
+        "certified_cases": len(certified),
+        "absorbed_from_base": [r.case if len({q.suite for q in recs}) == 1 else f"{r.suite}/{r.case}"
+                               for r in audit_present if r.base_absorbed],
+        "present_not_absorbed": _rate(not_absorbed),
         # load_table rows whose recording the regenerated suite no longer reproduces: no audit
         "not_regenerated": [f"{r.suite}/{r.case}" for r in eff if not r.regenerated],
         # over the misses whose floor is known (a kept table has none)
@@ -367,6 +386,10 @@ def format_summary(s: dict) -> str:
              *([f"effect present under the presence audit ({s['audited_cases']} effect cases audited, "
                 f"the rest by the generator's rule), named right: {_fmt_rate(s['present_under_audit'])}"]
                if s["audited_cases"] else []),
+             *([f"absorbed from the diagnosis' base fit ({s['certified_cases']} effect cases certified; "
+                f"absorption.json): {', '.join(s['absorbed_from_base']) or 'none'}; present under the audit and "
+                f"not absorbed, named right: {_fmt_rate(s['present_not_absorbed'])}"]
+               if s.get("certified_cases") else []),
              *([f"not regenerated (effect log-likelihood changed; scored as tabled, generator's rule, no audit): "
                 f"{', '.join(s['not_regenerated'])}"] if s.get("not_regenerated") else []),
              "rescue refits: " + (", ".join(f"{m} fired {v['fired']} kept {v['kept']}" for m, v in s["rescues"].items())

@@ -6,7 +6,9 @@ an effect survives the best base-model fit of the clean waveform. Three searches
 - :func:`unabsorbed_rms`, the generator's own rule and, with :data:`AUDIT_SEARCH`, the design
   audit;
 - :func:`continued_unabsorbed_rms`, window continuation;
-- :func:`audit_presence`, which re-tests a written suite with either or both.
+- :func:`audit_presence`, which re-tests a written suite with either or both;
+- :func:`certify_absorption`, after a suite is diagnosed: the base model polished from each
+  report's base posterior, which can only show an effect absorbed, never present.
 
 :func:`unabsorbed_rms` answers with a scrambled-Sobol design and a Nelder–Mead polish on the whole 400-frame window.
 That objective is a thin ridge in f0: a draw whose f0 is 1 % off drifts a fifth of a cycle over
@@ -44,7 +46,7 @@ from vfcore.result import HR_OVERSAMPLE
 from .config import BASE_CONFIG, MATERIAL_SETS, PRESENCE_SIGMA, TRUTH_BOUNDS
 
 __all__ = ["MaterialSpace", "unabsorbed_rms", "CONTINUATION_SEARCH", "continued_unabsorbed_rms", "windows",
-           "AUDIT_SEARCH", "audit_presence"]
+           "AUDIT_SEARCH", "audit_presence", "CERTIFY_MAXFEV", "certify_absorption"]
 
 
 def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
@@ -329,4 +331,55 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
     tmp = suite / "audit.json.tmp"
     tmp.write_text(json.dumps(doc, indent=1, default=float))
     tmp.replace(suite / "audit.json")
+    return doc
+
+
+#: Nelder-Mead simulations of :func:`certify_absorption` per case (the audit polishes with 150)
+CERTIFY_MAXFEV = 150
+
+
+def _certify_one(args):
+    cid, clean, start, sigma, config, bounds, maxfev = args
+    u, fit = unabsorbed_rms(np.asarray(clean, dtype=float), None, config, n_sobol=1, n_starts=0, maxfev=maxfev,
+                            starts=[start], bounds=bounds)
+    return cid, {"unabsorbed_rms_mm2": u, "sigma_mm2": sigma, "absorbed": bool(u < PRESENCE_SIGMA * sigma),
+                 "start": start, "absorbing_fit": fit}
+
+
+def certify_absorption(suite: str | os.PathLike, reports: str | os.PathLike, workers: int = 1,
+                       config: SimConfig = BASE_CONFIG, maxfev: int = CERTIFY_MAXFEV) -> dict:
+    """After a suite is diagnosed: how much of each effect the base model leaves when started where
+    the diagnosis's own base fit ended. For every effect case with a report ``reports/case_XX.json``,
+    the clean waveform is fitted by the audit's objective (:func:`unabsorbed_rms`: any sub-frame lag,
+    the suite's material box) with a Nelder-Mead of ``maxfev`` simulations from the report's
+    base-posterior mean. A material point that reproduces the clean waveform to within
+    ``PRESENCE_SIGMA`` of the noise is a certificate that the effect is absorbable, whichever search
+    found it; a larger misfit proves nothing (the search may have missed), so this can only mark
+    effects absent (``"absorbed": true``), never present. Writes ``reports/absorption.json``; the
+    suite's files are untouched. Reads the reports as JSON only: nothing of the fitting code is
+    imported. Cases without a report, controls and reports without a base posterior are skipped."""
+    suite, reports = Path(suite), Path(reports)
+    hidden = json.loads((suite / "truth.json").read_text())["cases"]
+    public = suite / "cases.json"
+    bounds = suite_bounds(json.loads(public.read_text()) if public.exists() else {})
+    jobs = []
+    for cid, t in sorted(hidden.items()):
+        rp = reports / f"case_{cid}.json"
+        if t.get("label") == "control" or not rp.exists():
+            continue
+        base = (json.loads(rp.read_text()).get("base") or {}).get("params") or {}
+        if not all(n in base for n in bounds):
+            continue
+        start = {n: float(base[n]["mean"]) for n in bounds}
+        jobs.append((cid, t["clean"], start, float(t["sigma_mm2"]), config, bounds, int(maxfev)))
+    if workers > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(workers) as ex:
+            out = dict(ex.map(_certify_one, jobs))
+    else:
+        out = dict(map(_certify_one, jobs))
+    doc = {"maxfev": int(maxfev), "presence_sigma": PRESENCE_SIGMA, "cases": out}
+    tmp = reports / "absorption.json.tmp"
+    tmp.write_text(json.dumps(doc, indent=1, default=float))
+    tmp.replace(reports / "absorption.json")
     return doc

@@ -39,7 +39,7 @@ import numpy as np
 from vfcore import TABLE3, Params, SimConfig, simulate
 from vfcore.measures import estimate_f0
 
-from .absorb import AUDIT_SEARCH, MaterialSpace, audit_presence, unabsorbed_rms
+from .absorb import AUDIT_SEARCH, MaterialSpace, audit_presence, certify_absorption, unabsorbed_rms
 from .config import BASE_CONFIG, MATERIAL_SETS, N_OBS, N_Y, PRESENCE_SIGMA, SCALE_ANCHOR, TRUTH_BOUNDS
 from .mechanisms import (PIXEL_MM, SUB_C, asymmetric_area, boxcar_average, epithelium_profile,
                          forward_extensions_available, frame_times, gap_profile, hr_times, leak_area,
@@ -51,6 +51,7 @@ __all__ = [
     "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile", "zipper_area",
     "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale", "oscillates",
     "amplitude", "phonates", "MaterialSpace", "unabsorbed_rms", "PRESENCE_SIGMA", "AUDIT_SEARCH", "audit_presence",
+    "certify_absorption",
     "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
 ]
 
@@ -486,6 +487,10 @@ def main(argv=None) -> int:
     ap.add_argument("--audit-method", choices=("both", "continuation", "design"), default="both",
                     help="absorption search of --audit: window continuation, a dense design, or both "
                          "(default; the design only where the continuation left the effect present)")
+    ap.add_argument("--certify", metavar="SUITE",
+                    help="after a diagnosis of SUITE: polish the base model from each report's base posterior "
+                         "(--reports) and mark the effects it absorbs (writes REPORTS/absorption.json)")
+    ap.add_argument("--reports", metavar="DIR", help="the diagnosis reports of --certify (case_XX.json)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes (same cases for any number)")
     ap.add_argument("--material", choices=tuple(MATERIAL_SETS), default="full",
@@ -508,8 +513,22 @@ def main(argv=None) -> int:
                   f"{r['unabsorbed_rms_mm2'] / s_:5.2f} sigma  {'present' if r['present'] else 'NOT PRESENT'}"
                   + ("  (changed)" if r["present"] != old[cid]["present"] else ""))
         return 0
+    if a.certify:
+        if not a.reports:
+            ap.error("--certify needs --reports DIR (the diagnosis reports)")
+        if not (Path(a.certify) / "truth.json").exists():
+            ap.error(f"--certify: no truth.json in {a.certify}")
+        if not Path(a.reports).is_dir():
+            ap.error(f"--reports: {a.reports} is not a directory")
+        doc = certify_absorption(a.certify, a.reports, workers=a.workers)
+        print(f"absorption from the reports' base fits in {time.perf_counter() - t0:.1f} s "
+              f"({len(doc['cases'])} effect cases, Nelder-Mead {doc['maxfev']} simulations each)")
+        for cid, r in doc["cases"].items():
+            print(f"  {cid} unabsorbed {r['unabsorbed_rms_mm2'] / r['sigma_mm2']:5.2f} sigma  "
+                  + ("ABSORBED" if r["absorbed"] else "not shown absorbed"))
+        return 0
     if not a.out:
-        ap.error("--out is required (or --audit SUITE)")
+        ap.error("--out is required (or --audit SUITE, or --certify SUITE)")
     cases = generate_suite(a.seed, presence=not a.no_presence, workers=a.workers, material=a.material)
     write_suite(cases, a.out, a.seed, material=a.material)
     dt = time.perf_counter() - t0

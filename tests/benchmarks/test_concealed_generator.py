@@ -352,3 +352,39 @@ def test_audit_polishes_the_given_starts_and_can_only_lower_the_unabsorbed_rms(t
     assert doc["cases"]["01"] == {"present": False}
     assert json.loads((tmp_path / "audit.json").read_text())["cases"]["00"]["present"] is False
     assert (tmp_path / "truth.json").read_text() == before
+
+
+def test_certificate_marks_an_effect_the_base_fit_absorbs_and_never_one_it_does_not(tmp_path, capsys):
+    """generate.py --certify polishes the base model from each report's base-posterior mean: a clean
+    waveform the base model reproduces at that point is certified absorbed; one it cannot reproduce
+    (the same waveform scaled by 1.5) is not; controls and cases without a report are skipped; the
+    suite's files are untouched and absorption.json appears beside the reports."""
+    import json
+    absorbing = {"E_body": 12.0, "E_cover": 600.0, "p_sub": 1000.0}
+    r = simulate(Params(**{**TABLE3.as_dict(), **absorbing}), CFG)
+    clean = G.sample_hr(np.asarray(r.gaw_hr), G.hr_times(r), G.frame_times(G.N_OBS, 97.3, CFG.fps))
+    far = {**TABLE3.as_dict(), "E_body": 9.5, "E_cover": 900.0, "p_sub": 1700.0}
+    t = {"truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": 3.0, "present": True, "absorbing_fit": {}}
+    hidden = {"seed": 0, "n_obs": G.N_OBS, "cases": {
+        "00": {**t, "label": "frame_rate", "clean": clean.tolist()},
+        "01": {**t, "label": "scale", "clean": (1.5 * clean).tolist()},
+        "02": {**t, "label": "control", "clean": clean.tolist()},
+        "03": {**t, "label": "leak", "clean": clean.tolist()}}}
+    suite, reps = tmp_path / "suite", tmp_path / "reports"
+    suite.mkdir()
+    reps.mkdir()
+    (suite / "truth.json").write_text(json.dumps(hidden))
+    base = {"base": {"params": {n: {"mean": v, "sd": 0.1} for n, v in absorbing.items()}}}
+    for cid in ("00", "01", "02"):
+        (reps / f"case_{cid}.json").write_text(json.dumps(base))
+    before = (suite / "truth.json").read_text()
+    doc = A.certify_absorption(suite, reps, config=CFG, maxfev=4)
+    assert set(doc["cases"]) == {"00", "01"}
+    assert doc["cases"]["00"]["absorbed"] and doc["cases"]["00"]["unabsorbed_rms_mm2"] < 1e-6
+    assert not doc["cases"]["01"]["absorbed"] and doc["cases"]["01"]["unabsorbed_rms_mm2"] > 0.5
+    assert json.loads((reps / "absorption.json").read_text())["cases"]["00"]["absorbed"] is True
+    assert (suite / "truth.json").read_text() == before
+    # the command line names what is missing
+    with pytest.raises(SystemExit) as e:
+        G.main(["--certify", str(suite)])
+    assert e.value.code == 2 and "--reports" in capsys.readouterr().err

@@ -290,3 +290,31 @@ def test_pairs_outside_effects_and_no_fit_verdicts_are_scored_apart(tmp_path):
     assert s["material_verdicts"] == 1 and s["false_alarms"]["count"] == 0
     text = format_summary(s)
     assert "wrong name: 1/3" in text and "outside the catalogue left unnamed: 1/2" in text
+
+
+def test_absorption_certificate_only_removes_cases_from_the_secondary_rate(tmp_path):
+    """absorption.json (generate.py --certify) takes an effect the diagnosis's base fit absorbed out of
+    the secondary rate "present under the audit and not absorbed"; a case it does not show absorbed
+    stays, a control is never certified, and the protocol's own rates do not move."""
+    cdir, odir = _suite(tmp_path, "s", {
+        "00": (_truth("scale"), _report(None)),                       # missed, absorbed from the base
+        "01": (_truth("leak"), _report("leak")),                      # named right, not shown absorbed
+        "02": (_truth("zipper"), _report(None)),                      # missed, not certified
+        "03": (_truth("frame_rate", present=False), _report(None)),  # absent already: never added back
+        "04": (_truth("control"), _report(None)),
+    })
+    (odir / "absorption.json").write_text(json.dumps({"cases": {
+        "00": {"absorbed": True}, "01": {"absorbed": False}, "03": {"absorbed": False},
+        "04": {"absorbed": True}}}))
+    recs = {r.case: r for r in load_suite(cdir, odir)}
+    assert recs["00"].base_absorbed is True and recs["01"].base_absorbed is False
+    assert recs["02"].base_absorbed is None and recs["04"].base_absorbed is None
+    s = summarise(list(recs.values()))
+    assert (s["present"]["named"], s["present"]["of"]) == (1, 3)
+    assert (s["present_not_absorbed"]["named"], s["present_not_absorbed"]["of"]) == (1, 2)
+    assert s["absorbed_from_base"] == ["00"] and s["certified_cases"] == 3
+    assert "absorbed from the diagnosis' base fit (3 effect cases certified" in format_summary(s)
+    # without the file nothing is certified and the line is absent
+    (odir / "absorption.json").unlink()
+    s = summarise(load_suite(cdir, odir))
+    assert s["certified_cases"] == 0 and "absorbed from the diagnosis' base fit" not in format_summary(s)
