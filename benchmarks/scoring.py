@@ -220,8 +220,6 @@ def load_table(cases_dir, table, *, suite: str | None = None, rtol: float = 1e-4
     from vfcore.diagnose.extensions import physics_of
     cases_dir = Path(cases_dir)
     truth, audit = _suite_truth(cases_dir)
-    cert_path = out_dir / "absorption.json"
-    cert = json.loads(cert_path.read_text())["cases"] if cert_path.exists() else {}
     suite = suite or cases_dir.name
     recs = []
     for line in Path(table).read_text().splitlines():
