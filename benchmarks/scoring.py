@@ -301,12 +301,13 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
     # suites with an audit: its presence; the others keep the generator's
     audit_present = [r for r in eff if (r.present if r.audit_present is None else r.audit_present)]
     certified = [r for r in eff if r.base_absorbed is not None]
+    suites = {r.suite for r in recs}
     # present under the audit (or the generator's rule) and not shown absorbable from the diagnosis's base fit
     not_absorbed = [r for r in audit_present if not r.base_absorbed]
     missed = [r for r in present if not r.ok]
     shortlist = [r for r in present if r.ok or (r.physics is not None and r.label in r.rivals)]
     return {
-        "suites": sorted({r.suite for r in recs}),
+        "suites": sorted(suites),
         "cases": len(recs),
         "present": _rate(present),
         "all_effect_cases": _rate(eff),
@@ -332,7 +333,7 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
         "audited_cases": len(audited),
         "present_under_audit": _rate(audit_present),
         "certified_cases": len(certified),
-        "absorbed_from_base": [r.case if len({q.suite for q in recs}) == 1 else f"{r.suite}/{r.case}"
+        "absorbed_from_base": [r.case if len(suites) == 1 else f"{r.suite}/{r.case}"
                                for r in audit_present if r.base_absorbed],
         "present_not_absorbed": _rate(not_absorbed),
         # load_table rows whose recording the regenerated suite no longer reproduces: no audit

@@ -313,25 +313,40 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
     if method not in ("continuation", "design", "both"):
         raise ValueError(f"method must be 'continuation', 'design' or 'both', got {method!r}")
     suite = Path(suite)
-    hidden = json.loads((suite / "truth.json").read_text())
     default = {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH,
                "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH}}[method]
     search = dict(default if search is None else search)
     _check_search(search, method)
+    hidden, bounds = _hidden_cases_and_box(suite)
+    jobs = [(cid, t, config, search, method, bounds) for cid, t in sorted(hidden.items())]
+    doc = {"method": method, "search": search, "presence_sigma": PRESENCE_SIGMA,
+           "cases": _run_cases(_audit_one, jobs, workers)}
+    _write_whole(suite / "audit.json", doc)
+    return doc
+
+
+def _hidden_cases_and_box(suite: Path) -> tuple[dict, dict]:
+    """A suite's hidden cases (``truth.json``) and its material box (from ``cases.json``)."""
+    hidden = json.loads((suite / "truth.json").read_text())["cases"]
     public = suite / "cases.json"
-    bounds = suite_bounds(json.loads(public.read_text()) if public.exists() else {})
-    jobs = [(cid, t, config, search, method, bounds) for cid, t in sorted(hidden["cases"].items())]
-    if workers > 1:
+    return hidden, suite_bounds(json.loads(public.read_text()) if public.exists() else {})
+
+
+def _run_cases(fn, jobs: list, workers: int) -> dict:
+    """``{case id: result}`` of ``fn`` over ``jobs`` (each returning ``(id, result)``), in ``workers``
+    processes when more than one; the results do not depend on the number."""
+    if workers > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as ex:
-            out = dict(ex.map(_audit_one, jobs))
-    else:
-        out = dict(map(_audit_one, jobs))
-    doc = {"method": method, "search": search, "presence_sigma": PRESENCE_SIGMA, "cases": out}
-    tmp = suite / "audit.json.tmp"
+            return dict(ex.map(fn, jobs))
+    return dict(map(fn, jobs))
+
+
+def _write_whole(path: Path, doc: dict) -> None:
+    """``doc`` as JSON at ``path``, through a temporary file, so a reader never sees half of it."""
+    tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(doc, indent=1, default=float))
-    tmp.replace(suite / "audit.json")
-    return doc
+    tmp.replace(path)
 
 
 #: Nelder-Mead simulations of :func:`certify_absorption` per case (the audit polishes with 150)
@@ -359,9 +374,7 @@ def certify_absorption(suite: str | os.PathLike, reports: str | os.PathLike, wor
     suite's files are untouched. Reads the reports as JSON only: nothing of the fitting code is
     imported. Cases without a report, controls and reports without a base posterior are skipped."""
     suite, reports = Path(suite), Path(reports)
-    hidden = json.loads((suite / "truth.json").read_text())["cases"]
-    public = suite / "cases.json"
-    bounds = suite_bounds(json.loads(public.read_text()) if public.exists() else {})
+    hidden, bounds = _hidden_cases_and_box(suite)
     jobs = []
     for cid, t in sorted(hidden.items()):
         rp = reports / f"case_{cid}.json"
@@ -372,14 +385,6 @@ def certify_absorption(suite: str | os.PathLike, reports: str | os.PathLike, wor
             continue
         start = {n: float(base[n]["mean"]) for n in bounds}
         jobs.append((cid, t["clean"], start, float(t["sigma_mm2"]), config, bounds, int(maxfev)))
-    if workers > 1 and len(jobs) > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(workers) as ex:
-            out = dict(ex.map(_certify_one, jobs))
-    else:
-        out = dict(map(_certify_one, jobs))
-    doc = {"maxfev": int(maxfev), "presence_sigma": PRESENCE_SIGMA, "cases": out}
-    tmp = reports / "absorption.json.tmp"
-    tmp.write_text(json.dumps(doc, indent=1, default=float))
-    tmp.replace(reports / "absorption.json")
+    doc = {"maxfev": int(maxfev), "presence_sigma": PRESENCE_SIGMA, "cases": _run_cases(_certify_one, jobs, workers)}
+    _write_whole(reports / "absorption.json", doc)
     return doc
