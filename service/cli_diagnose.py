@@ -288,6 +288,7 @@ def diagnose_cmd(
 
     console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "
                   f"candidates {req.candidates or 'all implemented'}, {workers} worker(s)")
+    print_expected_cost(problem, req, workers, base_post)
     t0 = time.perf_counter()
     store = out / ".resume"
     if resume and store.exists():
@@ -304,6 +305,23 @@ def diagnose_cmd(
     console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
                   f"({time.perf_counter() - t0:.1f} s)")
     console.print(f"report: {page.resolve()}", highlight=False, soft_wrap=True)
+
+
+def print_expected_cost(problem, req, workers: int, base_post) -> None:
+    """The diagnosis's expected cost, before it starts: the two outcomes' measured simulation ranges and
+    minutes from a short timed probe of the recording's own model (:mod:`vfcore.diagnose.expected`)."""
+    from vfcore.batch import probe_seconds_per_sim
+    from vfcore.diagnose.expected import expected_cost
+    from vfcore.diagnose.extensions import get
+    from vfcore.inference.importance import draw_prior
+
+    opts = req.options()
+    prior = problem.prior
+    t = probe_seconds_per_sim(prior.full_array(draw_prior(prior, 32, opts.seed)), problem.config)
+    n = None if opts.candidates is None else sum(get(c).implemented for c in opts.candidates)
+    reused = base_post is not None and tuple(base_post.names) == tuple(prior.names)
+    for line in expected_cost(opts, t, workers, base_given=reused, n_entries=n).lines():
+        console.print(line, highlight=False, soft_wrap=True)
 
 
 def run_local(problem, req, workers: int, store: Path | None, base_post):

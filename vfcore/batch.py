@@ -243,3 +243,24 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = LO
             for i, r in zip(sel, res):
                 out[i] = r
     return out  # type: ignore[return-value]
+
+
+def probe_seconds_per_sim(params_array, config: SimConfig, seconds: float = 0.1) -> float:
+    """One core's seconds per simulation of ``config`` on this machine: the rows of ``params_array``
+    simulated for ``seconds`` of model time in one lock-step block (no early stop), scaled to
+    ``config.duration``. Give it as many rows as a fit's block (32): a simulation's first 50 ms
+    cost more per model second than the rest (measured: 32 rows for 0.05 s overestimated whole
+    runs 1.3 times on the coarse mesh, for 0.1 s 1.1 times) and a narrow block costs more per row,
+    so 8 rows for 0.05 s overestimated whole runs 2.4-2.9 times (``benchmarks/bench_probe.py``, docs/inference.md "Cost
+    before a run")."""
+    arr = _as_rows(params_array)
+    n = len(arr)
+    if n == 0:
+        raise ValueError("probe_seconds_per_sim needs at least one row")
+    if seconds <= 0:
+        raise ValueError(f"seconds must be > 0, got {seconds!r}")
+    cfg = config.replace(duration=min(seconds, config.duration), discard=0.0, early_stop=False)
+    simulate_many(arr[:1], cfg.replace(duration=cfg.dt * 4), block=1)        # load the compiled kernels
+    t = time.perf_counter()
+    simulate_many(arr, cfg, block=n)
+    return (time.perf_counter() - t) / n * config.duration / cfg.duration

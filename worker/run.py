@@ -93,20 +93,17 @@ LOCKSTEP_BLOCK = 32
 SMC_SIMS_PER_PARTICLE = (20, 90)
 
 
-def probe_seconds_per_sim(spec: JobSpec, n: int = 8, seconds: float = 0.05) -> float:
-    """Seconds per simulation of this job's model on this machine: ``n`` prior draws simulated for
-    ``seconds`` of model time in one lock-step block, scaled to the job's duration (a settled draw that
-    stops early costs less; one that fails costs less still)."""
+def probe_seconds_per_sim(spec: JobSpec, n: int = 32, seconds: float = 0.1) -> float:
+    """Seconds per simulation of this job's model on this machine: ``n`` prior draws simulated in one
+    lock-step block for ``seconds`` of model time, scaled to the job's duration
+    (:func:`vfcore.batch.probe_seconds_per_sim`; a settled draw that stops early costs less, one that fails
+    less still)."""
     if spec.model != "fe":
         return estimated_seconds_per_sim(spec)
-    from vfcore.batch import simulate_many
+    from vfcore.batch import probe_seconds_per_sim as probe
     problem_prior = spec.to_prior()
     rows = problem_prior.full_array(draw_prior(problem_prior, n, spec.seed))
-    cfg = spec.sim_config().replace(duration=min(seconds, spec.duration), discard=0.0, early_stop=False)
-    simulate_many(rows[:1], cfg.replace(duration=cfg.dt * 4), block=1)        # load the compiled kernels
-    t = time.perf_counter()
-    simulate_many(rows, cfg, block=n)
-    return (time.perf_counter() - t) / n * spec.duration / cfg.duration
+    return probe(rows, spec.sim_config(), seconds)
 
 
 def expected_simulations(spec: JobSpec) -> tuple[int, int]:

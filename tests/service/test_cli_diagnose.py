@@ -237,3 +237,25 @@ def test_a_base_fit_lends_its_model_to_the_settings_not_given(tmp_path, leaky_ga
     assert r.exit_code == 2 and "--contact-layer-mm 0.2" in " ".join(r.output.split()), r.output
     r = _invoke([str(leaky_gaw), "--out", str(tmp_path / "out"), "--estimate", "E_body,E_cover", *TINY])
     assert seen[-1][0].config.dt == 1e-4 and seen[-1][0].config.contact == "projection"   # no --base: defaults
+
+
+def test_the_expected_cost_is_announced_before_the_diagnosis_runs(tmp_path, leaky_gaw, monkeypatch):
+    """Both outcomes' simulations and minutes are printed before any fit starts; a candidate subset
+    announces fewer catalogue simulations than the whole catalogue."""
+    import service.cli_diagnose as C
+    from vfcore.diagnose.expected import CATALOGUE_SIMULATIONS, FLOOR_SIMULATIONS
+
+    def stop(problem, req, workers, store, base_post):
+        raise C.fail("stopped before simulating", code=1)
+
+    monkeypatch.setattr(C, "run_local", stop)
+    args = [str(leaky_gaw), "--out", str(tmp_path / "out"), "--estimate", "E_body,E_cover", *TINY]
+    r = CliRunner().invoke(app, ["diagnose", *args], env={"COLUMNS": "250"})
+    assert r.exit_code == 1 and "stopped before simulating" in r.output, r.output
+    text = " ".join(r.output.split())
+    assert text.index("expected cost") < text.index("stopped before simulating")
+    assert f"{FLOOR_SIMULATIONS[0]:,}-{FLOOR_SIMULATIONS[1]:,} simulations" in text, text
+    assert f"{CATALOGUE_SIMULATIONS[0]:,}-{CATALOGUE_SIMULATIONS[1]:,} simulations" in text, text
+    r = CliRunner().invoke(app, ["diagnose", *args, "--candidates", "leak"], env={"COLUMNS": "250"})
+    text = " ".join(r.output.split())
+    assert f"{CATALOGUE_SIMULATIONS[1]:,} simulations" not in text and "1 of" in text, text

@@ -1,0 +1,120 @@
+"""What a diagnosis is expected to cost, announced before it starts (``vfinfer diagnose`` prints it).
+
+A diagnosis ends in one of two ways whose costs differ tenfold, and which one is not known before the
+base fit: it stops at the noise after the base fit (``floor_stop``, docs/diagnose.md section 3), or it
+reaches the catalogue (refits, rescues, continuation searches, mode checks). The counts below are the
+ranges measured on the held-out suite of seed 12 (docs/diagnose.md section 5, all 19 finished cases,
+every setting at its default, 2 workers):
+
+* floor stops, 10 cases: 3,513–14,393 simulations. Two base runs of 40 particles cost 3,500–4,300; a
+  base whose two runs disagree is fitted again with twice the particles (8,700–14,400);
+* reaching the catalogue, 9 cases: 21,991–81,360 simulations.
+
+Their time per simulation differs too. The base fits simulate a whole SMC generation in lock-step
+blocks; the catalogue's stages also score waveform-level parameters by quadrature per simulation and run
+single Nelder–Mead evaluations on the scalar kernel. Both are stated in units of the base model's own
+time per simulation, measured before the run by :func:`vfcore.batch.probe_seconds_per_sim` (32 prior
+draws, one lock-step block; within 0.9–1.2 times a whole run on the suites' coarse mesh,
+``benchmarks/bench_probe.py``): the suite's floor stops took a median 19.6 ms a simulation on 2 workers
+(39 ms of a core) and its catalogue cases 36.8 ms, 0.8 of that on the current code (the one case run
+on both, 28.6 and 22.8 ms), about 59 ms of a core, against the probe's 45–47 ms on the same machine.
+
+The counts scale with the settings that set them (base particles and runs, refit particles, the number
+of entries refitted and searched); with any of these away from its default the figures are scaled
+linearly and marked as a guide: the ranges were not measured there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .options import DiagnoseOptions
+
+__all__ = ["ExpectedCost", "expected_cost", "FLOOR_SIMULATIONS", "CATALOGUE_SIMULATIONS",
+           "FLOOR_TIME_FACTOR", "CATALOGUE_TIME_FACTOR"]
+
+#: Simulations of a diagnosis that stops after its base fit, at the defaults (seed 12, 10 cases).
+FLOOR_SIMULATIONS = (3_513, 14_393)
+#: Simulations of a diagnosis that reaches the catalogue, at the defaults (seed 12, 9 cases).
+CATALOGUE_SIMULATIONS = (21_991, 81_360)
+#: Core-seconds per simulation of each kind of diagnosis, in units of the base model's lock-step probe.
+FLOOR_TIME_FACTOR = 0.85
+CATALOGUE_TIME_FACTOR = 1.3
+
+#: The implemented catalogue at the defaults: every entry refitted, 5 of them searched.
+_DEFAULT = DiagnoseOptions()
+_CHANGING = ("n_particles", "base_runs", "refit_particles", "max_refits", "continuation",
+             "continuation_entries", "escalate_factor", "shared_mode", "mode_checks")
+_REFITS, _SEARCH, _CHECKS = 0.66, 0.28, 0.06
+
+
+@dataclass(frozen=True)
+class ExpectedCost:
+    """Simulations and minutes of the two outcomes; ``guide`` names the settings that differ from the
+    measured defaults (empty: the measured ranges themselves)."""
+
+    floor: tuple[int, int]
+    catalogue: tuple[int, int]
+    floor_minutes: tuple[float, float]
+    catalogue_minutes: tuple[float, float]
+    seconds_per_simulation: float
+    workers: int
+    base_given: bool
+    guide: tuple[str, ...]
+
+    def lines(self) -> list[str]:
+        """The announcement, one line per outcome."""
+        def span(a, b, fmt):
+            return f"{fmt(a)}-{fmt(b)}"
+        ints, mins = (lambda v: f"{v:,}"), (lambda v: f"{v:.0f}" if v >= 10 else f"{v:.1f}")
+        w = f"{self.workers} worker{'s' if self.workers > 1 else ''}"
+        first = ("if the --base fit is already at the noise: no further base fit" if self.base_given else
+                 f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations, "
+                 f"about {span(*self.floor_minutes, mins)} min")
+        out = [f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
+               + first,
+               f"  if it goes on to the catalogue: {span(*self.catalogue, ints)} simulations, about "
+               f"{span(*self.catalogue_minutes, mins)} min"]
+        if self.guide:
+            out.append("  (measured at the default settings; scaled for yours: " + ", ".join(self.guide) + ")")
+        return out
+
+
+def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, workers: int, *,
+                  base_given: bool = False, n_entries: int | None = None) -> ExpectedCost:
+    """The expected cost of a diagnosis with ``options`` on ``workers`` processes, given the base model's
+    probed ``seconds_per_simulation`` (one core). ``n_entries``: the catalogue entries that will be
+    refitted (None: all, as measured). With ``base_given`` the base fit's share is left out of both."""
+    if seconds_per_simulation <= 0 or workers < 1:
+        raise ValueError("seconds_per_simulation must be > 0 and workers >= 1")
+    d = _DEFAULT
+    base = options.n_particles * options.base_runs / (d.n_particles * d.base_runs)
+    from .extensions import CATALOGUE
+    n_all = len(CATALOGUE)
+    n = n_all if n_entries is None else int(n_entries)
+    if options.max_refits is not None:
+        # max_refits caps only the observation-level entries; the forward-level ones are always refitted
+        from .options import OBSERVATION_ENTRIES
+        n = min(n, n_all - OBSERVATION_ENTRIES + options.max_refits)
+    refit = options.refit_n / d.refit_n * n / n_all
+    searched = 0 if not options.continuation else min(n, options.continuation_entries or n)
+    search = (1 + searched) / (1 + d.continuation_entries)
+    # the catalogue's share split by stage as the suite's time was (refits and rescues 66 %, the
+    # continuation stage 28 %, mode checks 6 %: the mean a case of its first group)
+    rest = (_REFITS * refit + _SEARCH * search
+            + _CHECKS * (options.mode_checks / d.mode_checks if d.mode_checks else 1.0))
+    f_lo, f_hi = FLOOR_SIMULATIONS
+    c_lo, c_hi = CATALOGUE_SIMULATIONS
+    floor = (round(f_lo * base), round(f_hi * base))
+    cat = (round(f_lo * base + (c_lo - f_lo) * rest), round(f_hi * base + (c_hi - f_hi) * rest))
+    if base_given:
+        cat = (cat[0] - floor[0], cat[1] - floor[1])
+        floor = (0, 0)
+
+    def minutes(sims, factor):
+        return tuple(s * seconds_per_simulation * factor / workers / 60.0 for s in sims)
+    guide = tuple(f"{name} {getattr(options, name)!r}" for name in _CHANGING
+                  if getattr(options, name) != getattr(d, name))
+    if n_entries is not None and n_entries != n_all:
+        guide = guide + (f"{n_entries} of {n_all} entries",)
+    return ExpectedCost(floor, cat, minutes(floor, FLOOR_TIME_FACTOR), minutes(cat, CATALOGUE_TIME_FACTOR),
+                        float(seconds_per_simulation), int(workers), bool(base_given), guide)
