@@ -313,14 +313,17 @@ def print_expected_cost(problem, req, workers: int, base_post) -> None:
     from vfcore.batch import probe_seconds_per_sim
     from vfcore.diagnose.expected import expected_cost
     from vfcore.diagnose.extensions import get
+    from vfcore.diagnose.material import pinned
     from vfcore.inference.importance import draw_prior
 
     opts = req.options()
     prior = problem.prior
     t = probe_seconds_per_sim(prior.full_array(draw_prior(prior, 32, opts.seed)), problem.config)
     n = None if opts.candidates is None else sum(get(c).implemented for c in opts.candidates)
-    reused = base_post is not None and tuple(base_post.names) == tuple(prior.names)
-    for line in expected_cost(opts, t, workers, base_given=reused, n_entries=n).lines():
+    freed = opts.free_material and bool(pinned(problem))
+    reused = base_post is not None and tuple(base_post.names) == tuple(prior.names) and not freed
+    fits = 0 if reused else 1 if base_post is not None or not freed else 2
+    for line in expected_cost(opts, t, workers, base_fits=fits, n_entries=n).lines():
         console.print(line, highlight=False, soft_wrap=True)
 
 

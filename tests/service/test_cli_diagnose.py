@@ -259,3 +259,8 @@ def test_the_expected_cost_is_announced_before_the_diagnosis_runs(tmp_path, leak
     r = CliRunner().invoke(app, ["diagnose", *args, "--candidates", "leak"], env={"COLUMNS": "250"})
     text = " ".join(r.output.split())
     assert f"{CATALOGUE_SIMULATIONS[1]:,} simulations" not in text and "1 of" in text, text
+    # E_lig, p_sub and eta held at Table 3 and freed after a pinned fit: two base fits
+    pinned = [a for a in args if a != "--no-free-material"]
+    r = CliRunner().invoke(app, ["diagnose", *pinned], env={"COLUMNS": "250"})
+    text = " ".join(r.output.split())
+    assert f"{2 * FLOOR_SIMULATIONS[1]:,} simulations" in text and "a pinned base fit" in text, text

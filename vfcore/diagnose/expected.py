@@ -21,7 +21,9 @@ on both, 28.6 and 22.8 ms), about 59 ms of a core, against the probe's 45–47 m
 
 The counts scale with the settings that set them (base particles and runs, refit particles, the number
 of entries refitted and searched); with any of these away from its default the figures are scaled
-linearly and marked as a guide: the ranges were not measured there.
+linearly and marked as a guide: the ranges were not measured there. So is a diagnosis that holds some of
+the five at Table 3 and frees them after a pinned fit (two base fits), or one given a base fit to reuse
+(none).
 """
 from __future__ import annotations
 
@@ -58,7 +60,7 @@ class ExpectedCost:
     catalogue_minutes: tuple[float, float]
     seconds_per_simulation: float
     workers: int
-    base_given: bool
+    base_fits: int
     guide: tuple[str, ...]
 
     def lines(self) -> list[str]:
@@ -67,7 +69,7 @@ class ExpectedCost:
             return f"{fmt(a)}-{fmt(b)}"
         ints, mins = (lambda v: f"{v:,}"), (lambda v: f"{v:.0f}" if v >= 10 else f"{v:.1f}")
         w = f"{self.workers} worker{'s' if self.workers > 1 else ''}"
-        first = ("if the --base fit is already at the noise: no further base fit" if self.base_given else
+        first = ("if the --base fit is already at the noise: no further base fit" if self.base_fits == 0 else
                  f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations, "
                  f"about {span(*self.floor_minutes, mins)} min")
         out = [f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
@@ -80,14 +82,16 @@ class ExpectedCost:
 
 
 def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, workers: int, *,
-                  base_given: bool = False, n_entries: int | None = None) -> ExpectedCost:
+                  base_fits: int = 1, n_entries: int | None = None) -> ExpectedCost:
     """The expected cost of a diagnosis with ``options`` on ``workers`` processes, given the base model's
-    probed ``seconds_per_simulation`` (one core). ``n_entries``: the catalogue entries that will be
-    refitted (None: all, as measured). With ``base_given`` the base fit's share is left out of both."""
-    if seconds_per_simulation <= 0 or workers < 1:
-        raise ValueError("seconds_per_simulation must be > 0 and workers >= 1")
+    probed ``seconds_per_simulation`` (one core). ``base_fits``: 1 as measured; 0 when a given base
+    fit is used as it is (its share left out), 2 when parameters held at Table 3 are freed after a
+    pinned fit (:func:`.material.material_first`: the base share twice). ``n_entries``: the catalogue
+    entries that will be refitted (None: all, as measured)."""
+    if seconds_per_simulation <= 0 or workers < 1 or base_fits not in (0, 1, 2):
+        raise ValueError("seconds_per_simulation must be > 0, workers >= 1 and base_fits 0, 1 or 2")
     d = _DEFAULT
-    base = options.n_particles * options.base_runs / (d.n_particles * d.base_runs)
+    base = options.n_particles * options.base_runs / (d.n_particles * d.base_runs) * max(base_fits, 1)
     from .extensions import CATALOGUE
     n_all = len(CATALOGUE)
     n = n_all if n_entries is None else int(n_entries)
@@ -106,7 +110,7 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, worke
     c_lo, c_hi = CATALOGUE_SIMULATIONS
     floor = (round(f_lo * base), round(f_hi * base))
     cat = (round(f_lo * base + (c_lo - f_lo) * rest), round(f_hi * base + (c_hi - f_hi) * rest))
-    if base_given:
+    if base_fits == 0:
         cat = (cat[0] - floor[0], cat[1] - floor[1])
         floor = (0, 0)
 
@@ -116,5 +120,7 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, worke
                   if getattr(options, name) != getattr(d, name))
     if n_entries is not None and n_entries != n_all:
         guide = guide + (f"{n_entries} of {n_all} entries",)
+    if base_fits == 2:
+        guide = guide + ("a pinned base fit before the freed one",)
     return ExpectedCost(floor, cat, minutes(floor, FLOOR_TIME_FACTOR), minutes(cat, CATALOGUE_TIME_FACTOR),
-                        float(seconds_per_simulation), int(workers), bool(base_given), guide)
+                        float(seconds_per_simulation), int(workers), int(base_fits), guide)

@@ -40,12 +40,15 @@ def test_the_count_moves_with_the_settings_that_set_it_and_says_it_is_scaled():
     assert few.catalogue[1] < d.catalogue[1] and "2 of" in "\n".join(few.lines())
 
 
-def test_a_reused_base_fit_leaves_out_the_base_share():
+def test_a_reused_base_fit_leaves_out_the_base_share_and_a_pinned_one_doubles_it():
     d = expected_cost(DiagnoseOptions(), 0.04, 2)
-    b = expected_cost(DiagnoseOptions(), 0.04, 2, base_given=True)
+    b = expected_cost(DiagnoseOptions(), 0.04, 2, base_fits=0)
     assert b.floor == (0, 0)
     assert b.catalogue == (d.catalogue[0] - d.floor[0], d.catalogue[1] - d.floor[1])
     assert "--base" in b.lines()[0]
+    two = expected_cost(DiagnoseOptions(), 0.04, 2, base_fits=2)
+    assert two.floor == (2 * d.floor[0], 2 * d.floor[1])
+    assert two.catalogue[1] - two.floor[1] == d.catalogue[1] - d.floor[1] and "pinned" in "\n".join(two.lines())
 
 
 def test_nonsense_is_refused():
@@ -53,3 +56,5 @@ def test_nonsense_is_refused():
         expected_cost(DiagnoseOptions(), 0.0, 2)
     with pytest.raises(ValueError):
         expected_cost(DiagnoseOptions(), 0.04, 0)
+    with pytest.raises(ValueError):
+        expected_cost(DiagnoseOptions(), 0.04, 2, base_fits=3)
