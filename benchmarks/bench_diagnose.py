@@ -84,12 +84,13 @@ def run(a) -> None:
                                max_refits=a.max_refits or None, refit_particles=a.refit_particles,
                                base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
+                               escalate_refits=a.escalate_refits,
                                shared_mode=a.shared_mode, continuation=a.continuation,
                                continuation_entries=a.continuation_entries or None,
                                continuation_options={"halving": bool(a.halving)})
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
-            d["runner"] = {"continuation": a.continuation, "continuation_entries": a.continuation_entries, "halving": a.halving, "shared_mode": a.shared_mode,
+            d["runner"] = {"escalate_refits": a.escalate_refits, "continuation": a.continuation, "continuation_entries": a.continuation_entries, "halving": a.halving, "shared_mode": a.shared_mode,
                            "seed": a.seed, "noise": a.noise, "lag_search": a.lag_search}
             if store is not None:          # a resumed case: its earlier attempts' wall time counted in
                 account(d, inner)
@@ -171,6 +172,9 @@ def main(argv=None) -> int:
                          "results so far were measured with 'fixed'")
     ap.add_argument("--escalate-tau", type=float, default=10.0,
                     help="between-run error (nats) of the base runs above which the particles are doubled (0 = never)")
+    ap.add_argument("--escalate-refits", action=argparse.BooleanOptionalAction, default=d.escalate_refits,
+                    help="an escalation also doubles the particles of every later fit (default: "
+                         "vfcore.diagnose.DiagnoseOptions().escalate_refits)")
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods': 1.5 periods only")

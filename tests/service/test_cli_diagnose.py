@@ -124,6 +124,7 @@ def test_library_cli_service_and_benchmark_share_one_set_of_defaults(monkeypatch
     assert (seen["particles"], seen["refit_particles"]) == (o.n_particles, o.refit_particles)
     assert seen["continuation"] == o.continuation
     assert seen["continuation_entries"] == o.continuation_entries
+    assert seen["escalate_refits"] == o.escalate_refits
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
 
 

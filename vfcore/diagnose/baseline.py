@@ -115,7 +115,8 @@ def fit_base(run: Run, st: DiagnosisState) -> None:
         all_base.extend(runs)
         st.n_simulations += nb
         st.notes.extend(bnotes)
-        st.refit_n *= factor
+        if run.options.escalate_refits:
+            st.refit_n *= factor
     else:
         st.n_simulations += int(st.base.n_simulations)
         all_base.append((float(st.base.log_evidence), float(st.base.log_evidence_se)))

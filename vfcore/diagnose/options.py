@@ -84,6 +84,9 @@ class DiagnoseOptions:
         (None: never).
     escalate_factor : int
         Particle factor of the escalation.
+    escalate_refits : bool
+        An escalation also multiplies the particles of every later refit, rescue, mode check and
+        continued fit (False: only the base runs are escalated).
     integrate : bool
         Refits integrate each extension's waveform-level parameters out of every simulation's
         likelihood by quadrature (:func:`.fit.fit_extended`); False: the SMC is joint.
@@ -149,6 +152,7 @@ class DiagnoseOptions:
     refit_particles: int | None = 24
     escalate_tau: float | None = 10.0
     escalate_factor: int = 2
+    escalate_refits: bool = True
     integrate: bool = True
     nested_check: bool = True
     parsimony_se: float = 0.0

@@ -537,6 +537,32 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
     assert factor == 1
 
 
+def test_an_escalation_doubles_the_later_fits_particles_unless_told_not_to(monkeypatch):
+    """The escalation factor carries into every later fit (``st.refit_n``) by default; with
+    ``escalate_refits=False`` only the base runs are escalated. The base runs themselves are the same
+    either way."""
+    from types import SimpleNamespace
+
+    import vfcore.diagnose.baseline as B
+    from vfcore.diagnose.options import DiagnoseOptions
+    from vfcore.diagnose.state import DiagnosisState, Run
+
+    def fake_base_fit(problem, n_particles, runs_out, **kw):
+        runs_out.extend([(-100.0, 1.0), (-600.0, 1.0)])
+        return SimpleNamespace(log_evidence=-90.0), 0.5, 2, 1234, ["base runs disagree"]
+
+    monkeypatch.setattr(B, "base_fit", fake_base_fit)
+    monkeypatch.setattr(DiagnosisState, "summary", lambda self, post: {"predictive_noise_sd": 0.0})
+    seen = {}
+    for flag in (True, False):
+        o = DiagnoseOptions(free_material=False, escalate_refits=flag)
+        st = DiagnosisState(problem=SimpleNamespace(noise="fixed", sigma_e=1.0), base=None, refit_n=o.refit_n,
+                            candidates=[])
+        B.fit_base(Run.start(o, map, None), st)
+        seen[flag] = (st.refit_n, st.n_simulations, st.base.log_evidence)
+    assert seen[True] == (48, 1234, -90.0) and seen[False] == (24, 1234, -90.0)
+
+
 def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
     from vfcore.diagnose.amend import promote_local
     # a 6,585-nat gain with 82 % RMS gain, but base runs 1,760 nats apart: not found globally
