@@ -249,9 +249,8 @@ def probe_seconds_per_sim(params_array, config: SimConfig, seconds: float = 0.1)
     """One core's seconds per simulation of ``config`` on this machine: the rows of ``params_array``
     simulated for ``seconds`` of model time in one lock-step block (no early stop), scaled to
     ``config.duration``. Give it as many rows as a fit's block (32): a simulation's first 50 ms
-    cost more per model second than the rest (measured: 32 rows for 0.05 s overestimated whole
-    runs 1.3 times on the coarse mesh, for 0.1 s 1.1 times) and a narrow block costs more per row,
-    so 8 rows for 0.05 s overestimated whole runs 2.4-2.9 times (``benchmarks/bench_probe.py``, docs/inference.md "Cost
+    cost more per model second than the rest and a narrow block costs more per row: 8 rows for
+    0.05 s overestimated whole runs 2.3-2.6 times, 32 rows for 0.1 s 1.15-1.38 times (``benchmarks/bench_probe.py``, docs/inference.md "Cost
     before a run")."""
     arr = _as_rows(params_array)
     n = len(arr)

@@ -14,7 +14,7 @@ Their time per simulation differs too. The base fits simulate a whole SMC genera
 blocks; the catalogue's stages also score waveform-level parameters by quadrature per simulation and run
 single Nelder–Mead evaluations on the scalar kernel. Both are stated in units of the base model's own
 time per simulation, measured before the run by :func:`vfcore.batch.probe_seconds_per_sim` (32 prior
-draws, one lock-step block; within 0.9–1.2 times a whole run on the suites' coarse mesh,
+draws, one lock-step block; 1.13–1.26 times a whole run on the suites' coarse mesh,
 ``benchmarks/bench_probe.py``): the suite's floor stops took a median 19.6 ms a simulation on 2 workers
 (39 ms of a core) and its catalogue cases 36.8 ms, 0.8 of that on the current code (the one case run
 on both, 28.6 and 22.8 ms), about 59 ms of a core, against the probe's 45–47 ms on the same machine.
