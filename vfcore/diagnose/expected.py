@@ -42,7 +42,7 @@ CATALOGUE_SIMULATIONS = (21_991, 81_360)
 FLOOR_TIME_FACTOR = 0.85
 CATALOGUE_TIME_FACTOR = 1.3
 
-#: The implemented catalogue at the defaults: every entry refitted, 5 of them searched.
+#: The settings the ranges were measured at, and those that change the simulation count.
 _DEFAULT = DiagnoseOptions()
 _CHANGING = ("n_particles", "base_runs", "refit_particles", "max_refits", "continuation",
              "continuation_entries", "escalate_factor", "shared_mode", "mode_checks")
@@ -105,7 +105,7 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, worke
     # the catalogue's share split by stage as the suite's time was (refits and rescues 66 %, the
     # continuation stage 28 %, mode checks 6 %: the mean a case of its first group)
     rest = (_REFITS * refit + _SEARCH * search
-            + _CHECKS * (options.mode_checks / d.mode_checks if d.mode_checks else 1.0))
+            + _CHECKS * options.mode_checks / d.mode_checks)
     f_lo, f_hi = FLOOR_SIMULATIONS
     c_lo, c_hi = CATALOGUE_SIMULATIONS
     floor = (round(f_lo * base), round(f_hi * base))
