@@ -10,7 +10,7 @@ export MKL_NUM_THREADS := 1
 export NUMBA_NUM_THREADS ?= 2
 export MPLBACKEND := Agg
 
-.PHONY: install test test-all lock demo bench meshes clean
+.PHONY: install test test-slow test-all lock demo bench meshes clean
 
 # Installs exactly the committed lock (hashes checked), then the project itself
 # without resolving anything: a fresh clone gets the versions CI tested.
@@ -27,9 +27,12 @@ install: $(VENV)/.installed
 test: install
 	$(PY) -m pytest -q --durations=15 -m "not slow" tests
 
-# Everything, the slow end-to-end diagnoses and calibrations included (what CI runs after `test`).
-test-all: install
-	$(PY) -m pytest -q --durations=25 tests
+# Only the end-to-end checks marked `slow` (the slow end-to-end diagnoses and calibrations).
+test-slow: install
+	$(PY) -m pytest -q --durations=25 -m slow tests
+
+# Everything: the default suite, then the slow checks, each test run once (what CI runs).
+test-all: test test-slow
 
 # Regenerates requirements.lock from pyproject.toml (every extra, hashes, all platforms) with a
 # pinned uv in a throwaway venv; tests/packaging/test_packaging.py fails while the two disagree.
