@@ -16,7 +16,7 @@ from vfcore.diagnose.options import BOUNDS, OBSERVATION_ENTRIES, DiagnoseOptions
 from worker.jobspec import JobSpec
 
 __all__ = ["JobSpec", "Figure", "Submitted", "JobStatus", "CompareRequest", "LinkOut", "DiagnoseRequest",
-           "DiagnosisSpec", "DiagnoseStarted", "DiagnosisStatus", "check_candidates", "KINDS", "DIAGNOSIS_OPTIONS"]
+           "DiagnosisSpec", "DiagnoseStarted", "ExpectedDiagnosis", "DiagnosisStatus", "check_candidates", "KINDS", "DIAGNOSIS_OPTIONS"]
 
 #: What a row of the job table holds: an inference (a JobSpec) or a diagnosis of a finished inference.
 KINDS = ("inference", "diagnosis")
@@ -33,6 +33,9 @@ class Submitted(BaseModel):
     state: str
     status_url: str
     warnings: list[str] = Field(default_factory=list)
+    expected_simulations: tuple[int, int] | None = Field(default=None, description=(
+        "(low, high) simulations the run will take: exact for importance sampling, the range measured on "
+        "finite-element fits for SMC (docs/inference.md, 'Cost before a run')"))
 
 
 class JobStatus(BaseModel):
@@ -162,11 +165,27 @@ class DiagnosisSpec(BaseModel):
         return self.model_dump_json()
 
 
+class ExpectedDiagnosis(BaseModel):
+    """What a diagnosis is expected to cost, announced when it is queued (vfcore.diagnose.expected): which of
+    the two outcomes it ends in is known only after its base fit."""
+
+    floor_simulations: tuple[int, int] = Field(description=(
+        "(low, high) simulations if the base fit reaches the noise and the diagnosis stops there; (0, 0) when the "
+        "job's own posterior is the base fit as it is"))
+    catalogue_simulations: tuple[int, int] = Field(description="(low, high) simulations if it goes on to the catalogue")
+    base_fits: int = Field(description="base fits it runs: 0 (the job's posterior reused), 1, or 2 (a pinned fit, "
+                                       "then the parameters held at Table 3 freed)")
+    scaled_for: list[str] = Field(default_factory=list, description=(
+        "settings away from the defaults the ranges were measured at (empty: the measured ranges); the figures "
+        "are then scaled linearly, a guide"))
+
+
 class DiagnoseStarted(BaseModel):
     id: str = Field(description="the job diagnosed")
     state: str
     status_url: str
     diagnosis_id: str = Field(description="the diagnosis's own job id (GET or DELETE /jobs/{diagnosis_id})")
+    expected: ExpectedDiagnosis | None = None
 
 
 class DiagnosisStatus(BaseModel):

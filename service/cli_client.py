@@ -117,6 +117,20 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
     console.print(d["id"])
 
 
+def expected_lines(e: dict | None) -> list[str]:
+    """The service's announced cost of a diagnosis (``DiagnoseStarted.expected``) as the lines ``vfinfer
+    diagnose`` prints, without minutes: the service does not time its workers."""
+    if not e:
+        return []
+    f, c = e["floor_simulations"], e["catalogue_simulations"]
+    first = ("if the job's posterior is already at the noise: no further base fit" if e["base_fits"] == 0 else
+             f"if the base fit reaches the noise (it stops there): {f[0]:,}-{f[1]:,} simulations")
+    out = ["expected cost: " + first, f"  if it goes on to the catalogue: {c[0]:,}-{c[1]:,} simulations"]
+    if e.get("scaled_for"):
+        out.append("  (measured at the default settings; scaled for yours: " + ", ".join(e["scaled_for"]) + ")")
+    return out
+
+
 def _progress(d: dict) -> str:
     p = d["progress"]
     tot = p["simulations_total"] or 0
@@ -253,8 +267,10 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
         raise fail(f"--out {out} exists and is not a folder")
     with Service(url, token) as svc:
         if start:
-            svc.request("POST", f"/jobs/{job_id}/diagnose", json=body or None)
+            started = svc.json("POST", f"/jobs/{job_id}/diagnose", json=body or None)
             console.print(f"diagnosis of {job_id} started")
+            for line in expected_lines(started.get("expected")):
+                console.print(line, highlight=False, soft_wrap=True)
         if cancel:
             svc.request("DELETE", f"/jobs/{job_id}/diagnosis")
             console.print(f"diagnosis of {job_id} cancelling")

@@ -311,19 +311,13 @@ def print_expected_cost(problem, req, workers: int, base_post) -> None:
     """The diagnosis's expected cost, before it starts: the two outcomes' measured simulation ranges and
     minutes from a short timed probe of the recording's own model (:mod:`vfcore.diagnose.expected`)."""
     from vfcore.batch import probe_seconds_per_sim
-    from vfcore.diagnose.expected import expected_cost
-    from vfcore.diagnose.extensions import get
-    from vfcore.diagnose.material import pinned
+    from vfcore.diagnose.expected import expected_for
     from vfcore.inference.importance import draw_prior
 
     opts = req.options()
     prior = problem.prior
     t = probe_seconds_per_sim(prior.full_array(draw_prior(prior, 32, opts.seed)), problem.config)
-    n = None if opts.candidates is None else sum(get(c).implemented for c in opts.candidates)
-    freed = opts.free_material and bool(pinned(problem))
-    reused = base_post is not None and tuple(base_post.names) == tuple(prior.names) and not freed
-    fits = 0 if reused else 1 if base_post is not None or not freed else 2
-    for line in expected_cost(opts, t, workers, base_fits=fits, n_entries=n).lines():
+    for line in expected_for(problem, opts, t, workers, base_post).lines():
         console.print(line, highlight=False, soft_wrap=True)
 
 

@@ -15,10 +15,11 @@ from fastapi.responses import HTMLResponse
 from worker import store as st
 
 from ..access import done_job, own_job, page_reader
-from ..api_models import DiagnoseRequest, DiagnoseStarted, DiagnosisSpec, DiagnosisStatus, LinkOut
+from ..api_models import (DiagnoseRequest, DiagnoseStarted, DiagnosisSpec, DiagnosisStatus, ExpectedDiagnosis,
+                          LinkOut)
 from ..db import ACTIVE
 from ..deps import JobIdDep, ManagerDep, UserDep
-from ..diagnosis import read_report
+from ..diagnosis import expected, read_report
 from ..manager import DiagnosisRunning
 from ..signing import Exp, OptionalUserDep, Sig, SignerDep, link_out
 
@@ -54,12 +55,16 @@ def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
         raise HTTPException(422, [{"loc": ["path", "job_id"], "type": "value_error",
                                    "msg": f"diagnosis needs a job of the finite-element model ('fe'), "
                                           f"this one is {rec['model']!r}"}])
+    req = req or DiagnoseRequest()
+    c = expected(rec["spec"], manager.store_path(rec["id"]), req, 1)
     try:
-        diag_id = manager.submit_diagnosis(user, rec["id"], req or DiagnoseRequest())
+        diag_id = manager.submit_diagnosis(user, rec["id"], req)
     except DiagnosisRunning:
         raise HTTPException(status.HTTP_409_CONFLICT, "a diagnosis of this job is already running") from None
+    cost = ExpectedDiagnosis(floor_simulations=c.floor, catalogue_simulations=c.catalogue, base_fits=c.base_fits,
+                             scaled_for=list(c.guide))
     return DiagnoseStarted(id=rec["id"], state="queued", status_url=f"/jobs/{rec['id']}/diagnosis",
-                           diagnosis_id=diag_id)
+                           diagnosis_id=diag_id, expected=cost)
 
 
 @router.get("/jobs/{job_id}/diagnosis", response_model=DiagnosisStatus,

@@ -12,6 +12,7 @@ from fastapi.responses import HTMLResponse, JSONResponse
 from worker import store as st
 from worker.models import model_named
 from worker.reduce import compare_posteriors
+from worker.run import expected_simulations
 
 from ..access import done_job, own_job, page_reader
 from ..api_models import CompareRequest, Figure, JobSpec, JobStatus, LinkOut, Submitted
@@ -73,7 +74,8 @@ def submit(spec: JobSpec, user: UserDep, manager: ManagerDep, settings: Settings
     if refused is not None:
         return refused
     job_id = manager.submit(user, spec, notes=notes)
-    return Submitted(id=job_id, state="queued", status_url=f"/jobs/{job_id}", warnings=notes.get("warnings", []))
+    return Submitted(id=job_id, state="queued", status_url=f"/jobs/{job_id}", warnings=notes.get("warnings", []),
+                     expected_simulations=expected_simulations(spec))
 
 
 @router.get("/jobs", response_model=list[JobStatus], summary="List your jobs with their state and progress")

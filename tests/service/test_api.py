@@ -41,6 +41,7 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     assert r.status_code == 202, r.text
     job_id = r.json()["id"]
     assert len(job_id) == 32
+    assert r.json()["expected_simulations"] == [600, 600]        # importance sampling: exactly its draws
     st = wait_done(http, job_id, "alice")
     assert st["state"] == "done", st
     assert st["progress"]["simulations_done"] == st["progress"]["simulations_total"] == 600

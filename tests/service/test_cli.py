@@ -155,6 +155,15 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
     assert r.exit_code == 0, r.output
     assert seen["candidates"] == ["leak", "scale"] and seen["n_particles"] == 12 and seen["continuation"] is False
     assert re.search(r"0:0\d  base fit · 0 simulations", r.output) and "refit 1/1: leak · 40 simulations" in r.output
+    # the service's announcement: no stored posterior and parameters held at Table 3, so two base fits, of
+    # 12 particles where the ranges were measured with the default's
+    from vfcore.diagnose.expected import FLOOR_SIMULATIONS
+    from vfcore.diagnose.options import DiagnoseOptions
+    text = " ".join(r.output.split())
+    lo, hi = (round(2 * f * 12 / DiagnoseOptions().n_particles) for f in FLOOR_SIMULATIONS)
+    assert f"(it stops there): {lo:,}-{hi:,} simulations if it goes on" in text, text
+    assert "n_particles 12" in text and "a pinned base fit before the freed one" in text
+    assert text.index("expected cost") < text.index("base fit · 0 simulations")
     assert "diagnosis done" in r.output and "missing physics: leak" in r.output and "time by stage" in r.output
     assert json.loads((out / "diagnosis.json").read_text())["winner"] == "leak"
     assert (out / "diagnosis.png").read_bytes().startswith(b"\x89PNG")

@@ -83,6 +83,7 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     r = http.post(f"/jobs/{job}/diagnose", json=body, headers=auth("alice"))
     assert r.status_code == 202, r.text
     assert r.json()["status_url"] == f"/jobs/{job}/diagnosis"
+    assert r.json()["expected"]["base_fits"] == 0 and r.json()["expected"]["floor_simulations"] == [0, 0]
     diag = r.json()["diagnosis_id"]
     # one at a time per job; the figure is not served while it runs
     assert http.post(f"/jobs/{job}/diagnose", json=body, headers=auth("alice")).status_code == 409
@@ -145,6 +146,37 @@ def test_a_failed_diagnosis_leaves_its_simulations_to_the_next_request(service, 
     # the new diagnosis replaced the old one, which is gone with its store
     assert http.get(f"/jobs/{first['diagnosis_id']}", headers=auth("alice")).status_code == 404
     assert not (stores / f"{first['diagnosis_id']}.zarr").exists() and second["diagnosis_id"] != first["diagnosis_id"]
+
+
+def test_a_diagnosis_announces_its_expected_simulations_when_queued(service, monkeypatch):
+    """POST /jobs/{id}/diagnose answers the simulations of both outcomes before anything runs: the measured
+    ranges at the defaults with one base fit, twice the base share when the parameters held at Table 3 are
+    freed after a pinned fit, and the settings that scale the figures named."""
+    import vfcore.diagnose.pipeline as P
+    from vfcore.diagnose.expected import CATALOGUE_SIMULATIONS, FLOOR_SIMULATIONS
+    from vfcore.diagnose.material import pinned
+    from worker.jobspec import JobSpec
+
+    monkeypatch.setattr(P, "diagnose", dying_diagnosis([], "stopped after the announcement"))
+    jid = done_fe_job(service.settings)            # no posterior stored: the diagnosis fits its base itself
+    http = service.http
+    from service.db import JobDB
+    db = JobDB(service.settings.db_path)
+    try:
+        problem = JobSpec.from_json(db.get(jid)["spec"]).to_problem()
+    finally:
+        db.close()
+    assert pinned(problem)                         # the premise of the two base fits below
+    r = http.post(f"/jobs/{jid}/diagnose", json={"free_material": False}, headers=auth("alice"))
+    assert r.status_code == 202, r.text
+    assert r.json()["expected"] == {"floor_simulations": list(FLOOR_SIMULATIONS), "base_fits": 1,
+                                    "catalogue_simulations": list(CATALOGUE_SIMULATIONS), "scaled_for": []}
+    assert _wait_diagnosis(http, jid, "alice", timeout=60)["state"] == "failed"
+    e = http.post(f"/jobs/{jid}/diagnose", json={"candidates": ["leak"]}, headers=auth("alice")).json()["expected"]
+    assert e["base_fits"] == 2 and e["floor_simulations"] == [2 * f for f in FLOOR_SIMULATIONS]
+    assert e["catalogue_simulations"][1] < CATALOGUE_SIMULATIONS[1] + FLOOR_SIMULATIONS[1]
+    assert any("pinned" in g for g in e["scaled_for"]) and any(g.startswith("1 of") for g in e["scaled_for"])
+    assert _wait_diagnosis(http, jid, "alice", timeout=60)["state"] == "failed"
 
 
 def httpx_client(srv):

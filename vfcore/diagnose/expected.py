@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 from .options import DiagnoseOptions
 
-__all__ = ["ExpectedCost", "expected_cost", "FLOOR_SIMULATIONS", "CATALOGUE_SIMULATIONS",
+__all__ = ["ExpectedCost", "expected_cost", "expected_for", "base_fits", "FLOOR_SIMULATIONS", "CATALOGUE_SIMULATIONS",
            "FLOOR_TIME_FACTOR", "CATALOGUE_TIME_FACTOR"]
 
 #: Simulations of a diagnosis that stops after its base fit, at the defaults (seed 12, 10 cases).
@@ -51,14 +51,15 @@ _REFITS, _SEARCH, _CHECKS = 0.66, 0.28, 0.06
 
 @dataclass(frozen=True)
 class ExpectedCost:
-    """Simulations and minutes of the two outcomes; ``guide`` names the settings that differ from the
-    measured defaults (empty: the measured ranges themselves)."""
+    """Simulations and minutes of the two outcomes (minutes None when no time per simulation was
+    given); ``guide`` names the settings that differ from the measured defaults (empty: the measured
+    ranges themselves)."""
 
     floor: tuple[int, int]
     catalogue: tuple[int, int]
-    floor_minutes: tuple[float, float]
-    catalogue_minutes: tuple[float, float]
-    seconds_per_simulation: float
+    floor_minutes: tuple[float, float] | None
+    catalogue_minutes: tuple[float, float] | None
+    seconds_per_simulation: float | None
     workers: int
     base_fits: int
     guide: tuple[str, ...]
@@ -69,26 +70,32 @@ class ExpectedCost:
             return f"{fmt(a)}-{fmt(b)}"
         ints, mins = (lambda v: f"{v:,}"), (lambda v: f"{v:.0f}" if v >= 10 else f"{v:.1f}")
         w = f"{self.workers} worker{'s' if self.workers > 1 else ''}"
+        timed = self.seconds_per_simulation is not None
+
+        def about(m):
+            return f", about {span(*m, mins)} min" if timed else ""
         first = ("if the --base fit is already at the noise: no further base fit" if self.base_fits == 0 else
-                 f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations, "
-                 f"about {span(*self.floor_minutes, mins)} min")
-        out = [f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
-               + first,
-               f"  if it goes on to the catalogue: {span(*self.catalogue, ints)} simulations, about "
-               f"{span(*self.catalogue_minutes, mins)} min"]
+                 f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations"
+                 + about(self.floor_minutes))
+        head = (f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
+                if timed else "expected cost: ")
+        out = [head + first,
+               f"  if it goes on to the catalogue: {span(*self.catalogue, ints)} simulations"
+               + about(self.catalogue_minutes)]
         if self.guide:
             out.append("  (measured at the default settings; scaled for yours: " + ", ".join(self.guide) + ")")
         return out
 
 
-def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, workers: int, *,
+def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None, workers: int, *,
                   base_fits: int = 1, n_entries: int | None = None) -> ExpectedCost:
     """The expected cost of a diagnosis with ``options`` on ``workers`` processes, given the base model's
-    probed ``seconds_per_simulation`` (one core). ``base_fits``: 1 as measured; 0 when a given base
+    probed ``seconds_per_simulation`` (one core; None: simulations only). ``base_fits``: 1 as measured; 0 when a given base
     fit is used as it is (its share left out), 2 when parameters held at Table 3 are freed after a
     pinned fit (:func:`.material.material_first`: the base share twice). ``n_entries``: the catalogue
     entries that will be refitted (None: all, as measured)."""
-    if seconds_per_simulation <= 0 or workers < 1 or base_fits not in (0, 1, 2):
+    timed = seconds_per_simulation is not None
+    if (timed and seconds_per_simulation <= 0) or workers < 1 or base_fits not in (0, 1, 2):
         raise ValueError("seconds_per_simulation must be > 0, workers >= 1 and base_fits 0, 1 or 2")
     d = _DEFAULT
     base = options.n_particles * options.base_runs / (d.n_particles * d.base_runs) * max(base_fits, 1)
@@ -115,7 +122,7 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, worke
         floor = (0, 0)
 
     def minutes(sims, factor):
-        return tuple(s * seconds_per_simulation * factor / workers / 60.0 for s in sims)
+        return tuple(s * seconds_per_simulation * factor / workers / 60.0 for s in sims) if timed else None
     guide = tuple(f"{name} {getattr(options, name)!r}" for name in _CHANGING
                   if getattr(options, name) != getattr(d, name))
     if n_entries is not None and n_entries != n_all:
@@ -123,4 +130,27 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float, worke
     if base_fits == 2:
         guide = guide + ("a pinned base fit before the freed one",)
     return ExpectedCost(floor, cat, minutes(floor, FLOOR_TIME_FACTOR), minutes(cat, CATALOGUE_TIME_FACTOR),
-                        float(seconds_per_simulation), int(workers), int(base_fits), guide)
+                        float(seconds_per_simulation) if timed else None, int(workers), int(base_fits), guide)
+
+
+def base_fits(problem, options: DiagnoseOptions, base_post=None) -> int:
+    """The base fits a diagnosis of ``problem`` with ``options`` runs before the catalogue: 0 when the
+    given fit ``base_post`` is used as it is (it estimated the problem's own parameters and nothing is
+    freed), 1 when it is the pinned fit the freed one is judged against, or when none is given and
+    nothing is freed, 2 when none is given and the parameters held at Table 3 are freed after a pinned
+    fit (:func:`.material.material_first`)."""
+    from .material import pinned
+    freed = options.free_material and bool(pinned(problem))
+    if base_post is not None:
+        return 1 if freed or tuple(base_post.names) != tuple(problem.prior.names) else 0
+    return 2 if freed else 1
+
+
+def expected_for(problem, options: DiagnoseOptions, seconds_per_simulation: float | None, workers: int,
+                 base_post=None) -> ExpectedCost:
+    """:func:`expected_cost` of a diagnosis of ``problem``: its base fits (:func:`base_fits`) and the
+    implemented entries among ``options.candidates`` (all when None)."""
+    from .extensions import get
+    n = None if options.candidates is None else sum(get(c).implemented for c in options.candidates)
+    return expected_cost(options, seconds_per_simulation, workers, base_fits=base_fits(problem, options, base_post),
+                         n_entries=n)

@@ -58,3 +58,27 @@ def test_nonsense_is_refused():
         expected_cost(DiagnoseOptions(), 0.04, 0)
     with pytest.raises(ValueError):
         expected_cost(DiagnoseOptions(), 0.04, 2, base_fits=3)
+
+
+def test_the_base_fits_follow_the_given_fit_and_what_is_freed(monkeypatch):
+    """No fit given: one base fit, two when parameters held at Table 3 are freed after a pinned one. A
+    given fit of the problem's own parameters is the base as it is (none), unless parameters are freed
+    (it is then the pinned fit: one more) or it estimated other parameters (one)."""
+    from types import SimpleNamespace
+
+    import vfcore.diagnose.material as M
+    from vfcore.diagnose.expected import base_fits, expected_for
+
+    problem = SimpleNamespace(prior=SimpleNamespace(names=("E_body", "E_cover")))
+    same, other = SimpleNamespace(names=("E_body", "E_cover")), SimpleNamespace(names=("E_cover",))
+    for held, want in (([], {None: 1, "same": 0, "other": 1}), (["p_sub"], {None: 2, "same": 1, "other": 1})):
+        monkeypatch.setattr(M, "pinned", lambda p, held=held: held)
+        for free in (True, False):
+            got = {k: base_fits(problem, DiagnoseOptions(free_material=free), post)
+                   for k, post in ((None, None), ("same", same), ("other", other))}
+            assert got == (want if free else {None: 1, "same": 0, "other": 1}), (held, free)
+    monkeypatch.setattr(M, "pinned", lambda p: ["p_sub"])
+    c = expected_for(problem, DiagnoseOptions(candidates=["leak", "asymmetry"]), None, 2)
+    assert c.base_fits == 2 and c.floor == (2 * FLOOR_SIMULATIONS[0], 2 * FLOOR_SIMULATIONS[1])
+    assert c.floor_minutes is None and c.catalogue_minutes is None and "2 of" in "\n".join(c.guide)
+    assert "about" not in "\n".join(c.lines()) and "ms a simulation" not in c.lines()[0]
