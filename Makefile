@@ -23,13 +23,18 @@ $(VENV)/.installed: pyproject.toml requirements.lock
 
 install: $(VENV)/.installed
 
+# Test processes (pytest-xdist): most tests run on one core, so two processes use both of a 2-core machine.
+# Whole test files go to one process (--dist loadfile): a module's fixtures are built once.
+TEST_JOBS ?= 2
+XDIST := -n $(TEST_JOBS) --dist loadfile
+
 # The default suite: everything but the few end-to-end checks marked `slow` (minutes on 2 cores).
 test: install
-	$(PY) -m pytest -q --durations=15 -m "not slow" tests
+	$(PY) -m pytest -q $(XDIST) --durations=15 -m "not slow" tests
 
 # Only the end-to-end checks marked `slow` (the slow end-to-end diagnoses and calibrations).
 test-slow: install
-	$(PY) -m pytest -q --durations=25 -m slow tests
+	$(PY) -m pytest -q $(XDIST) --durations=25 -m slow tests
 
 # Everything: the default suite, then the slow checks, each test run once (what CI runs).
 test-all: test test-slow
