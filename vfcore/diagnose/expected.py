@@ -99,8 +99,8 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None
         raise ValueError("seconds_per_simulation must be > 0, workers >= 1 and base_fits 0, 1 or 2")
     d = _DEFAULT
     base = options.n_particles * options.base_runs / (d.n_particles * d.base_runs) * max(base_fits, 1)
-    from .extensions import CATALOGUE
-    n_all = len(CATALOGUE)
+    from .extensions import implemented
+    n_all = len(implemented())          # a diagnosis without candidates refits every implemented entry
     n = n_all if n_entries is None else int(n_entries)
     if options.max_refits is not None:
         # max_refits caps only the observation-level entries; the forward-level ones are always refitted
