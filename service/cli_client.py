@@ -120,15 +120,12 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
 def expected_lines(e: dict | None) -> list[str]:
     """The service's announced cost of a diagnosis (``DiagnoseStarted.expected``) as the lines ``vfinfer
     diagnose`` prints, without minutes: the service does not time its workers."""
+    from vfcore.diagnose.expected import ExpectedCost
     if not e:
         return []
-    f, c = e["floor_simulations"], e["catalogue_simulations"]
-    first = ("if the job's posterior is already at the noise: no further base fit" if e["base_fits"] == 0 else
-             f"if the base fit reaches the noise (it stops there): {f[0]:,}-{f[1]:,} simulations")
-    out = ["expected cost: " + first, f"  if it goes on to the catalogue: {c[0]:,}-{c[1]:,} simulations"]
-    if e.get("scaled_for"):
-        out.append("  (measured at the default settings; scaled for yours: " + ", ".join(e["scaled_for"]) + ")")
-    return out
+    cost = ExpectedCost(tuple(e["floor_simulations"]), tuple(e["catalogue_simulations"]), None, None, None, 1,
+                        int(e["base_fits"]), tuple(e.get("scaled_for") or ()))
+    return cost.lines(given="job's posterior")
 
 
 def _progress(d: dict) -> str:

@@ -207,7 +207,7 @@ def job_posterior(store_path: Path):
     return post if post.predictive is not None else None
 
 
-def expected(job_spec_json: str, store_path: Path, request, workers: int):
+def expected(job_spec_json: str, store_path: Path, request):
     """What a diagnosis of the finished job (its spec ``job_spec_json``, its store ``store_path``) with
     ``request`` is expected to cost, in simulations (:func:`vfcore.diagnose.expected.expected_for`): the
     job's own posterior is its base fit when ``request.reuse_posterior`` and the store keeps one. No time per
@@ -216,7 +216,7 @@ def expected(job_spec_json: str, store_path: Path, request, workers: int):
     from worker.jobspec import JobSpec
     problem = JobSpec.from_json(job_spec_json).to_problem()
     base = job_posterior(store_path) if request.reuse_posterior else None
-    return expected_for(problem, request.options(), None, max(1, int(workers)), base)
+    return expected_for(problem, request.options(), None, 1, base)
 
 
 # ------------------------------------------------------------------------------------ the job

@@ -56,7 +56,7 @@ def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
                                    "msg": f"diagnosis needs a job of the finite-element model ('fe'), "
                                           f"this one is {rec['model']!r}"}])
     req = req or DiagnoseRequest()
-    c = expected(rec["spec"], manager.store_path(rec["id"]), req, 1)
+    c = expected(rec["spec"], manager.store_path(rec["id"]), req)
     try:
         diag_id = manager.submit_diagnosis(user, rec["id"], req)
     except DiagnosisRunning:

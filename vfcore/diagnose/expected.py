@@ -64,8 +64,8 @@ class ExpectedCost:
     base_fits: int
     guide: tuple[str, ...]
 
-    def lines(self) -> list[str]:
-        """The announcement, one line per outcome."""
+    def lines(self, given: str = "--base fit") -> list[str]:
+        """The announcement, one line per outcome; ``given`` names the reused base fit (``base_fits`` 0)."""
         def span(a, b, fmt):
             return f"{fmt(a)}-{fmt(b)}"
         ints, mins = (lambda v: f"{v:,}"), (lambda v: f"{v:.0f}" if v >= 10 else f"{v:.1f}")
@@ -74,7 +74,7 @@ class ExpectedCost:
 
         def about(m):
             return f", about {span(*m, mins)} min" if timed else ""
-        first = ("if the --base fit is already at the noise: no further base fit" if self.base_fits == 0 else
+        first = (f"if the {given} is already at the noise: no further base fit" if self.base_fits == 0 else
                  f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations"
                  + about(self.floor_minutes))
         head = (f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
