@@ -114,6 +114,9 @@ def submit(gaw: Annotated[Path, typer.Argument(help="GAW file: CSV (time_s,area_
     for w in d.get("warnings", []):
         warn(w)
     note_is(sampler)
+    if d.get("expected_simulations"):           # on stderr: stdout ends with the id, which scripts read
+        lo, hi = d["expected_simulations"]
+        typer.echo(f"expected: {lo:,} simulations" if lo == hi else f"expected: {lo:,}-{hi:,} simulations", err=True)
     console.print(d["id"])
 
 

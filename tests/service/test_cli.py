@@ -29,6 +29,8 @@ def test_submit_status_fetch(service, tmp_path):
     r = CliRunner().invoke(app, ["submit", str(gaw), *TOY], env=env)
     assert r.exit_code == 0, r.output
     job_id = re.findall(r"[A-Za-z0-9_-]{32}", r.output)[-1]
+    assert r.stdout.strip().splitlines()[-1] == job_id and "expected" not in r.stdout   # the id ends stdout
+    assert "expected: 120 simulations" in r.stderr               # importance sampling: exactly its draws
     r = CliRunner().invoke(app, ["status", job_id, "--wait"], env=env)
     assert r.exit_code == 0 and "done" in r.output, r.output
     r = CliRunner().invoke(app, ["fetch", job_id, "--out", str(tmp_path / "out")], env=env)
