@@ -16,7 +16,8 @@ from vfcore.diagnose.options import BOUNDS, OBSERVATION_ENTRIES, DiagnoseOptions
 from worker.jobspec import JobSpec
 
 __all__ = ["JobSpec", "Figure", "Submitted", "JobStatus", "CompareRequest", "LinkOut", "DiagnoseRequest",
-           "DiagnosisSpec", "DiagnoseStarted", "ExpectedDiagnosis", "DiagnosisStatus", "check_candidates", "KINDS", "DIAGNOSIS_OPTIONS"]
+           "DiagnosisSpec", "DiagnoseStarted", "ExpectedDiagnosis", "DiagnosisStatus", "check_candidates", "KINDS",
+           "DIAGNOSIS_OPTIONS"]
 
 #: What a row of the job table holds: an inference (a JobSpec) or a diagnosis of a finished inference.
 KINDS = ("inference", "diagnosis")

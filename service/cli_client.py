@@ -126,8 +126,9 @@ def expected_lines(e: dict | None) -> list[str]:
     from vfcore.diagnose.expected import ExpectedCost
     if not e:
         return []
-    cost = ExpectedCost(tuple(e["floor_simulations"]), tuple(e["catalogue_simulations"]), None, None, None, 1,
-                        int(e["base_fits"]), tuple(e.get("scaled_for") or ()))
+    cost = ExpectedCost(floor=tuple(e["floor_simulations"]), catalogue=tuple(e["catalogue_simulations"]),
+                        floor_minutes=None, catalogue_minutes=None, seconds_per_simulation=None, workers=1,
+                        base_fits=int(e["base_fits"]), guide=tuple(e.get("scaled_for") or ()))
     return cost.lines(given="job's posterior")
 
 

@@ -90,8 +90,8 @@ class ExpectedCost:
 def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None, workers: int, *,
                   base_fits: int = 1, n_entries: int | None = None) -> ExpectedCost:
     """The expected cost of a diagnosis with ``options`` on ``workers`` processes, given the base model's
-    probed ``seconds_per_simulation`` (one core; None: simulations only). ``base_fits``: 1 as measured; 0 when a given base
-    fit is used as it is (its share left out), 2 when parameters held at Table 3 are freed after a
+    probed ``seconds_per_simulation`` (one core; None: simulations only). ``base_fits``: 1 as measured;
+    0 when a given base fit is used as it is (its share left out), 2 when parameters held at Table 3 are freed after a
     pinned fit (:func:`.material.material_first`: the base share twice). ``n_entries``: the catalogue
     entries that will be refitted (None: all, as measured)."""
     timed = seconds_per_simulation is not None
