@@ -84,13 +84,13 @@ def run(a) -> None:
                                max_refits=a.max_refits or None, refit_particles=a.refit_particles,
                                base_runs=a.base_runs, min_rms_gain=a.min_rms_gain,
                                escalate_tau=None if a.escalate_tau <= 0 else a.escalate_tau,
-                               escalate_refits=a.escalate_refits,
+                               escalate_refits=a.escalate_refits, refit_start=a.refit_start,
                                shared_mode=a.shared_mode, continuation=a.continuation,
                                continuation_entries=a.continuation_entries or None,
                                continuation_options={"halving": bool(a.halving)})
             d = rep.to_dict()
             d["wall_s"] = time.perf_counter() - t0
-            d["runner"] = {"escalate_refits": a.escalate_refits, "continuation": a.continuation, "continuation_entries": a.continuation_entries, "halving": a.halving, "shared_mode": a.shared_mode,
+            d["runner"] = {"escalate_refits": a.escalate_refits, "refit_start": a.refit_start, "continuation": a.continuation, "continuation_entries": a.continuation_entries, "halving": a.halving, "shared_mode": a.shared_mode,
                            "seed": a.seed, "noise": a.noise, "lag_search": a.lag_search}
             if store is not None:          # a resumed case: its earlier attempts' wall time counted in
                 account(d, inner)
@@ -175,6 +175,10 @@ def main(argv=None) -> int:
     ap.add_argument("--escalate-refits", action=argparse.BooleanOptionalAction, default=d.escalate_refits,
                     help="an escalation also doubles the particles of every later fit (default: "
                          "vfcore.diagnose.DiagnoseOptions().escalate_refits)")
+    from vfcore.diagnose.options import REFIT_STARTS
+    ap.add_argument("--refit-start", choices=REFIT_STARTS, default=d.refit_start,
+                    help="where the refits' SMC starts: the prior, or the base posterior (the rescue's "
+                         "reference-started SMC; default: vfcore.diagnose.DiagnoseOptions().refit_start)")
     from vfcore.observe import LAG_SEARCHES
     ap.add_argument("--lag-search", choices=LAG_SEARCHES, default="window",
                     help="phase-alignment lag range (Problem.lag_search); 'periods': 1.5 periods only")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from .adequacy import MAX_RMS_RATIO
 
-__all__ = ["DiagnoseOptions", "BOUNDS", "OBSERVATION_ENTRIES", "RESCUE_METHODS"]
+__all__ = ["DiagnoseOptions", "BOUNDS", "OBSERVATION_ENTRIES", "REFIT_STARTS", "RESCUE_METHODS"]
 
 #: The observation-level entries of the catalogue (:mod:`.extensions`): more refits than these cannot
 #: be asked for (tests/service/test_cli_diagnose.py checks the count against the catalogue).
@@ -29,6 +29,10 @@ BOUNDS = {"n_particles": (10, 400), "refit_particles": (10, 400), "max_refits": 
 
 #: How a refit that ended far below the base is refitted (:mod:`.rescue`).
 RESCUE_METHODS = ("reference", "box")
+
+#: Where the refits' SMC starts (:mod:`.refits`): the prior, or the base posterior (the rescue's
+#: reference-started SMC run for every entry at once).
+REFIT_STARTS = ("prior", "base")
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,10 @@ class DiagnoseOptions:
         only pays off with a shift of the material parameters is not informative).
     refit_particles : int or None
         SMC particles of the refits, mode checks and rescues (None: ``n_particles``).
+    refit_start : {"prior", "base"}
+        ``"prior"``: each refit's SMC starts from the prior of materials x extension; ``"base"``: from
+        the base posterior, as the reference-started rescue does (:func:`.mode_fits.reference_refits`,
+        inflated ``rescue_inflate`` times); such refits are not rescued by the same method again.
     escalate_tau : float or None
         When the base runs' between-run error exceeds this (nats), more base runs are made with
         ``escalate_factor`` times the particles, and every later fit uses that factor too
@@ -150,6 +158,7 @@ class DiagnoseOptions:
     screen_options: dict | None = None
     refit_forward: bool = True
     refit_particles: int | None = 24
+    refit_start: str = "prior"
     escalate_tau: float | None = 10.0
     escalate_factor: int = 2
     escalate_refits: bool = True
@@ -174,6 +183,8 @@ class DiagnoseOptions:
     def __post_init__(self):
         if self.rescue_method not in RESCUE_METHODS:
             raise ValueError(f"rescue_method must be 'reference' or 'box', got {self.rescue_method!r}")
+        if self.refit_start not in REFIT_STARTS:
+            raise ValueError(f"refit_start must be 'prior' or 'base', got {self.refit_start!r}")
         for name, (lo, hi) in BOUNDS.items():
             v = getattr(self, name)
             if v is None and name not in ("n_particles", "seed", "base_runs", "chunk_size"):

@@ -10,6 +10,7 @@ from ..inference.posterior import Posterior
 from ..inference.smc import WHOLE_RUN_OPTIONS
 from .fit import fit_extended, null_drops, param_table
 from .locate import locate
+from .mode_fits import reference_refits
 from .rank import null_consistent, residual_removed
 from .state import DiagnosisState, Run
 from .summary import predicted_gaws
@@ -28,7 +29,18 @@ def refit_chosen(run: Run, st: DiagnosisState) -> None:
     st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
     seeds = [o.seed + 101 * (i + 1) for i in range(len(st.chosen))]
     smc = run.smc
-    if st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
+    if st.chosen and o.refit_start == "base":
+        t1 = time.perf_counter()
+        run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
+        fits = reference_refits(pb, st.base, [(name, st.refit_n, sd) for name, sd in zip(st.chosen, seeds)],
+                                map=run.map, chunk_size=o.chunk_size, inflate=o.rescue_inflate,
+                                integrate=o.integrate, **smc)
+        for name, (_, _, post) in zip(st.chosen, fits):
+            post.info["reference_refit_of"] = "base"
+            st.refits[name] = post
+            st.n_simulations += int(post.n_simulations)
+            st.after[name] = summarise(run, st, name, post, t1)
+    elif st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
         t1 = time.perf_counter()
         run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
         ends: dict[int, float] = {}

@@ -79,6 +79,8 @@ def rescue_refits(run: Run, st: DiagnosisState) -> None:
     an evidence that must beat the first, so firing more often costs simulations, never a name."""
     o = run.options
     strategy = RESCUES[o.rescue_method]
+    if o.refit_start == "base" and o.rescue_method == "reference":
+        return                  # every refit already is the reference-started fit this rescue would run
     rescuable = [n for n in st.chosen if (o.rescue_forward if get(n).kind == "forward" else o.rescue_observation)]
     z0, s0 = float(st.base.log_evidence), float(st.base.log_evidence_se)
     due = []

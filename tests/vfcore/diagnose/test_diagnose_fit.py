@@ -354,6 +354,42 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
 
 
 @pytest.mark.slow
+def test_refits_started_from_the_base_posterior_name_a_hidden_scale_without_a_rescue(base_run, monkeypatch):
+    """``refit_start="base"``: every refit is the reference-started SMC the rescue runs, from the base
+    posterior, so the recording of the test above (a hidden 12 % scale error that the base absorbed
+    with a softer cover) is named from the first and only fit of the entry, its value and the true
+    cover recovered, and no rescue runs after it."""
+    from vfcore.diagnose import fit, pipeline
+    prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
+    rng = np.random.default_rng(21)
+    y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
+    real, calls = fit.fit_extended, []
+
+    def recording(problem, extension, **kw):
+        calls.append((extension, kw.get("reference") is not None))
+        return real(problem, extension, **kw)
+
+    route_refits(monkeypatch, recording)
+    pb = Problem(y, FPS, prior, config=CFG)
+    rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"],
+                            base_runs=1, refit_start="base")
+    assert calls == [("scale", True)], calls
+    assert "rescued" not in rep.after["scale"] and not any(n.startswith("rescue:") for n in rep.notes)
+    assert rep.refits["scale"].info["reference_refit_of"] == "base"
+    assert rep.base.mean[0] < 0.85 * TABLE3.E_cover            # the base absorbed the scale
+    assert rep.winner == "scale", rep.to_dict()["ranking"]
+    assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
+    assert abs(rep.after["scale"]["params"]["E_cover"]["mean"] - TABLE3.E_cover) < 0.1 * TABLE3.E_cover
+
+
+def test_refit_start_is_checked():
+    from vfcore.diagnose.options import DiagnoseOptions
+    assert DiagnoseOptions().refit_start == "prior"
+    with pytest.raises(ValueError, match="refit_start must be 'prior' or 'base', got 'posterior'"):
+        DiagnoseOptions(refit_start="posterior")
+
+
+@pytest.mark.slow
 def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base_run, monkeypatch):
     """Blind runs. A hidden 12 % scale error; the asymmetry entry can reproduce it (in
     phase, amplitude ratio 1.24), but its first refit is made to end as a sampler stuck near the
