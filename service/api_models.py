@@ -110,6 +110,11 @@ class DiagnoseRequest(BaseModel):
     max_refits: int | None = Field(default=DEFAULTS.max_refits, **_bounds("max_refits"),
                                    description="most observation-level extensions refitted, best screened "
                                                f"first (default: all {OBSERVATION_ENTRIES})")
+    refit_start: Literal["prior", "base", "mixed"] = Field(
+        default=DEFAULTS.refit_start,
+        description="where each extended fit's SMC starts: the prior; the base posterior (fewer simulations, "
+                    "no rescue); or the base posterior for the observation-level entries only "
+                    "(docs/diagnose.md, 'Refits started from the base')")
     continuation: bool = Field(default=DEFAULTS.continuation,
                                description="also search the base model and every extension by window "
                                            "continuation and fit from the optimum (docs/diagnose.md section 4)")
@@ -133,7 +138,7 @@ class DiagnoseRequest(BaseModel):
         """The library settings this request gives (:class:`vfcore.diagnose.DiagnoseOptions` fields; the rest
         keep the library's defaults; ``reuse_posterior`` is the caller's business)."""
         return dict(candidates=self.candidates, n_particles=self.n_particles, refit_particles=self.refit_particles,
-                    max_refits=self.max_refits, continuation=self.continuation, free_material=self.free_material,
+                    refit_start=self.refit_start, max_refits=self.max_refits, continuation=self.continuation, free_material=self.free_material,
                     seed=self.seed)
 
     def options(self) -> DiagnoseOptions:
@@ -143,7 +148,7 @@ class DiagnoseRequest(BaseModel):
 
 #: The command-line option of each DiagnoseRequest field (error messages name what the user typed).
 DIAGNOSIS_OPTIONS = {"candidates": "--candidates", "n_particles": "--particles", "refit_particles": "--refit-particles",
-                     "max_refits": "--max-refits", "continuation": "--continuation",
+                     "refit_start": "--refit-start", "max_refits": "--max-refits", "continuation": "--continuation",
                      "free_material": "--free-material", "reuse_posterior": "--base", "seed": "--seed"}
 
 

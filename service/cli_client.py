@@ -241,6 +241,8 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
                   help="with --start: SMC particles of each base fit (10-400)")] = None,
               refit_particles: Annotated[Optional[int], typer.Option(
                   help="with --start: particles of each refit (10-400)")] = None,
+              refit_start: Annotated[Optional[str], typer.Option(
+                  help="with --start: where each refit starts: prior, base or mixed")] = None,
               max_refits: Annotated[Optional[int], typer.Option(
                   help="with --start: most observation-level refits (0-6)")] = None,
               continuation: Annotated[Optional[bool], typer.Option(
@@ -258,7 +260,7 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
     if start and cancel:
         raise fail("--start and --cancel exclude each other")
     body = {k: v for k, v in (("n_particles", particles), ("refit_particles", refit_particles),
-                              ("max_refits", max_refits), ("continuation", continuation), ("seed", seed)) if v is not None}
+                              ("refit_start", refit_start), ("max_refits", max_refits), ("continuation", continuation), ("seed", seed)) if v is not None}
     if candidates:
         body["candidates"] = [c.strip() for c in candidates.split(",") if c.strip()]
     diagnose_request(**body)                 # the service's bounds, checked before anything is sent

@@ -238,6 +238,10 @@ def diagnose_cmd(
         particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = DEFAULTS.n_particles,
         refit_particles: Annotated[int, typer.Option(
             help="SMC particles of each extended fit (10-400)")] = DEFAULTS.refit_particles,
+        refit_start: Annotated[str, typer.Option(
+            parser=choice("prior", "base", "mixed"), metavar="[prior|base|mixed]",
+            help="where each extended fit's SMC starts: the prior, the base posterior (about a quarter fewer "
+                 "simulations, no rescue), or the base for observation-level entries only")] = DEFAULTS.refit_start,
         max_refits: Annotated[Optional[int], typer.Option(
             help="most observation-level extensions refitted, best screened first (0-6; default: all)")] = DEFAULTS.max_refits,
         candidates: Annotated[Optional[str], typer.Option(
@@ -265,8 +269,8 @@ def diagnose_cmd(
     from .diagnosis import plot
 
     req = diagnose_request(candidates=None if candidates is None else _names(candidates), n_particles=particles,
-                           refit_particles=refit_particles, max_refits=max_refits, continuation=continuation,
-                           seed=seed, free_material=free_material)
+                           refit_particles=refit_particles, refit_start=refit_start, max_refits=max_refits,
+                           continuation=continuation, seed=seed, free_material=free_material)
     if workers < 1:
         raise _fail(f"--workers must be >= 1, got {workers}")
     if out.exists() and not out.is_dir():

@@ -218,7 +218,7 @@ def render_diagnosis_report(d: dict, figure: str | None, title: str, links: dict
     parts = [page_head(title), f"<h1>{escape(title)}</h1>", "<h2>Verdict</h2>", _verdict(d)]
     src = dict(source or {})
     req = d.get("request") or {}
-    for k in ("candidates", "n_particles", "refit_particles", "max_refits", "continuation", "seed"):
+    for k in ("candidates", "n_particles", "refit_particles", "refit_start", "max_refits", "continuation", "seed"):
         if k in req:
             src.setdefault(k.replace("_", " "), req[k] if req[k] is not None else "all")
     parts.append("<h2>Recording and base fit</h2>")

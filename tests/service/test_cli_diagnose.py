@@ -114,6 +114,8 @@ def test_library_cli_service_and_benchmark_share_one_set_of_defaults(monkeypatch
     assert sig["duration"].default is sig["dt"].default is None     # None: the --base fit's, else MODEL_DEFAULTS
     assert sig["continuation"].default == req.continuation == o.continuation
     assert sig["free_material"].default == req.free_material == o.free_material
+    assert sig["refit_start"].default == req.refit_start == o.refit_start
+    assert DiagnoseRequest(refit_start="base").options().refit_start == "base"
     assert (req.n_particles, req.refit_particles, req.max_refits) == (o.n_particles, o.refit_particles, o.max_refits)
     assert req.options() == o                       # a default request is the library's default diagnosis
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2]))     # undone after the test
@@ -125,6 +127,7 @@ def test_library_cli_service_and_benchmark_share_one_set_of_defaults(monkeypatch
     assert seen["continuation"] == o.continuation
     assert seen["continuation_entries"] == o.continuation_entries
     assert seen["escalate_refits"] == o.escalate_refits
+    assert seen["refit_start"] == o.refit_start
     assert seen["max_refits"] == 0                  # the script's spelling of "all" (None)
 
 

@@ -50,7 +50,7 @@ def test_diagnose_rules(service):
     r = http.post(f"/jobs/{toy}/diagnose", json={"candidates": ["leak", "warp_drive"]}, headers=auth("alice"))
     assert r.status_code == 422 and "warp_drive" in r.text and "leak'" not in r.text.split("known")[0], r.text
     for body in ({"n_particles": 5}, {"n_particles": 401}, {"max_refits": 7}, {"refit_particles": 3}, {"candidates": []},
-                 {"colour": "red"}):
+                 {"colour": "red"}, {"refit_start": "posterior"}):
         assert http.post(f"/jobs/{toy}/diagnose", json=body, headers=auth("alice")).status_code == 422, body
     # a job that is not done: 409
     r = http.post("/jobs", json=toy_spec(n=400, delay=0.05), headers=auth("alice"))

@@ -100,13 +100,13 @@ def reference_refit(problem: Problem, post: Posterior, extension: str, *, n_part
     the extension's sampled parameters are uniform over their prior). The result's log-evidence
     estimates the extended model's evidence (generalized stepping-stone path), not a bound.
     Returns ``(log Z, se, posterior)``."""
-    ref = _reference(problem, post, extension, inflate, integrate, seed)
+    ref = base_reference(problem, post, extension, inflate, integrate, seed)
     near = fit_extended(problem, extension, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
                         integrate=integrate, reference=ref, **smc_options)
-    return _referenced(near, ref, inflate)
+    return referenced(near, ref, inflate)
 
 
-def _reference(problem: Problem, post: Posterior, extension: str, inflate: float, integrate: bool, seed: int):
+def base_reference(problem: Problem, post: Posterior, extension: str, inflate: float, integrate: bool, seed: int):
     """The Gaussian reference of :func:`reference_refit`: ``post``'s material particles, inflated, on the
     extended prior."""
     from ..inference.reference import reference_from_posterior
@@ -115,7 +115,7 @@ def _reference(problem: Problem, post: Posterior, extension: str, inflate: float
     return reference_from_posterior(prior, post, inflate=inflate, seed=seed)
 
 
-def _referenced(near: Posterior, ref, inflate: float) -> tuple[float, float, Posterior]:
+def referenced(near: Posterior, ref, inflate: float) -> tuple[float, float, Posterior]:
     """``(log Z, se, posterior)`` of a reference-started fit, its reference recorded in its ``info``."""
     near.info["reference"] = {"inflate": inflate, "p_inside": ref.p_inside}
     return float(near.log_evidence), float(near.log_evidence_se), near
@@ -131,10 +131,10 @@ def reference_refits(problem: Problem, post: Posterior, jobs, *, map=map, chunk_
     if set(smc_options) & set(WHOLE_RUN_OPTIONS):
         return [reference_refit(problem, post, e, n_particles=n, seed=s, map=map, chunk_size=chunk_size,
                                 inflate=inflate, integrate=integrate, **smc_options) for e, n, s in jobs]
-    refs = [_reference(problem, post, e, inflate, integrate, s) for e, _, s in jobs]
+    refs = [base_reference(problem, post, e, inflate, integrate, s) for e, _, s in jobs]
     posts = fit_extended_many(problem, [(e, n, s, {"reference": r}) for (e, n, s), r in zip(jobs, refs)], map=map,
                               chunk_size=chunk_size, integrate=integrate, **smc_options)
-    return [_referenced(near, ref, inflate) for near, ref in zip(posts, refs)]
+    return [referenced(near, ref, inflate) for near, ref in zip(posts, refs)]
 
 
 def _material_view(post: Posterior, n_base: int):

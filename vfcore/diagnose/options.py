@@ -30,9 +30,9 @@ BOUNDS = {"n_particles": (10, 400), "refit_particles": (10, 400), "max_refits": 
 #: How a refit that ended far below the base is refitted (:mod:`.rescue`).
 RESCUE_METHODS = ("reference", "box")
 
-#: Where the refits' SMC starts (:mod:`.refits`): the prior, or the base posterior (the rescue's
-#: reference-started SMC run for every entry at once).
-REFIT_STARTS = ("prior", "base")
+#: Where the refits' SMC starts (:mod:`.refits`): the prior; the base posterior (the rescue's
+#: reference-started SMC) for every entry; or for the observation-level entries only.
+REFIT_STARTS = ("prior", "base", "mixed")
 
 
 @dataclass(frozen=True)
@@ -82,10 +82,12 @@ class DiagnoseOptions:
         only pays off with a shift of the material parameters is not informative).
     refit_particles : int or None
         SMC particles of the refits, mode checks and rescues (None: ``n_particles``).
-    refit_start : {"prior", "base"}
+    refit_start : {"prior", "base", "mixed"}
         ``"prior"``: each refit's SMC starts from the prior of materials x extension; ``"base"``: from
-        the base posterior, as the reference-started rescue does (:func:`.mode_fits.reference_refits`,
-        inflated ``rescue_inflate`` times); such refits are not rescued by the same method again.
+        the base posterior, as the reference-started rescue does (:func:`.mode_fits.base_reference`,
+        inflated ``rescue_inflate`` times); ``"mixed"``: the observation-level entries from the base
+        posterior, the forward-level ones from the prior. A refit started from the base is not
+        rescued by the same method again.
     escalate_tau : float or None
         When the base runs' between-run error exceeds this (nats), more base runs are made with
         ``escalate_factor`` times the particles, and every later fit uses that factor too
@@ -184,7 +186,13 @@ class DiagnoseOptions:
         if self.rescue_method not in RESCUE_METHODS:
             raise ValueError(f"rescue_method must be 'reference' or 'box', got {self.rescue_method!r}")
         if self.refit_start not in REFIT_STARTS:
-            raise ValueError(f"refit_start must be 'prior' or 'base', got {self.refit_start!r}")
+            raise ValueError(f"refit_start must be one of {', '.join(map(repr, REFIT_STARTS))}, "
+                             f"got {self.refit_start!r}")
+        from ..inference.smc import WHOLE_RUN_OPTIONS
+        whole = sorted(set(self.smc_options or {}) & set(WHOLE_RUN_OPTIONS))
+        if whole and self.refit_start != "prior":
+            raise ValueError(f"refits started from the base posterior run together, so the SMC options {whole} "
+                             "need refit_start='prior'")
         for name, (lo, hi) in BOUNDS.items():
             v = getattr(self, name)
             if v is None and name not in ("n_particles", "seed", "base_runs", "chunk_size"):

@@ -10,13 +10,22 @@ from ..inference.posterior import Posterior
 from ..inference.smc import WHOLE_RUN_OPTIONS
 from .fit import fit_extended, null_drops, param_table
 from .locate import locate
-from .mode_fits import reference_refits
+from .extensions import get
+from .mode_fits import base_reference, referenced
 from .rank import null_consistent, residual_removed
 from .state import DiagnosisState, Run
 from .summary import predicted_gaws
 from .together import fit_extended_many
 
-__all__ = ["refit_chosen", "summarise", "keep_if_higher"]
+__all__ = ["refit_chosen", "starts_from_base", "summarise", "keep_if_higher"]
+
+
+def starts_from_base(refit_start: str, name: str) -> bool:
+    """Whether entry ``name``'s refit starts from the base posterior under ``refit_start``
+    (``DiagnoseOptions.refit_start``): every entry's with ``"base"``, the observation-level entries'
+    with ``"mixed"`` (a forward-level entry changes the dynamics, and its mode may lie far from the
+    base's materials), none with ``"prior"``."""
+    return refit_start == "base" or (refit_start == "mixed" and get(name).kind != "forward")
 
 
 def refit_chosen(run: Run, st: DiagnosisState) -> None:
@@ -29,25 +38,21 @@ def refit_chosen(run: Run, st: DiagnosisState) -> None:
     st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
     seeds = [o.seed + 101 * (i + 1) for i in range(len(st.chosen))]
     smc = run.smc
-    if st.chosen and o.refit_start == "base":
-        t1 = time.perf_counter()
-        run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
-        fits = reference_refits(pb, st.base, [(name, st.refit_n, sd) for name, sd in zip(st.chosen, seeds)],
-                                map=run.map, chunk_size=o.chunk_size, inflate=o.rescue_inflate,
-                                integrate=o.integrate, **smc)
-        for name, (_, _, post) in zip(st.chosen, fits):
-            post.info["reference_refit_of"] = "base"
-            st.refits[name] = post
-            st.n_simulations += int(post.n_simulations)
-            st.after[name] = summarise(run, st, name, post, t1)
-    elif st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
+    from_base = {name for name in st.chosen if starts_from_base(o.refit_start, name)}   # prior only, below
+    if st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
         t1 = time.perf_counter()
         run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
         ends: dict[int, float] = {}
-        posts = fit_extended_many(pb, [(name, st.refit_n, sd) for name, sd in zip(st.chosen, seeds)], map=run.map,
-                                  chunk_size=o.chunk_size, integrate=o.integrate,
+        refs = {name: base_reference(pb, st.base, name, o.rescue_inflate, o.integrate, sd)
+                for name, sd in zip(st.chosen, seeds) if name in from_base}
+        jobs = [(name, st.refit_n, sd) + (({"reference": refs[name]},) if name in refs else ())
+                for name, sd in zip(st.chosen, seeds)]
+        posts = fit_extended_many(pb, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
                                   on_done=lambda i, _: ends.setdefault(i, time.perf_counter()), **smc)
         for i, (name, post) in enumerate(zip(st.chosen, posts)):
+            if name in refs:
+                post = referenced(post, refs[name], o.rescue_inflate)[2]
+                post.info["reference_refit_of"] = "base"
             st.refits[name] = post
             st.n_simulations += int(post.n_simulations)
             st.after[name] = summarise(run, st, name, post, t1)

@@ -12,7 +12,7 @@ from typing import Callable
 from ..inference.posterior import Posterior
 from .extensions import get
 from .mode_fits import base_near, reference_refit, reference_refits
-from .refits import keep_if_higher
+from .refits import keep_if_higher, starts_from_base
 from .state import DiagnosisState, Run
 
 __all__ = ["Rescue", "RESCUES", "rescue_refits"]
@@ -79,9 +79,8 @@ def rescue_refits(run: Run, st: DiagnosisState) -> None:
     an evidence that must beat the first, so firing more often costs simulations, never a name."""
     o = run.options
     strategy = RESCUES[o.rescue_method]
-    if o.refit_start == "base" and o.rescue_method == "reference":
-        return                  # every refit already is the reference-started fit this rescue would run
-    rescuable = [n for n in st.chosen if (o.rescue_forward if get(n).kind == "forward" else o.rescue_observation)]
+    rescuable = [n for n in st.chosen if (o.rescue_forward if get(n).kind == "forward" else o.rescue_observation)
+                 and not (o.rescue_method == "reference" and starts_from_base(o.refit_start, n))]
     z0, s0 = float(st.base.log_evidence), float(st.base.log_evidence_se)
     due = []
     for j, name in enumerate(rescuable):

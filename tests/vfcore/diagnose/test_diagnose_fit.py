@@ -382,11 +382,19 @@ def test_refits_started_from_the_base_posterior_name_a_hidden_scale_without_a_re
     assert abs(rep.after["scale"]["params"]["E_cover"]["mean"] - TABLE3.E_cover) < 0.1 * TABLE3.E_cover
 
 
-def test_refit_start_is_checked():
+def test_refit_start_is_checked_and_chooses_the_entries_started_from_the_base():
+    from vfcore.diagnose.extensions import implemented
     from vfcore.diagnose.options import DiagnoseOptions
-    assert DiagnoseOptions().refit_start == "prior"
-    with pytest.raises(ValueError, match="refit_start must be 'prior' or 'base', got 'posterior'"):
+    from vfcore.diagnose.refits import starts_from_base
+    with pytest.raises(ValueError, match="refit_start must be one of 'prior', 'base', 'mixed', got 'posterior'"):
         DiagnoseOptions(refit_start="posterior")
+    with pytest.raises(ValueError, match=r"SMC options \['runs'\] need refit_start='prior'"):
+        DiagnoseOptions(refit_start="mixed", smc_options={"runs": 2})
+    names = list(implemented())
+    assert not any(starts_from_base("prior", n) for n in names)
+    assert all(starts_from_base("base", n) for n in names)
+    mixed = {n for n in names if starts_from_base("mixed", n)}
+    assert mixed == {"leak", "scale", "exposure", "frame_rate", "zipper", "asymmetry"}
 
 
 @pytest.mark.slow

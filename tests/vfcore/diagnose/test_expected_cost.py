@@ -38,6 +38,10 @@ def test_the_count_moves_with_the_settings_that_set_it_and_says_it_is_scaled():
         assert c.guide, fewer
     few = expected_cost(DiagnoseOptions(), 0.04, 2, n_entries=2)
     assert few.catalogue[1] < d.catalogue[1] and "2 of" in "\n".join(few.lines())
+    # refits from the base are named, not scaled: their ranges were not measured
+    b = expected_cost(DiagnoseOptions(refit_start="base"), 0.04, 2)
+    assert (b.floor, b.catalogue) == (d.floor, d.catalogue)
+    assert "refit_start 'base', not scaled" in "\n".join(b.lines())
 
 
 def test_a_reused_base_fit_leaves_out_the_base_share_and_a_pinned_one_doubles_it():
