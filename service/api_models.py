@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from vfcore.diagnose.options import BOUNDS, OBSERVATION_ENTRIES, DiagnoseOptions
+from vfcore.diagnose.options import BOUNDS, OBSERVATION_ENTRIES, REFIT_STARTS, DiagnoseOptions
 from worker.jobspec import JobSpec
 
 __all__ = ["JobSpec", "Figure", "Submitted", "JobStatus", "CompareRequest", "LinkOut", "DiagnoseRequest",
@@ -110,7 +110,7 @@ class DiagnoseRequest(BaseModel):
     max_refits: int | None = Field(default=DEFAULTS.max_refits, **_bounds("max_refits"),
                                    description="most observation-level extensions refitted, best screened "
                                                f"first (default: all {OBSERVATION_ENTRIES})")
-    refit_start: Literal["prior", "base", "mixed"] = Field(
+    refit_start: Literal[REFIT_STARTS] = Field(
         default=DEFAULTS.refit_start,
         description="where each extended fit's SMC starts: the prior; the base posterior (fewer simulations, "
                     "no rescue); or the base posterior for the observation-level entries only "

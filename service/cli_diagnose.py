@@ -20,7 +20,7 @@ from vfcore.config import contact_label
 from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw
 from .cli_options import AreaScale, Contact, ContactLayer, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
-from vfcore.diagnose.options import DiagnoseOptions
+from vfcore.diagnose.options import REFIT_STARTS, DiagnoseOptions
 
 #: the library's settings are the command's defaults (one source for library, CLI and service)
 DEFAULTS = DiagnoseOptions()
@@ -239,7 +239,7 @@ def diagnose_cmd(
         refit_particles: Annotated[int, typer.Option(
             help="SMC particles of each extended fit (10-400)")] = DEFAULTS.refit_particles,
         refit_start: Annotated[str, typer.Option(
-            parser=choice("prior", "base", "mixed"), metavar="[prior|base|mixed]",
+            parser=choice(*REFIT_STARTS), metavar="[" + "|".join(REFIT_STARTS) + "]",
             help="where each extended fit's SMC starts: the prior, the base posterior (about a quarter fewer "
                  "simulations, no rescue), or the base for observation-level entries only")] = DEFAULTS.refit_start,
         max_refits: Annotated[Optional[int], typer.Option(

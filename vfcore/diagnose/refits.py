@@ -9,8 +9,8 @@ import time
 from ..inference.posterior import Posterior
 from ..inference.smc import WHOLE_RUN_OPTIONS
 from .fit import fit_extended, null_drops, param_table
-from .locate import locate
 from .extensions import get
+from .locate import locate
 from .mode_fits import base_reference, referenced
 from .rank import null_consistent, residual_removed
 from .state import DiagnosisState, Run
@@ -38,13 +38,12 @@ def refit_chosen(run: Run, st: DiagnosisState) -> None:
     st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
     seeds = [o.seed + 101 * (i + 1) for i in range(len(st.chosen))]
     smc = run.smc
-    from_base = {name for name in st.chosen if starts_from_base(o.refit_start, name)}   # prior only, below
     if st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
         t1 = time.perf_counter()
         run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
         ends: dict[int, float] = {}
         refs = {name: base_reference(pb, st.base, name, o.rescue_inflate, o.integrate, sd)
-                for name, sd in zip(st.chosen, seeds) if name in from_base}
+                for name, sd in zip(st.chosen, seeds) if starts_from_base(o.refit_start, name)}
         jobs = [(name, st.refit_n, sd) + (({"reference": refs[name]},) if name in refs else ())
                 for name, sd in zip(st.chosen, seeds)]
         posts = fit_extended_many(pb, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
