@@ -84,7 +84,11 @@ def _verdict(d: dict) -> str:
     a = (d.get("refits") or {}).get(win) or {}
     phys = d.get("physics") or win
     gain = a.get("rms_improvement", row.get("rms_gain"))
-    ev = (f"dlogZ = {fmt_num(_num(row.get('delta')), '.2f')} ± {fmt_num(_num(row.get('delta_se')), '.2f')} nats against "
+    loc = d.get("local") or {}
+    ev = ((f"named on the local comparison: dlogZ = {fmt_num(_num(loc.get('dlogZ')), '.2f')} ± "
+           f"{fmt_num(_num(loc.get('se')), '.2f')} nats against the base model refitted in its material mode; "
+           if loc else "")
+          + f"dlogZ = {fmt_num(_num(row.get('delta')), '.2f')} ± {fmt_num(_num(row.get('delta_se')), '.2f')} nats against "
           f"{escape(str(d.get('reference') or 'base'))}; residual RMS {fmt_num(_num((d.get('base') or {}).get('residual_rms')), '.3g')}"
           f" → {fmt_num(_num(a.get('residual_rms')), '.3g')} mm² ({_pct(gain)} lower)")
     if _num(row.get("residual_removed")) is not None:

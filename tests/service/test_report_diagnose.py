@@ -105,6 +105,14 @@ def test_named_physics_page():
     assert "1,234 simulations" in page and "2 min 05 s" in page and "base fit" in page
     assert "&lt;larger&gt;" in page                                 # notes escaped
     assert "<img src='diagnosis.png'" in page and "leaky.csv" in page and "n particles" in page
+    assert "local comparison" not in page
+    # a name given on the local comparison leads with that comparison, the global gain beside it
+    d = copy.deepcopy(REPORT)
+    d["local"] = {"dlogZ": 5000.0, "se": 1.5}
+    page = render_diagnosis_report(d, None, "d", None)
+    check_page(page)
+    assert ("named on the local comparison: dlogZ = 5000.00 ± 1.50 nats against the base model refitted in its "
+            "material mode; dlogZ = 300.00 ± 0.50 nats against base") in page
 
 
 def test_no_finding_page_and_missing_numbers():

@@ -19,10 +19,11 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
     (:func:`.mode_fits.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
     errors of the two fits, no ``tau``: both sit in one mode, so the mode hopping that ``tau``
     measures is not part of this comparison) and still beats every base-model fit found."""
-    return _named(ranking, name, (
+    named = _named(ranking, name, (
         f"{name}: named on the local comparison: dlogZ {d_local:.1f} +- {se_local:.1f} against the base model "
         f"refitted in its material mode (the global error includes a between-run error of {tau:.1f} nats from "
         f"base runs that landed in different modes)"))
+    return dc.replace(named, local=(float(d_local), float(se_local)))
 
 
 def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: float = 0.0, *,
@@ -83,4 +84,4 @@ def prefer_parsimonious(ranking: RankReport, k: float = 1.0) -> RankReport:
 def _named(ranking: RankReport, name: str, note: str) -> RankReport:
     """A copy of ``ranking`` with ``name``'s row found, ``name`` the winner and ``note`` added."""
     rows = [dc.replace(r, found=True, reason="") if r.name == name else r for r in ranking.rows]
-    return dc.replace(ranking, rows=rows, winner=name, notes=list(ranking.notes) + [note])
+    return dc.replace(ranking, rows=rows, winner=name, notes=list(ranking.notes) + [note], local=None)

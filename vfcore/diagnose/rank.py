@@ -155,15 +155,21 @@ class RankReport:
     notes: list[str] = field(default_factory=list)
     min_rms_gain: float = 0.30
     reference: str = "base"              # "base" or the null-consistent fit used as the reference
+    #: ``(dlogZ, se)`` of the local comparison that named the winner (:func:`.amend.promote_local`), else None
+    local: tuple | None = None
 
     @property
     def verdict(self) -> str:
         if self.winner is None:
             return NO_FINDING
         r = next(r for r in self.rows if r.name == self.winner)
+        # a winner named on the local comparison says so: its global gain is within its error by construction
+        gain = (f"dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}" if self.local is None else
+                f"named on the local comparison: dlogZ = {self.local[0]:.2f} +- {self.local[1]:.2f} against the base "
+                f"model refitted in its material mode, {r.delta:.2f} +- {r.delta_se:.2f} against the reference")
         return (f"missing physics: {self.physics}"
                 + (f" ({self.winner} model" if self.physics != self.winner else " (")
-                + (", " if self.physics != self.winner else "") + f"dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}"
+                + (", " if self.physics != self.winner else "") + gain
                 + (f", residual RMS {100 * r.rms_gain:.0f} % lower" if math.isfinite(r.rms_gain) else "")
                 + (f", removes {100 * r.residual_removed:.0f} % of the localised residual"
                    if math.isfinite(r.residual_removed) else "") + ")"

@@ -62,6 +62,8 @@ class DiagnoseReport:
             "screening": {k: {kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
                               for kk, vv in v.items()} for k, v in self.screening.items()},
             "refits": self.after, "ranking": rows, "reference": self.ranking.reference,
+            "local": (None if self.winner is None or self.ranking.local is None else
+                      {"dlogZ": self.ranking.local[0], "se": self.ranking.local[1]}),
             "n_simulations": self.n_simulations, "wall_s": self.wall_s, "notes": self.notes,
             "cost": self.cost,
         }

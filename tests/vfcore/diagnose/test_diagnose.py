@@ -575,6 +575,15 @@ def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
     assert row.reason.startswith("evidence") and row.rms_gain > 0.8
     p = promote_local(r, "epithelium", 5000.0, 1.5, tau)
     assert p.winner == "epithelium" and p.physics == "epithelium" and "local comparison" in p.notes[-1]
+    # the verdict gives the comparison that named it, and the global gain with its swamping error beside it
+    row = next(x for x in p.rows if x.name == "epithelium")
+    assert ("named on the local comparison: dlogZ = 5000.00 +- 1.50" in p.verdict
+            and f"{row.delta:.2f} +- {row.delta_se:.2f} against the reference" in p.verdict)
+    assert "local comparison" not in r.verdict
+    # a later rule that names another entry drops the local basis with it
+    from vfcore.diagnose.amend import prefer_nested
+    q = prefer_nested(p, "leak", "epithelium", "nested")
+    assert q.winner == "leak" and q.local is None and "local comparison" not in q.verdict
     assert next(x for x in p.rows if x.name == "epithelium").found
     assert not next(x for x in p.rows if x.name == "leak").found
     assert r.winner is None                       # the original report is unchanged
