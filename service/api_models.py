@@ -138,8 +138,8 @@ class DiagnoseRequest(BaseModel):
         """The library settings this request gives (:class:`vfcore.diagnose.DiagnoseOptions` fields; the rest
         keep the library's defaults; ``reuse_posterior`` is the caller's business)."""
         return dict(candidates=self.candidates, n_particles=self.n_particles, refit_particles=self.refit_particles,
-                    refit_start=self.refit_start, max_refits=self.max_refits, continuation=self.continuation, free_material=self.free_material,
-                    seed=self.seed)
+                    refit_start=self.refit_start, max_refits=self.max_refits, continuation=self.continuation,
+                    free_material=self.free_material, seed=self.seed)
 
     def options(self) -> DiagnoseOptions:
         """The library's options of this request."""

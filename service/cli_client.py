@@ -260,7 +260,8 @@ def diagnosis(job_id: JobId, url: Url = "http://127.0.0.1:8000", token: Token = 
     if start and cancel:
         raise fail("--start and --cancel exclude each other")
     body = {k: v for k, v in (("n_particles", particles), ("refit_particles", refit_particles),
-                              ("refit_start", refit_start), ("max_refits", max_refits), ("continuation", continuation), ("seed", seed)) if v is not None}
+                              ("refit_start", refit_start), ("max_refits", max_refits), ("continuation", continuation),
+                              ("seed", seed)) if v is not None}
     if candidates:
         body["candidates"] = [c.strip() for c in candidates.split(",") if c.strip()]
     diagnose_request(**body)                 # the service's bounds, checked before anything is sent

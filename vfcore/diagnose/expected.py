@@ -130,8 +130,8 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None
     if base_fits == 2:
         guide = guide + ("a pinned base fit before the freed one",)
     if options.refit_start != d.refit_start:
-        # not scaled: refits from the base cost about a quarter fewer simulations on four of the suite's
-        # cases (docs/diagnose.md, "Refits started from the base"), too few to give a range
+        # not scaled: refits from the base cost 28 % fewer simulations on the nine catalogue cases of the
+        # seed-12 suite (docs/diagnose.md, "Refits started from the base"), too few to give a range
         guide = guide + (f"refit_start {options.refit_start!r}, not scaled (fewer simulations than these)",)
     return ExpectedCost(floor, cat, minutes(floor, FLOOR_TIME_FACTOR), minutes(cat, CATALOGUE_TIME_FACTOR),
                         float(seconds_per_simulation) if timed else None, int(workers), int(base_fits), guide)
