@@ -131,10 +131,11 @@ def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycl
     ``A_R``), each contributing half its area: ``A_L(t)/2 + A_R(t_R(t))/2``.
 
     The right fold is entrained 1:1 on the left fold's cycles, cycle by cycle: with ``c_L(t)`` the
-    left fold's cycle coordinate (k at its k-th opening instant, linear in between), the right
-    fold is read where its own cycle coordinate is ``c_L(t) - lag_cycles`` (folded by whole cycles
-    into its record). A piecewise-linear warp between opening instants, so the identical fold
-    (ratio 1, lag 0) returns ``A_L`` exactly. The folds' coupling through the shared flow, which
+    left fold's cycle coordinate (k at its k-th opening instant, linear in between, at the mean
+    period beyond the first and the last), the right fold is read where its own cycle coordinate
+    is ``c_L(t) - lag_cycles`` (folded by whole cycles only where that instant leaves its record).
+    A piecewise-linear warp between opening instants, so the identical fold (ratio 1, lag 0)
+    returns ``A_L`` exactly, and a nearly identical one nearly ``A_L``, ends included. The folds' coupling through the shared flow, which
     sets the common f0 in reality, is not modelled (docs/diagnose.md)."""
     return pair_observer(left_hr, right_hr, fps)(lag_cycles)
 
@@ -150,18 +151,30 @@ def pair_observer(left_hr: np.ndarray, right_hr: np.ndarray, fps: float):
         raise RuntimeError("too few cycles to entrain the folds")
     t = np.arange(yl.size) / rate
     tr = np.arange(yr.size) / rate
-    # cycle coordinate of the left fold: k at its k-th opening instant, linear in between (mean
-    # period outside); the right fold is read at the same coordinate minus the lag, folded by
-    # whole cycles into the span of its own opening instants
+    # cycle coordinate of the left fold: k at its k-th opening instant, linear in between, at the
+    # mean period before the first and after the last; the right fold is read at the instant of
+    # the same coordinate minus the lag, by the same rule on its own opening instants. Only an
+    # instant outside the right fold's record is folded by whole cycles into the span of its
+    # opening instants, so that the same fold at lag 0 is read at (to round-off) its own instants
+    # over the whole record, the partial cycles at either end included.
     T_L = (ol[-1] - ol[0]) / (ol.size - 1)
     c0 = np.interp(t, ol, np.arange(ol.size, dtype=float))
     c0 = np.where(t < ol[0], (t - ol[0]) / T_L, np.where(t > ol[-1], ol.size - 1 + (t - ol[-1]) / T_L, c0))
     top = orr.size - 1
     k_r = np.arange(orr.size, dtype=float)
+    T_R = (orr[-1] - orr[0]) / top
+    same = yl.shape == yr.shape and bool(np.array_equal(yl, yr))
 
     def observe(lag_cycles: float) -> np.ndarray:
+        if same and float(lag_cycles) == 0.0:      # the pair's null: the fold itself, exactly
+            return yl.copy()
         c = c0 - float(lag_cycles)
-        c = np.where(c > top, c - np.ceil(c - top), c)
-        c = np.where(c < 0, c + np.ceil(-c), c)
-        return 0.5 * yl + 0.5 * np.interp(np.interp(c, k_r, orr), tr, yr)
+        at = np.where(c < 0, orr[0] + c * T_R, np.where(c > top, orr[-1] + (c - top) * T_R, np.interp(c, k_r, orr)))
+        out = (at < tr[0]) | (at > tr[-1])
+        if out.any():
+            cf = c[out]
+            cf = np.where(cf > top, cf - np.ceil(cf - top), cf)
+            cf = np.where(cf < 0, cf + np.ceil(-cf), cf)
+            at[out] = np.interp(cf, k_r, orr)
+        return 0.5 * yl + 0.5 * np.interp(at, tr, yr)
     return observe
