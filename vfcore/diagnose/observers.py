@@ -135,8 +135,9 @@ def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycl
     period beyond the first and the last), the right fold is read where its own cycle coordinate
     is ``c_L(t) - lag_cycles`` (folded by whole cycles only where that instant leaves its record).
     A piecewise-linear warp between opening instants, so the identical fold (ratio 1, lag 0)
-    returns ``A_L`` exactly, and a nearly identical one nearly ``A_L``, ends included. The folds' coupling through the shared flow, which
-    sets the common f0 in reality, is not modelled (docs/diagnose.md)."""
+    returns ``A_L`` exactly, and a nearly identical one nearly ``A_L``, ends included. The folds'
+    coupling through the shared flow, which sets the common f0 in reality, is not modelled
+    (docs/diagnose.md)."""
     return pair_observer(left_hr, right_hr, fps)(lag_cycles)
 
 
@@ -169,7 +170,8 @@ def pair_observer(left_hr: np.ndarray, right_hr: np.ndarray, fps: float):
         if same and float(lag_cycles) == 0.0:      # the pair's null: the fold itself, exactly
             return yl.copy()
         c = c0 - float(lag_cycles)
-        at = np.where(c < 0, orr[0] + c * T_R, np.where(c > top, orr[-1] + (c - top) * T_R, np.interp(c, k_r, orr)))
+        at = np.where(c < 0, orr[0] + c * T_R,
+                      np.where(c > top, orr[-1] + (c - top) * T_R, np.interp(c, k_r, orr)))
         out = (at < tr[0]) | (at > tr[-1])
         if out.any():
             cf = c[out]
