@@ -13,6 +13,8 @@ turn and the total turns.
 
     python benchmarks/bench_smoothness.py --contact projection --dt 1e-4
     python benchmarks/bench_smoothness.py --contact layer --dt 5e-5 --twins 20
+    python benchmarks/bench_smoothness.py --flow continuous --contact layer --dt 1e-4
+    python benchmarks/bench_smoothness.py --flow continuous --contact layer --span 0.002   # the fine scan
 """
 from __future__ import annotations
 
@@ -47,6 +49,7 @@ def log_ratio_direction(seed: int, ndim: int) -> np.ndarray:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--contact", default="projection", help="SimConfig.contact")
+    ap.add_argument("--flow", default="paper", help="SimConfig.flow")
     ap.add_argument("--dt", type=float, default=1e-4)
     ap.add_argument("--mesh", default="coarse")
     ap.add_argument("--twins", type=int, default=20)
@@ -59,10 +62,10 @@ def main(argv=None) -> int:
     from vfcore.inference import Prior, evaluate, make_twin
     from vfcore.params import TABLE3
 
-    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=0.55, contact=a.contact)
+    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=0.55, contact=a.contact, flow=a.flow)
     prior = Prior.default(fixed={"x0": TABLE3.as_dict()["x0"]})
     ts = np.linspace(-a.span, a.span, a.points)
-    print(f"contact={a.contact} dt={a.dt:g} mesh={a.mesh}: {a.points} points over ±{a.span} in log-ratio")
+    print(f"flow={a.flow} contact={a.contact} dt={a.dt:g} mesh={a.mesh}: {a.points} points over ±{a.span} in log-ratio")
     print("| twin | p_sub (Pa) | turns | largest step (nats) | range (nats) |")
     print("|---|---|---|---|---|")
     counts = []
@@ -80,7 +83,7 @@ def main(argv=None) -> int:
         p_sub = tw.truth[list(prior.names).index("p_sub")]
         print(f"| {i} | {p_sub:.0f} | {k} | {step:.1f} | {rng:.1f} |", flush=True)
     counts = np.array(counts)
-    print(f"\ncontact={a.contact} dt={a.dt:g}: {int(np.sum(counts <= 1))} of {counts.size} twins smooth "
+    print(f"\nflow={a.flow} contact={a.contact} dt={a.dt:g} mesh={a.mesh}: {int(np.sum(counts <= 1))} of {counts.size} twins smooth "
           f"(at most one turn); {int(counts.sum())} turns in all")
     return 0
 

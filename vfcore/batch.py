@@ -20,7 +20,7 @@ from .config import SimConfig
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .scalar import simulate_one
-from .simcore import (BLOWUP, CLOSED_TOL, as_params, assemble_result, contact_law, flow_coefficient, midline, setup,
+from .simcore import (BLOWUP, CLOSED_TOL, as_params, assemble_result, contact_law, flow_code, flow_coefficient, midline, setup,
                       stop_settings)
 from .solver import _kernels as kern
 from .solver._batch_kernels import integrate_many
@@ -158,8 +158,8 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     stop = np.zeros(B, dtype=np.int64)
     integrate_many(n_steps, config.dt, *blk.coefs, system.indptr, system.indices, blk.kv, blk.mv, blk.dv, system.Lp,
                    system.Lj, blk.Lx, blk.G, system.sdx, system.sdz, system.sX, system.sZ, blk.u, v, a, blk.p_sub,
-                   config.p_sup, blk.sep, blk.x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, BLOWUP, width, gsep,
-                   lam, blk.traj_every, tu, tv, status, blk.sub_coef, flow_coefficient(config), p_in, proj,
+                   config.p_sup, blk.sep, blk.x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, flow_code(config), BLOWUP,
+                   width, gsep, lam, blk.traj_every, tu, tv, status, blk.sub_coef, flow_coefficient(config), p_in, proj,
                    config.contact == "layer", blk.kc, blk.cc, *stop_settings(config), stop)
     return assemble_block(blk, ps, configs, status, width, gsep, lam, tu, p_in, proj, stop, t_wall)
 

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 MESHES = ("coarse", "medium", "fine", "xfine", "xxfine")  # ~172, ~205, ~263, ~1050, ~4190 triangles; "medium" is the paper's default
 ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
 CONTACTS = ("projection", "layer")
+FLOWS = ("continuous", "paper")  # the flow load: continuous between nodes, or the paper's node-wise rule
 CONTACT_LAYER_MM = (0.0, 1.0)  # open bounds of the contact layer's thickness, mm (SimConfig, job spec, command line)
 #: settings that change how a simulation is run or kept, not the waveform it gives (early_stop changes it by
 #: less than its stop tolerances): left out when two models are compared
@@ -64,6 +65,13 @@ class SimConfig:
         ``contact_layer_mm`` with the cover's modulus E_cover and viscosity eta: pressure
         E_cover * overlap / h + eta * overlap rate / h, no adhesion).
     contact_layer_mm : thickness h of the contact layer, mm, in (0, 1) (used by ``contact="layer"``).
+    flow : the flow load, one of ``FLOWS`` (docs/model.md, "The continuous flow load"): "continuous" (separation
+        at the interpolated crossing of ``sep_ratio * g_min``, closure at the interpolated zero of the gap, the
+        pressure integrated over each edge, near-closure suction and upstream pockets faded over
+        ``closure_gap_mm``: the load is a continuous function of the surface) or "paper" (the paper's node-wise
+        rule: separation at the first node past the crossing, p_sub up to the first closed node, node values
+        lumped by halves onto the edges; with ``closure_gap_mm > 0`` blended into the closed distribution near
+        closure).
     early_stop : stop a simulation whose response has settled (no oscillation to come) and repeat its
         last state to the end, instead of integrating the rest (docs/model.md, "Stopping settled
         simulations"): the GAW differs by less than the stop tolerances, the cost drops.
@@ -89,6 +97,7 @@ class SimConfig:
     element: str = "p1"
     contact: str = "projection"
     contact_layer_mm: float = 0.1
+    flow: str = "paper"
     early_stop: bool = True
 
     def __post_init__(self) -> None:
@@ -98,6 +107,8 @@ class SimConfig:
             raise ValueError(f"config element must be one of {ELEMENTS}, got {self.element!r}")
         if self.contact not in CONTACTS:
             raise ValueError(f"config contact must be one of {CONTACTS}, got {self.contact!r}")
+        if self.flow not in FLOWS:
+            raise ValueError(f"config flow must be one of {FLOWS}, got {self.flow!r}")
         if not isinstance(self.early_stop, bool):
             raise ValueError(f"config early_stop must be True or False, got {self.early_stop!r}")
         hl = self.contact_layer_mm

@@ -122,7 +122,7 @@ def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None, fetch: boo
     ``fetch=False`` leaves the outputs on the GPU and returns None (to time the integration alone)."""
     from numba import cuda
 
-    from .simcore import BLOWUP, CLOSED_TOL, flow_coefficient, stop_settings
+    from .simcore import BLOWUP, CLOSED_TOL, flow_code, flow_coefficient, stop_settings
     from .solver._cuda_kernels import N_WORK_M, N_WORK_N, launch
 
     t0 = time.perf_counter()
@@ -164,7 +164,7 @@ def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None, fetch: boo
     f = float
     # fixed scalar types: one compiled kernel whatever numeric types a config holds
     scalars = (int(n_steps), f(config.dt), *(f(x) for x in blk.coefs), f(config.p_sup), f(CLOSED_TOL),
-               f(config.closure_gap_mm * 1e-3), f(BLOWUP), f(flow_coefficient(config)), bool(not projection),
+               f(config.closure_gap_mm * 1e-3), int(flow_code(config)), f(BLOWUP), f(flow_coefficient(config)), bool(not projection),
                int(blk.traj_every), int(stop_window), f(stop_width), f(stop_vel))
     launch(B, scalars, (*shared, kdm, Lx, G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam,
                         proj, p_in, tu, tv, status, stop))

@@ -10,7 +10,7 @@ import numpy as np
 from .config import SimConfig
 from .params import Params
 from .result import SimResult
-from .simcore import (BLOWUP, CLOSED_TOL, assemble_result, contact_law, flow_coefficient, midline, setup,
+from .simcore import (BLOWUP, CLOSED_TOL, assemble_result, contact_law, flow_code, flow_coefficient, midline, setup,
                       stop_settings)
 from .solver import _kernels as kern
 from .solver.system import get_system
@@ -50,7 +50,7 @@ def simulate_one(p: Params, config: SimConfig) -> SimResult:
         n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
         D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
         u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
-        config.closure_gap_mm * 1e-3, BLOWUP, width, gsep, lam, traj_every, tu, tv,
+        config.closure_gap_mm * 1e-3, flow_code(config), BLOWUP, width, gsep, lam, traj_every, tu, tv,
         kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj,
         config.contact == "layer", *contact_law(p, config, system), *stop_settings(config), stop)
     return assemble_result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,

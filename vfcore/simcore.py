@@ -20,7 +20,14 @@ from .solver import _kernels as kern
 from .solver.system import System
 
 RHO_AIR = 1.14          # kg/m^3 (Hadwin et al. 2019)
-CLOSED_TOL = 1e-9       # m: a surface node within 1 nm of the midline closes the glottis
+CLOSED_TOL = 1e-9       # m: a surface node within 1 nm of the midline closes the glottis (the paper's flow rule)
+
+
+def flow_code(config: SimConfig) -> int:
+    """The kernels' ``flow`` argument for ``config.flow`` (:data:`.solver._kernels.FLOW_PAPER` or
+    ``FLOW_CONTINUOUS``)."""
+    from .solver._kernels import FLOW_CONTINUOUS, FLOW_PAPER
+    return FLOW_PAPER if config.flow == "paper" else FLOW_CONTINUOUS
 MIN_CYCLE_AMPLITUDE = 0.05  # mm^2
 BLOWUP = 1e-2           # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
 # Settled-response stop (SimConfig.early_stop; docs/model.md, "Stopping settled simulations"): windows of

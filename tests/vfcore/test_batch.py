@@ -67,10 +67,11 @@ def test_batch_equals_scalar(scalar, batched):
             assert np.array_equal(getattr(s.cycles, f), getattr(b.cycles, f)), f
 
 
-def test_batch_equals_scalar_with_the_contact_layer(rows):
+@pytest.mark.parametrize("flow", ["paper", "continuous"])
+def test_batch_equals_scalar_with_the_contact_layer(rows, flow):
     """The compliant contact layer (per-sample springs and dashpots) keeps the lock-step kernel equal
-    to the scalar one bit for bit, contact forces included."""
-    cfg = SimConfig(contact="layer", duration=0.2, discard=0.05)
+    to the scalar one bit for bit, contact forces included, with either flow load."""
+    cfg = SimConfig(contact="layer", flow=flow, duration=0.2, discard=0.05)
     scalar = [simulate(r, cfg) for r in rows]
     batched = simulate_many(rows, cfg, block=6)
     assert any(s.ok and s.contact_force.max() > 0 for s in scalar)      # some sample touches the layer

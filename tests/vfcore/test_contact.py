@@ -33,7 +33,7 @@ def _masses_series(mass, v0, gap, h, n_steps, kc=None, cc=None):
     lam, proj = np.zeros((n_steps, m)), np.zeros((n_steps, m))
     layer = kc is not None
     st = kern.integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
-                                sdx, sdz, sX, sZ, u, v, a, 0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 1.0,
+                                sdx, sdz, sX, sZ, u, v, a, 0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 0, 1.0,
                                 np.zeros(n_steps), np.zeros(n_steps), lam, 0, np.zeros((0, n)), np.zeros((0, n)),
                                 np.zeros((0, 3)), 0.0, np.zeros(0), proj, layer,
                                 np.full(m, kc if layer else 0.0), np.full(m, cc if layer else 0.0),

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: past this the machine is too slow or too busy for it to say anything, and it skips saying so.
 SIM_TIMEOUT_S = 150
 
-# Prior draws of test_batch (seed 2) and Table 3, coarse mesh, a few tens of ms: both contact laws, the
+# Prior draws of test_batch (seed 2) and Table 3, coarse mesh, a few tens of ms: both contact laws, both flow loads, the
 # per-row extensions (separation ratio, epithelium, subglottal modes), trajectories and the settled-response
 # stop, each against simulate_many on the CPU.
 _SIM_SCRIPT = r"""
@@ -41,8 +41,9 @@ base = SimConfig(mesh="coarse", duration=0.04, discard=0.0, early_stop=False)
 ext = [base.replace(sep_ratio=1.5), base.replace(epithelium_E_kpa=30.0),
        base.replace(subglottal_modes=((500.0, 0.1, 1e5), (1400.0, 0.05, 5e4))), base]
 cases = {
-    "projection": [base] * N,
-    "layer": [base.replace(contact="layer")] * N,
+    "projection": [base.replace(contact="projection", flow="paper")] * N,
+    "layer": [base.replace(contact="layer", flow="paper")] * N,
+    "continuous": [base.replace(contact="layer", flow="continuous")] * N,
     "extensions": [ext[i % 4].replace(keep_trajectories=True) for i in range(N)],
     # long enough for closed draws to settle and for row 4 to diverge (ok=False on both devices)
     "early_stop": [base.replace(duration=0.4, discard=0.1, early_stop=True)] * N,
@@ -206,7 +207,7 @@ s = get_system("coarse", 0.4995, "p1")
 f8, i8 = types.float64, types.int64
 def arr(nd, dt=f8):
     return types.Array(dt, nd, "C")
-sig = ([i8, i8, f8, f8, f8, f8, f8, f8, f8, f8, f8, f8, types.boolean, i8, i8, f8, f8]
+sig = ([i8, i8, f8, f8, f8, f8, f8, f8, f8, f8, i8, f8, f8, types.boolean, i8, i8, f8, f8]
        + [typeof(getattr(s, k)) for k in ("indptr", "indices", "Lp", "Lj", "sdx", "sdz", "sX", "sZ")]
        + [arr(3), arr(2), arr(3), arr(3), arr(2), arr(3), arr(3), arr(3), arr(3), arr(2, types.boolean), arr(2, i8),
           arr(3), arr(3), arr(2), arr(2), arr(3), arr(3), arr(2), arr(3), arr(3), arr(1, i8), arr(1, i8)])
@@ -240,7 +241,7 @@ def _real_gpu() -> bool:
 @pytest.mark.skipif(not _real_gpu(), reason="no usable NVIDIA GPU (numba.cuda.is_available() is false, or NVVM is "
                                              "missing); the kernel's logic is checked on the simulator above")
 def test_real_gpu_matches_the_cpu_lockstep_kernel():
-    """On a GPU: the medium mesh, prior draws and Table 3 over 100 ms, both contact laws; with FMA contraction
+    """On a GPU: the medium mesh, prior draws and Table 3 over 100 ms, both contact laws and flow loads; with FMA contraction
     off the GPU's arithmetic is the CPU's, so the GAWs agree to 1e-10 relative (bit for bit expected)."""
     from vfcore import Params, SimConfig, TABLE3
     from vfcore.batch import simulate_many
@@ -249,8 +250,8 @@ def test_real_gpu_matches_the_cpu_lockstep_kernel():
     rng = np.random.default_rng(2)
     rows = np.array([Params.from_array(r).as_array() for r in lo + (hi - lo) * rng.random((15, 7))]
                     + [TABLE3.as_array()])
-    for contact in ("projection", "layer"):
-        cfg = SimConfig(duration=0.1, discard=0.02, contact=contact)
+    for contact, flow in (("projection", "paper"), ("layer", "paper"), ("layer", "continuous")):
+        cfg = SimConfig(duration=0.1, discard=0.02, contact=contact, flow=flow)
         cpu = simulate_many(rows, cfg, block=16)
         gpu = simulate_many(rows, cfg, device="cuda")
         for a, b in zip(cpu, gpu):

@@ -61,7 +61,7 @@ def _move_sample(kval, mval, dval, Lx, u, v, a, src, dst) -> None:
 
 @njit(cache=True)
 def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
-                   sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                   sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
                    width, gsep_out, lam_out, traj_every, traj_u, traj_v, status, sub_coef, flow_coef, p_in_out,
                    proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out):
     """Batched :func:`_kernels.integrate_coupled`.
@@ -147,10 +147,9 @@ def integrate_many(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval,
                 else:
                     xs[j] = sX[j]
                     zs[j] = sZ[j]
-                g = xm - xs[j]
-                gap[j] = g if g > 0.0 else 0.0
+                gap[j] = xm - xs[j]
             surface_loads(xs, zs, sX, sZ, gap, p_in[b], p_sup, sep_ratio[b], closed_tol, g_reg, fx[s], fz[s],
-                          pres)
+                          pres, flow)
         for i in range(n):
             for s in range(nb):
                 y1[i, s] = m_v * v[i, s] + m_a * a[i, s]

@@ -46,7 +46,7 @@ N_WORK_M = 10
 
 
 @njit(cache=True)
-def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, blowup, flow_coef, layer, traj_every,
+def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flow, blowup, flow_coef, layer, traj_every,
                stop_window, stop_width, stop_vel, indptr, indices, Lp, Lj, sdx, sdz, sX, sZ, kdm, Lx, G, uva, spar,
                sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out, p_in_out, traj_u, traj_v,
                status, stop_out):
@@ -55,7 +55,7 @@ def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, blo
     status[s] = integrate_ws(
         n_steps, h, am, af, beta, gamma, indptr, indices, kdm[0, :, s], kdm[1, :, s], kdm[2, :, s], Lp, Lj,
         Lx[:, s], G[:, :, s], sdx, sdz, sX, sZ, uva[0, :, s], uva[1, :, s], uva[2, :, s], spar[0, s], p_sup,
-        spar[1, s], spar[2, s], closed_tol, g_reg, blowup, width[:, s], gsep[:, s], lam_out[:, :, s], traj_every,
+        spar[1, s], spar[2, s], closed_tol, g_reg, flow, blowup, width[:, s], gsep[:, s], lam_out[:, :, s], traj_every,
         traj_u[:, :, s], traj_v[:, :, s], sub_coef[:, :, s], flow_coef, p_in_out[:, s], proj_out[:, :, s], layer,
         kcc[0, :, s], kcc[1, :, s], stop_window, stop_width, stop_vel, stop_out[s:s + 1],
         wn[0, :, s], wn[1, :, s], wn[2, :, s], wn[3, :, s],
@@ -77,14 +77,14 @@ else:
 
 
 @cuda.jit
-def integrate_kernel(nb, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, blowup, flow_coef, layer,
+def integrate_kernel(nb, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flow, blowup, flow_coef, layer,
                      traj_every, stop_window, stop_width, stop_vel, indptr, indices, Lp, Lj, sdx, sdz, sX, sZ, kdm, Lx,
                      G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out,
                      p_in_out, traj_u, traj_v, status, stop_out):
     """One thread per sample; threads past ``nb`` (the last block's padding) do nothing."""
     s = cuda.grid(1)
     if s < nb:
-        _run(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, blowup, flow_coef, layer, traj_every,
+        _run(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flow, blowup, flow_coef, layer, traj_every,
              stop_window, stop_width, stop_vel, indptr, indices, Lp, Lj, sdx, sdz, sX, sZ, kdm, Lx, G, uva, spar,
              sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out, p_in_out, traj_u, traj_v,
              status, stop_out)

@@ -11,6 +11,12 @@ import math
 import numpy as np
 from numba import njit
 
+from ._flow import surface_loads_continuous
+
+#: ``flow`` argument of the kernels: the paper's node-wise load, or the continuous one of :mod:`._flow`
+FLOW_PAPER = 0
+FLOW_CONTINUOUS = 1
+
 # No fast-math anywhere in the solver kernels (strict IEEE arithmetic, every sum in source order).
 # With ``reassoc`` LLVM may vectorise a reduction (a CSR row, a triangular-solve row) with an
 # association order that depends on the compilation context: a kernel compiled cold gave other bits
@@ -78,8 +84,11 @@ def chol_solve(Lp, Lj, Lx, b) -> None:
 
 
 @njit(cache=True)
-def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres):
+def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres, flow):
     """Bernoulli pressures along the free surface and the nodal forces they produce.
+
+    ``flow``: ``FLOW_PAPER`` (the paper's node-wise rule, below) or ``FLOW_CONTINUOUS``
+    (:func:`._flow.surface_loads_continuous`, which takes the signed gaps as they are).
 
     ``g_reg`` (m, 0 = off): small-gap regularisation. While the minimum half gap ``gmin`` is
     below ``g_reg`` the open-glottis Bernoulli pressures are blended into the closed-glottis
@@ -90,11 +99,17 @@ def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_
     xs, zs : (m,) current surface node coordinates (inferior -> superior), m.
     nxs, nzs : (m,) coordinates whose edges give the load directions (the reference
         configuration in the small-strain model), m.
-    gap : (m,) half gap to the midline, m (written).
+    gap : (m,) signed half gap to the midline, m (negative while a node overlaps it); the paper's rule
+        clamps it at 0 in place.
     Returns (min half gap, half gap at separation, index of closure or -1).
     Forces are per unit depth (N/m), pointing into the fold.
     """
+    if flow != FLOW_PAPER:
+        return surface_loads_continuous(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, g_reg, fx, fz, pres)
     m = xs.size
+    for i in range(m):
+        if not gap[i] > 0.0:
+            gap[i] = 0.0
     imin = 0
     for i in range(m):
         if gap[i] < gap[imin]:
@@ -427,11 +442,11 @@ def projection_impulse(indptr, mval, d, vd, ad, h, gamma):
 
 @njit(cache=True)
 def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
-              u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+              u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
               width, gsep_out, lam_out, traj_every, traj_u, traj_v):
     """:func:`integrate_coupled` without subglottal resonators (the inlet pressure is ``p_sub``)."""
     return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
-                             sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                             sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
                              width, gsep_out, lam_out, traj_every, traj_u, traj_v,
                              np.zeros((0, 3)), 0.0, np.zeros(0), np.zeros((0, sdx.size)),
                              False, np.zeros(sdx.size), np.zeros(sdx.size), 0, 0.0, 0.0, np.zeros(1, dtype=np.int64))
@@ -439,7 +454,7 @@ def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval
 
 @njit(cache=True)
 def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
-                      u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                      u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
                       width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
                       proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
@@ -478,7 +493,7 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
     m = sdx.size
     nmod = sub_coef.shape[0]
     return integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz,
-                        sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup, width, gsep_out,
+                        sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup, width, gsep_out,
                         lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out, proj_out, layer, kc, cc,
                         stop_window, stop_width, stop_vel, stop_out,
                         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m), np.empty(m),
@@ -489,7 +504,7 @@ def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mv
 
 @njit(cache=True)
 def integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
-                 u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, blowup,
+                 u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
                  width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
                  proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out,
                  y1, y2, r, ws_u0, xs, zs, gap, fx, fz, pres, lam, active, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb,
@@ -529,9 +544,8 @@ def integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, d
             else:
                 xs[j] = sX[j]
                 zs[j] = sZ[j]
-            g = x_mid - xs[j]
-            gap[j] = g if g > 0.0 else 0.0
-        surface_loads(xs, zs, sX, sZ, gap, p_in, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres)
+            gap[j] = x_mid - xs[j]
+        surface_loads(xs, zs, sX, sZ, gap, p_in, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres, flow)
         for i in range(n):
             y1[i] = m_v * v[i] + m_a * a[i]
             y2[i] = d_v * v[i] + d_a * a[i]

@@ -133,7 +133,7 @@ def _loads(gap, p_sub, p_sup, sep=1.3, tol=1e-9, nx=None, nz=None):
     nx = np.zeros(m) if nx is None else np.asarray(nx, float)
     nz = np.linspace(0, 1e-2, m) if nz is None else np.asarray(nz, float)
     fx, fz, pres = np.empty(m), np.empty(m), np.empty(m)
-    out = kern.surface_loads(nx.copy(), nz.copy(), nx, nz, gap, p_sub, p_sup, sep, tol, 0.0, fx, fz, pres)
+    out = kern.surface_loads(nx.copy(), nz.copy(), nx, nz, gap, p_sub, p_sup, sep, tol, 0.0, fx, fz, pres, kern.FLOW_PAPER)
     return out, pres, fx, fz
 
 
