@@ -87,11 +87,11 @@ def surface_loads_continuous(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, g_r
         while gap[jc] > 0.0:
             jc += 1
         iclose = jc
-        for i in range(m):
-            pres[i] = dp                    # the upstream narrowing's factor below ends it at the closure
+        for i in range(jc):
+            pres[i] = dp
     else:
         gsep = sep_ratio * gmin
-        suc = (smoothstep(gmin / g_reg) if g_reg > 0.0 else 1.0) * gsep * gsep
+        w = smoothstep(gmin / g_reg) if g_reg > 0.0 else 1.0
         wsum = 0.0
         for k in range(m):
             wsum += _min_weight(gap, k, gmin)
@@ -100,26 +100,30 @@ def surface_loads_continuous(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, g_r
             if wk <= 0.0:
                 continue
             wk /= wsum
-            for i in range(k + 1):
-                pres[i] += wk * dp * (1.0 - suc / (gap[i] * gap[i]))
+            # upstream of the narrowest node: the paper's blend of Bernoulli and p_sub
+            for i in range(k):
+                r = gsep / gap[i]
+                pres[i] += wk * (w * dp * (1.0 - r * r) + (1.0 - w) * dp)
+            # from it on: the attached Bernoulli deficit (its near-closure fade is the factor below)
             ridge = gap[k]
-            for i in range(k + 1, m):
+            for i in range(k, m):
                 g = gap[i]
                 if g > ridge:
                     ridge = g
                 att = 1.0 - smoothstep((ridge - gsep) / (ZETA * gsep))
                 if att <= 0.0:
                     break
-                q = dp * (1.0 - suc / (g * g))
+                r = gsep / g
+                q = dp * (1.0 - r * r)
                 if q < 0.0:
                     pres[i] += wk * att * q
-    # the narrowest gap strictly upstream of a node: a node behind a near-closure (or a closure) gets p_sup
+    # the narrowest gap up to and including a node: a node at, behind or in a near-closure fades to p_sup
     rmin = gap[0]
-    for i in range(1, m):
-        if rmin < g_reg or rmin <= 0.0:
-            pres[i] *= smoothstep(rmin / g_reg) if g_reg > 0.0 else 0.0
+    for i in range(m):
         if gap[i] < rmin:
             rmin = gap[i]
+        if rmin < g_reg or rmin <= 0.0:
+            pres[i] *= smoothstep(rmin / g_reg) if g_reg > 0.0 else 0.0
     for i in range(m):
         pres[i] += p_sup
         fx[i] = 0.0

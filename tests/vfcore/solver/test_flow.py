@@ -130,15 +130,16 @@ def test_continuous_through_the_first_closure():
 
 
 def test_closed_glottis_pressure():
-    """A straight vertical wall closed at node 4, open wider than g_reg upstream: p_sub on every node up to and
-    including node 4, p_sup beyond, lumped by halves; the net force is that of p_sub on [0, 4.5 mm]."""
+    """A straight vertical wall closed at node 4, open wider than g_reg upstream: p_sub on every node upstream
+    of node 4, p_sup from it on (the paper's closed load), lumped by halves; the net force is that of p_sub on
+    [0, 3.5 mm]."""
     m = 9
     nz = np.linspace(0.0, 8e-3, m)                       # 1 mm edges
     gap = np.array([0.6, 0.4, 0.3, 0.1, -0.3, -0.2, 0.1, 0.3, 0.5]) * MM
     F, (gmin, gsep, iclose), pres = forces(gap, kern.FLOW_CONTINUOUS, nz=nz, p_sup=200.0)
     assert iclose == 4 and gsep == 0.0 and gmin == 0.0
-    np.testing.assert_allclose(pres, [P_SUB] * 5 + [200.0] * 4, rtol=1e-14)
-    wet = 4.5e-3
+    np.testing.assert_allclose(pres, [P_SUB] * 4 + [200.0] * 5, rtol=1e-14)
+    wet = 3.5e-3
     assert F[:m].sum() == pytest.approx(-(P_SUB * wet + 200.0 * (8e-3 - wet)), rel=1e-12)
     assert abs(F[m:].sum()) < 1e-15
 
