@@ -17,7 +17,7 @@ from typing import Annotated, Optional
 import typer
 from rich.console import Console
 
-from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
+from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn, warnings_in_words)
 from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Element, Fix, Fps, ForceReach,
                           Measure, Mesh, Model, N, Noise, Out, Overwrite, Particles, Prior, PriorSet, Runs, Sampler,
                           Screen, Seed, SigmaE, Uncalibrated, Workers, parse_area_scale, parse_fixed, parse_priors)
@@ -91,14 +91,18 @@ def print_expected_cost(spec, workers: int) -> None:
                   f"{mins} min on {workers} worker{'s' if workers > 1 else ''}", highlight=False)
 
 
-def export_products(store_path: Path, out: Path, title: str = "vfinfer result") -> dict:
+def export_products(store_path: Path, out: Path, title: str = "vfinfer result",
+                    extra_warnings: list[str] | None = None) -> dict:
     """Copy summary, samples (CSV + JSON metadata, NetCDF) and figures out of a job store into ``out`` and
-    write the HTML report ``out/index.html``."""
+    write the HTML report ``out/index.html``; ``extra_warnings`` (Python warnings the run raised here) join the
+    summary's warnings, so that the report lists every warning the command prints."""
     from worker import store as st
 
     from .report import write_report
     out.mkdir(parents=True, exist_ok=True)
     summary = st.read_summary(store_path)
+    known = summary.setdefault("warnings", [])
+    known += [w for w in extra_warnings or [] if w not in known]
     (out / "posterior.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
     (out / "posterior_table.txt").write_text(summary.get("formatted", "") + "\n")
     ident = summary.get("identifiability")
@@ -133,9 +137,10 @@ def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
             bar.update(task, completed=p.n_done, total=max(p.n_total, p.n_done), description=p.phase,
                        ess=f"ESS={p.ess:.1f}" if p.ess == p.ess else "")
 
-        stats = run_job(client, job_id, store_path, spec, report=report)
+        with warnings_in_words(echo=False) as raised:        # printed with the summary's warnings
+            stats = run_job(client, job_id, store_path, spec, report=report)
     (out / "timings.json").write_text(json.dumps(stats, indent=1))
-    return export_products(store_path, out, title=f"vfinfer {job_id}")
+    return export_products(store_path, out, title=f"vfinfer {job_id}", extra_warnings=raised)
 
 
 # ------------------------------------------------------------------------------------ commands

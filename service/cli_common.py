@@ -9,6 +9,7 @@ import shutil
 import sys
 import tempfile
 import time
+import warnings
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
@@ -35,6 +36,26 @@ def warn(msg: str) -> None:
     typer.echo(f"warning: {_one_line(msg)}", err=True)
 
 
+@contextmanager
+def warnings_in_words(echo: bool = True):
+    """Inside, a Python warning is one ``warning: <message>`` line on stderr, like every other warning of the
+    command line: no file, line number or source line, which say nothing to a user. Yields the list of the
+    warnings' texts (each once), for a report to list; ``echo`` False only collects them, for a command that
+    prints its report's warnings itself. The previous handler comes back on exit."""
+    shown: list[str] = []
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = _one_line(message)
+        if text not in shown:
+            shown.append(text)
+            if echo:
+                warn(text)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield shown
+
+
 def fail(msg: str, code: int = USAGE_EXIT) -> typer.Exit:
     """Print the error line and return the ``typer.Exit`` to raise (``raise fail(...)``)."""
     error_line(msg)
@@ -48,12 +69,14 @@ ClickException, UsageError = _click_exc.ClickException, _click_exc.UsageError
 
 class VfinferGroup(TyperGroup):
     """The command group: click's usage errors become one ``error:`` line (click prints a usage box),
-    and an unexpected exception becomes one line too, not a traceback (``VFINFER_DEBUG=1`` shows it)."""
+    an unexpected exception becomes one line too, not a traceback (``VFINFER_DEBUG=1`` shows it), and a Python
+    warning a ``warning:`` line (:func:`warnings_in_words`)."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
-            rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var,
-                              standalone_mode=False, **extra)
+            with warnings_in_words():
+                rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var,
+                                  standalone_mode=False, **extra)
         except UsageError as exc:
             if type(exc).__name__.startswith("NoArgsIsHelp") and exc.ctx is not None:
                 typer.echo(exc.ctx.get_help())

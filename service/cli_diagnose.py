@@ -17,7 +17,7 @@ from rich.table import Table
 
 from vfcore.config import contact_label
 
-from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw
+from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw, warnings_in_words
 from .cli_options import AreaScale, Contact, ContactLayer, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
 from vfcore.diagnose.options import REFIT_STARTS, DiagnoseOptions
@@ -335,7 +335,7 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
 
     from .diagnosis import run_diagnose
     try:
-        with console.status("starting", spinner="dots") as status:
+        with console.status("starting", spinner="dots") as status, warnings_in_words() as raised:
             if workers == 1:
                 cmap = CachedMap(map, store) if store is not None else None
                 report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status), base=base_post)
@@ -349,7 +349,9 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
                                           progress=StageReporter(status), base=base_post)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
-    return jsonable(account(report.to_dict(), cmap)), report
+    d = jsonable(account(report.to_dict(), cmap))
+    d["warnings"] = raised                  # shown as they came; the report lists them
+    return d, report
 
 
 #: the option that sets each model setting a ``--base`` posterior must share with the diagnosis
