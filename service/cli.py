@@ -192,10 +192,12 @@ def _listen(host: str, port: int, family: int) -> socket.socket | None:
 
 @app.command()
 def serve(host: Annotated[str, typer.Option(help="address to listen on")] = "127.0.0.1",
-          port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port")] = 8000,
+          port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port; 0: one the system picks, which the "
+                                                                   "first line on stderr names")] = 8000,
           workers: Annotated[Optional[int], typer.Option(min=1, help="LocalCluster workers (if no scheduler)")] = None
           ) -> None:
-    """Run the HTTP API (with a LocalCluster unless VFINFER_SCHEDULER is set); API docs at /docs."""
+    """Run the HTTP API (with a LocalCluster unless VFINFER_SCHEDULER is set); API docs at /docs. The port is
+    bound before anything else starts, and ``listening on http://HOST:PORT`` on stderr says which it is."""
     import uvicorn
 
     from .main import create_app
@@ -213,6 +215,8 @@ def serve(host: Annotated[str, typer.Option(help="address to listen on")] = "127
     sock = _listen(host, port, family)
     if sock is None:
         raise fail(f"cannot listen on {host}:{port}: the port is in use or not allowed")
+    port = sock.getsockname()[1]                   # the system's pick for --port 0
+    typer.echo(f"listening on http://{host if ':' not in host else f'[{host}]'}:{port}", err=True)
     if not settings.users:
         warn("no tokens configured (VFINFER_TOKENS=user:token,...): every request will be 401")
     with sock:

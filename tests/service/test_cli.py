@@ -210,3 +210,35 @@ def test_serve_holds_its_port_before_the_app_starts(monkeypatch):
     r = CliRunner().invoke(app, ["serve", "--port", str(port)], env={"VFINFER_TOKENS": "user:a-long-token"})
     assert r.exit_code == 0, r.output
     assert seen == {"bind_refused": True, "served_on": [port]}
+
+
+def test_serve_on_port_0_binds_one_the_system_picks_and_names_it(monkeypatch):
+    """``--port 0``: the port is bound before the app starts and named on the ``listening on`` line, so a caller
+    (the service tests) never hands over a port that something else may take first."""
+    import re
+    import socket
+
+    import uvicorn
+
+    import service.main as main
+    seen = {}
+
+    def create_app(settings):
+        return object()
+
+    class Server:
+        def __init__(self, config):
+            pass
+
+        def run(self, sockets):
+            port = sockets[0].getsockname()[1]
+            with socket.socket() as s:               # the socket listens: a client connects
+                seen["connects"] = s.connect_ex(("127.0.0.1", port)) == 0
+            seen["served_on"] = port
+
+    monkeypatch.setattr(main, "create_app", create_app)
+    monkeypatch.setattr(uvicorn, "Server", Server)
+    r = CliRunner().invoke(app, ["serve", "--port", "0"], env={"VFINFER_TOKENS": "user:a-long-token"})
+    assert r.exit_code == 0, r.output
+    named = re.findall(r"^listening on http://127\.0\.0\.1:(\d+)$", r.stderr, re.M)
+    assert seen["connects"] and named == [str(seen["served_on"])] and seen["served_on"] != 0, r.stderr
