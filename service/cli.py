@@ -17,7 +17,8 @@ from typing import Annotated, Optional
 import typer
 from rich.console import Console
 
-from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn, warnings_in_words)
+from .cli_common import (POSITIVE, ProgressLines, VfinferGroup, check_out, fail, load_gaw, staged_output, warn,
+                         warnings_in_words)
 from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Element, Fix, Fps, ForceReach,
                           Measure, Mesh, Model, N, Noise, Out, Overwrite, Particles, Prior, PriorSet, Runs, Sampler,
                           Screen, Seed, SigmaE, Uncalibrated, Workers, parse_area_scale, parse_fixed, parse_priors)
@@ -28,7 +29,9 @@ app = typer.Typer(cls=VfinferGroup, add_completion=False, no_args_is_help=True,
                   context_settings={"help_option_names": ["-h", "--help"]},
                   help="Bayesian inference of vocal-fold properties from glottal area waveforms (GAW). "
                        "Parameters in the paper's units: E_body kPa, E_cover Pa, E_lig kPa, p_sub Pa, rho kg/m^3, "
-                       "eta Poise, x0 mm; areas mm^2; times s.")
+                       "eta Poise, x0 mm; areas mm^2; times s. When stderr is not a terminal (a log file, nohup, a "
+                       "batch job), infer, diagnose, reach and demo print a plain 'progress:' line there every ~30 s "
+                       "(VFINFER_PROGRESS_INTERVAL, seconds) instead of the live bar.")
 console = Console()
 
 GawArg = Annotated[Path, typer.Argument(
@@ -118,7 +121,8 @@ def export_products(store_path: Path, out: Path, title: str = "vfinfer result",
 
 
 def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
-    """Run a job on an in-process LocalCluster with a progress bar; products go to ``out``."""
+    """Run a job on an in-process LocalCluster with a progress bar (on a terminal) or a plain progress line every
+    ~30 s on stderr (elsewhere: ``cli_common.ProgressLines``); products go to ``out``."""
     from distributed import Client, LocalCluster
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -126,16 +130,19 @@ def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
 
     out.mkdir(parents=True, exist_ok=True)
     store_path = out / f"{job_id}.zarr"
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+    with ProgressLines() as lines, \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
             Client(cl) as client, Progress(TextColumn("{task.description}"), BarColumn(),
                                            TextColumn("{task.completed}/{task.total} sims  {task.fields[ess]}"),
                                            TimeElapsedColumn(), console=console) as bar:
         register_warm_up(client)
         task = bar.add_task("simulating", total=spec.n_simulations, ess="")
+        lines.update("simulating", 0, spec.n_simulations)
 
         def report(p):
             bar.update(task, completed=p.n_done, total=max(p.n_total, p.n_done), description=p.phase,
                        ess=f"ESS={p.ess:.1f}" if p.ess == p.ess else "")
+            lines.update(p.phase, p.n_done, max(p.n_total, p.n_done), p.ess)
 
         with warnings_in_words(echo=False) as raised:        # printed with the summary's warnings
             stats = run_job(client, job_id, store_path, spec, report=report)
@@ -314,12 +321,15 @@ def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, disca
     if rebuild or ens is None or not exact:
         t0 = time.perf_counter()
 
-        def progress(done, total, el):
-            eta = el / done * (total - done) if done else 0.0
-            console.print(f"reach: {done}/{total} draws simulated, {el:.0f} s elapsed, ~{eta:.0f} s left",
-                          highlight=False, soft_wrap=True)
         console.print(f"reach: simulating {n} prior draws ({mesh} mesh, dt {dt:g} s, {duration:g} s)", highlight=False)
-        ens = rc.build_ensemble(cfg, box, n, seed, progress=progress)
+        with ProgressLines() as lines:
+            def progress(done, total, el):
+                lines.update("reach ensemble", done, total)
+                if not lines.enabled:          # a terminal: a line a block, as ever
+                    eta = el / done * (total - done) if done else 0.0
+                    console.print(f"reach: {done}/{total} draws simulated, {el:.0f} s elapsed, ~{eta:.0f} s left",
+                                  highlight=False, soft_wrap=True)
+            ens = rc.build_ensemble(cfg, box, n, seed, progress=progress)
         path = rc.save_cached(ens)
         console.print(f"reach: {ens.n} draws in {time.perf_counter() - t0:.0f} s -> {path}", highlight=False)
     else:
