@@ -60,82 +60,12 @@ def _root(version: Annotated[Optional[bool], typer.Option("--version", callback=
 
 
 # ------------------------------------------------------------------------------------ helpers
-#: Seconds per prior draw of a reach ensemble on one core, measured (128 draws of each prior set, dt 5e-5 s, 0.55 s
-#: simulated, two jobs sharing two cores): 56-68 ms on the coarse mesh, 68 ms on the medium. Most draws do not
-#: phonate and stop early, which is why the medium mesh costs about what the coarse does.
-REACH_S_PER_DRAW = {"coarse": 0.07, "medium": 0.07}
-
-
-def ensure_reach(spec, workers: int) -> str | None:
-    """Which reach ensemble the check uses, in words: shipped, cached (built earlier) or built now (None: none,
-    or not the FE model). With none for the
-    job's configuration (e.g. the paper's medium mesh), build one on first use: ``DEFAULT_N`` draws of the
-    job's prior set (:func:`vfcore.inference.reach.first_use_prior`) on ``workers`` processes, with a progress
-    line, cached in the user cache (``VFINFER_CACHE_DIR``, else ``$XDG_CACHE_HOME/vfinfer``) under the key of
-    every waveform-changing setting; ``VFINFER_REACH_BUILD=0`` skips the build (the check then says it was not
-    made)."""
-    from vfcore.inference import reach as rc
-    from vfcore.inference.prior import Prior as PriorBox
-    if spec.model != "fe":
-        return None
-    cfg, prior = spec.sim_config(), spec.to_prior()
-    ens, _ = rc.find_ensemble(cfg, prior)
-    if ens is not None:
-        return f"{rc.origin(ens)} ensemble of {ens.n} draws, {ens.source}"
-    if os.environ.get("VFINFER_REACH_BUILD", "1").strip() == "0":
-        return None
-    target = rc.first_use_prior(prior, PriorBox.default(prior_set=spec.prior_set))
-    n = rc.DEFAULT_N
-    guess = n * REACH_S_PER_DRAW.get(cfg.mesh, 4 * REACH_S_PER_DRAW["medium"]) * (5e-5 / cfg.dt) / workers / 60.0
-    path = rc.ensemble_path(rc.reach_key(cfg, target))
-    console.print(f"reach: no ensemble for this configuration yet; building one now: {n} prior draws, about "
-                  f"{guess:.0f} min on {workers} worker{'s' if workers > 1 else ''} (measured: ~2 min on one core "
-                  f"for the coarse or the medium mesh at dt 5e-5 s), cached in {path} for later runs "
-                  "(VFINFER_REACH_BUILD=0 skips it)", highlight=False, soft_wrap=True)
-    t0 = time.perf_counter()
-    with ProgressLines() as lines, _draw_map(workers) as simulate:
-        def progress(done, total, el):
-            lines.update("reach ensemble", done, total)
-        ens = rc.build_ensemble(cfg, target, n, rc.DEFAULT_SEED, block=32 * workers, progress=progress,
-                                simulate_fn=simulate, on_error=lambda m: warn(f"reach ensemble: {m}"))
-    rc.save_cached(ens)
-    console.print(f"reach: built now: {ens.n} draws in {time.perf_counter() - t0:.0f} s, cached in {path}",
-                  highlight=False, soft_wrap=True)
-    return f"built now, {path}"
-
-
-class _draw_map:
-    """``simulate_fn`` of :func:`vfcore.inference.reach.build_ensemble` that splits each block of draws over
-    ``workers`` processes (in this process for one)."""
-
-    def __init__(self, workers: int):
-        self.workers, self.pool = workers, None
-
-    def __enter__(self):
-        if self.workers > 1:
-            from concurrent.futures import ProcessPoolExecutor
-            self.pool = ProcessPoolExecutor(self.workers)
-        return self
-
-    def __exit__(self, *exc):
-        if self.pool is not None:
-            self.pool.shutdown(cancel_futures=True)
-
-    def __call__(self, rows, config, block):
-        import numpy as np
-
-        from vfcore.batch import simulate_many
-        if self.pool is None:
-            return simulate_many(rows, config, block=block)
-        parts = [p for p in np.array_split(rows, self.workers) if len(p)]
-        return [r for part in self.pool.map(simulate_many, parts, [config] * len(parts)) for r in part]
-
-
 def reach_gate(spec, force_reach: bool, workers: int = 1) -> None:
     """The reach check before any sampling (docs/inference.md, "The model's reach"): a recording outside the
     reach of the model and prior exits 2 with one ``error:`` line unless ``force_reach`` (then a warning);
     a marginal or unchecked one gets a warning; an inside one a one-line note. The ensemble is found or built
     first (:func:`ensure_reach`); the note and the warning say which it was."""
+    from .cli_reach import ensure_reach
     which = ensure_reach(spec, workers)
     which = f" (reach ensemble: {which})" if which else ""
     try:
