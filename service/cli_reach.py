@@ -15,10 +15,12 @@ from .cli_common import ProgressLines, warn
 
 console = Console()
 
-#: Seconds per prior draw of a reach ensemble on one core, measured (128 draws of each prior set, dt 5e-5 s, 0.55 s
-#: simulated, two jobs sharing two cores): 56-68 ms on the coarse mesh, 68 ms on the medium. Most draws do not
-#: phonate and stop early, which is why the medium mesh costs about what the coarse does.
-REACH_S_PER_DRAW = {"coarse": 0.07, "medium": 0.07}
+#: Core-seconds per prior draw of a reach ensemble (dt 5e-5 s, 0.55 s simulated), measured: 128 draws of each
+#: prior set at 56-68 ms a draw on the coarse mesh and 68 ms on the medium with the cores to themselves, and the
+#: whole 2,000-draw medium-mesh build of `vfinfer infer --mesh medium --fix x0=8.4` in 254 s on 2 workers with
+#: the 2 cores shared with other jobs (0.25 s a draw). The estimate takes the busy figure, an upper bound; most
+#: draws do not phonate and stop early, which is why the medium mesh costs about what the coarse does.
+REACH_S_PER_DRAW = {"coarse": 0.25, "medium": 0.25}
 
 
 def ensure_reach(spec, workers: int) -> str | None:
@@ -43,8 +45,8 @@ def ensure_reach(spec, workers: int) -> str | None:
     guess = n * REACH_S_PER_DRAW.get(cfg.mesh, 4 * REACH_S_PER_DRAW["medium"]) * (5e-5 / cfg.dt) / workers / 60.0
     path = rc.ensemble_path(rc.reach_key(cfg, target))
     console.print(f"reach: no ensemble for this configuration yet; building one now: {n} prior draws, about "
-                  f"{guess:.0f} min on {workers} worker{'s' if workers > 1 else ''} (measured: ~2 min on one core "
-                  f"for the coarse or the medium mesh at dt 5e-5 s), cached in {path} for later runs "
+                  f"{guess:.0f} min on {workers} worker{'s' if workers > 1 else ''} at most (measured: 2,000 medium-mesh "
+                  f"draws at dt 5e-5 s in 4 min 14 s on 2 busy workers), cached in {path} for later runs "
                   "(VFINFER_REACH_BUILD=0 skips it)", highlight=False, soft_wrap=True)
     t0 = time.perf_counter()
     with ProgressLines() as lines, _draw_map(workers) as simulate:
