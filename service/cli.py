@@ -17,7 +17,8 @@ from typing import Annotated, Optional
 import typer
 from rich.console import Console
 
-from .cli_common import (POSITIVE, VfinferGroup, check_out, fail, load_gaw, staged_output, warn)
+from .cli_common import (POSITIVE, ProgressLines, VfinferGroup, check_out, fail, load_gaw, staged_output, warn,
+                         warnings_in_words)
 from .cli_options import (AreaScale, Contact, ContactLayer, Discard, Dt, Duration, Element, Fix, Fps, ForceReach,
                           Measure, Mesh, Model, N, Noise, Out, Overwrite, Particles, Prior, PriorSet, Runs, Sampler,
                           Screen, Seed, SigmaE, Uncalibrated, Workers, parse_area_scale, parse_fixed, parse_priors)
@@ -28,7 +29,9 @@ app = typer.Typer(cls=VfinferGroup, add_completion=False, no_args_is_help=True,
                   context_settings={"help_option_names": ["-h", "--help"]},
                   help="Bayesian inference of vocal-fold properties from glottal area waveforms (GAW). "
                        "Parameters in the paper's units: E_body kPa, E_cover Pa, E_lig kPa, p_sub Pa, rho kg/m^3, "
-                       "eta Poise, x0 mm; areas mm^2; times s.")
+                       "eta Poise, x0 mm; areas mm^2; times s. When stderr is not a terminal (a log file, nohup, a "
+                       "batch job), infer, diagnose, reach and demo print a plain 'progress:' line there every ~30 s "
+                       "(VFINFER_PROGRESS_INTERVAL, seconds) instead of the live bar.")
 console = Console()
 
 GawArg = Annotated[Path, typer.Argument(
@@ -57,10 +60,14 @@ def _root(version: Annotated[Optional[bool], typer.Option("--version", callback=
 
 
 # ------------------------------------------------------------------------------------ helpers
-def reach_gate(spec, force_reach: bool) -> None:
+def reach_gate(spec, force_reach: bool, workers: int = 1) -> None:
     """The reach check before any sampling (docs/inference.md, "The model's reach"): a recording outside the
     reach of the model and prior exits 2 with one ``error:`` line unless ``force_reach`` (then a warning);
-    a marginal or unchecked one gets a warning; an inside one a one-line note."""
+    a marginal or unchecked one gets a warning; an inside one a one-line note. The ensemble is found or built
+    first (:func:`ensure_reach`); the note and the warning say which it was."""
+    from .cli_reach import ensure_reach
+    which = ensure_reach(spec, workers)
+    which = f" (reach ensemble: {which})" if which else ""
     try:
         v = spec.reach()
     except ValueError as exc:
@@ -69,9 +76,9 @@ def reach_gate(spec, force_reach: bool) -> None:
         raise fail(v.message + "; --force-reach fits anyway")
     w = v.warning("--force-reach")
     if w is None:
-        console.print(f"reach: {v.message}", highlight=False, soft_wrap=True)
+        console.print(f"reach: {v.message}{which}", highlight=False, soft_wrap=True)
     elif spec.model == "fe":                      # only the FE model has a reach to check
-        warn(w)
+        warn(w + which)
 
 
 def print_expected_cost(spec, workers: int) -> None:
@@ -91,14 +98,18 @@ def print_expected_cost(spec, workers: int) -> None:
                   f"{mins} min on {workers} worker{'s' if workers > 1 else ''}", highlight=False)
 
 
-def export_products(store_path: Path, out: Path, title: str = "vfinfer result") -> dict:
+def export_products(store_path: Path, out: Path, title: str = "vfinfer result",
+                    extra_warnings: list[str] | None = None) -> dict:
     """Copy summary, samples (CSV + JSON metadata, NetCDF) and figures out of a job store into ``out`` and
-    write the HTML report ``out/index.html``."""
+    write the HTML report ``out/index.html``; ``extra_warnings`` (Python warnings the run raised here) join the
+    summary's warnings, so that the report lists every warning the command prints."""
     from worker import store as st
 
     from .report import write_report
     out.mkdir(parents=True, exist_ok=True)
     summary = st.read_summary(store_path)
+    known = summary.setdefault("warnings", [])
+    known += [w for w in extra_warnings or [] if w not in known]
     (out / "posterior.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
     (out / "posterior_table.txt").write_text(summary.get("formatted", "") + "\n")
     ident = summary.get("identifiability")
@@ -114,7 +125,8 @@ def export_products(store_path: Path, out: Path, title: str = "vfinfer result") 
 
 
 def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
-    """Run a job on an in-process LocalCluster with a progress bar; products go to ``out``."""
+    """Run a job on an in-process LocalCluster with a progress bar (on a terminal) or a plain progress line every
+    ~30 s on stderr (elsewhere: ``cli_common.ProgressLines``); products go to ``out``."""
     from distributed import Client, LocalCluster
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -122,20 +134,24 @@ def run_local(spec, out: Path, workers: int, job_id: str = "local") -> dict:
 
     out.mkdir(parents=True, exist_ok=True)
     store_path = out / f"{job_id}.zarr"
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+    with ProgressLines() as lines, \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
             Client(cl) as client, Progress(TextColumn("{task.description}"), BarColumn(),
                                            TextColumn("{task.completed}/{task.total} sims  {task.fields[ess]}"),
                                            TimeElapsedColumn(), console=console) as bar:
         register_warm_up(client)
         task = bar.add_task("simulating", total=spec.n_simulations, ess="")
+        lines.update("simulating", 0, spec.n_simulations)
 
         def report(p):
             bar.update(task, completed=p.n_done, total=max(p.n_total, p.n_done), description=p.phase,
                        ess=f"ESS={p.ess:.1f}" if p.ess == p.ess else "")
+            lines.update(p.phase, p.n_done, max(p.n_total, p.n_done), p.ess)
 
-        stats = run_job(client, job_id, store_path, spec, report=report)
+        with warnings_in_words(echo=False) as raised:        # printed with the summary's warnings
+            stats = run_job(client, job_id, store_path, spec, report=report)
     (out / "timings.json").write_text(json.dumps(stats, indent=1))
-    return export_products(store_path, out, title=f"vfinfer {job_id}")
+    return export_products(store_path, out, title=f"vfinfer {job_id}", extra_warnings=raised)
 
 
 # ------------------------------------------------------------------------------------ commands
@@ -156,7 +172,7 @@ def infer(gaw: GawArg, fps: Fps = None, sampler: Sampler = "smc", n: N = 2000, p
                       prior_set=prior_set, area_scale=parse_area_scale(area_scale, uncalibrated),
                       contact=contact, contact_layer_mm=contact_layer_mm, runs=runs)
     check_out(out, overwrite)
-    reach_gate(spec, force_reach)
+    reach_gate(spec, force_reach, workers)
     note_is(sampler)
     print_expected_cost(spec, workers)
     with staged_output(out) as stage:
@@ -187,10 +203,12 @@ def _listen(host: str, port: int, family: int) -> socket.socket | None:
 
 @app.command()
 def serve(host: Annotated[str, typer.Option(help="address to listen on")] = "127.0.0.1",
-          port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port")] = 8000,
+          port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port; 0: one the system picks, which the "
+                                                                   "first line on stderr names")] = 8000,
           workers: Annotated[Optional[int], typer.Option(min=1, help="LocalCluster workers (if no scheduler)")] = None
           ) -> None:
-    """Run the HTTP API (with a LocalCluster unless VFINFER_SCHEDULER is set); API docs at /docs."""
+    """Run the HTTP API (with a LocalCluster unless VFINFER_SCHEDULER is set); API docs at /docs. The port is
+    bound before anything else starts, and ``listening on http://HOST:PORT`` on stderr says which it is."""
     import uvicorn
 
     from .main import create_app
@@ -208,6 +226,8 @@ def serve(host: Annotated[str, typer.Option(help="address to listen on")] = "127
     sock = _listen(host, port, family)
     if sock is None:
         raise fail(f"cannot listen on {host}:{port}: the port is in use or not allowed")
+    port = sock.getsockname()[1]                   # the system's pick for --port 0
+    typer.echo(f"listening on http://{host if ':' not in host else f'[{host}]'}:{port}", err=True)
     if not settings.users:
         warn("no tokens configured (VFINFER_TOKENS=user:token,...): every request will be 401")
     with sock:
@@ -305,12 +325,15 @@ def reach(mesh: Mesh = "coarse", dt: Dt = 5e-5, duration: Duration = 0.55, disca
     if rebuild or ens is None or not exact:
         t0 = time.perf_counter()
 
-        def progress(done, total, el):
-            eta = el / done * (total - done) if done else 0.0
-            console.print(f"reach: {done}/{total} draws simulated, {el:.0f} s elapsed, ~{eta:.0f} s left",
-                          highlight=False, soft_wrap=True)
         console.print(f"reach: simulating {n} prior draws ({mesh} mesh, dt {dt:g} s, {duration:g} s)", highlight=False)
-        ens = rc.build_ensemble(cfg, box, n, seed, progress=progress)
+        with ProgressLines() as lines:
+            def progress(done, total, el):
+                lines.update("reach ensemble", done, total)
+                if not lines.enabled:          # a terminal: a line a block, as ever
+                    eta = el / done * (total - done) if done else 0.0
+                    console.print(f"reach: {done}/{total} draws simulated, {el:.0f} s elapsed, ~{eta:.0f} s left",
+                                  highlight=False, soft_wrap=True)
+            ens = rc.build_ensemble(cfg, box, n, seed, progress=progress)
         path = rc.save_cached(ens)
         console.print(f"reach: {ens.n} draws in {time.perf_counter() - t0:.0f} s -> {path}", highlight=False)
     else:

@@ -8,7 +8,9 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 import time
+import warnings
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
@@ -35,6 +37,26 @@ def warn(msg: str) -> None:
     typer.echo(f"warning: {_one_line(msg)}", err=True)
 
 
+@contextmanager
+def warnings_in_words(echo: bool = True):
+    """Inside, a Python warning is one ``warning: <message>`` line on stderr, like every other warning of the
+    command line: no file, line number or source line, which say nothing to a user. Yields the list of the
+    warnings' texts (each once), for a report to list; ``echo`` False only collects them, for a command that
+    prints its report's warnings itself. The previous handler comes back on exit."""
+    shown: list[str] = []
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = _one_line(message)
+        if text not in shown:
+            shown.append(text)
+            if echo:
+                warn(text)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield shown
+
+
 def fail(msg: str, code: int = USAGE_EXIT) -> typer.Exit:
     """Print the error line and return the ``typer.Exit`` to raise (``raise fail(...)``)."""
     error_line(msg)
@@ -48,12 +70,14 @@ ClickException, UsageError = _click_exc.ClickException, _click_exc.UsageError
 
 class VfinferGroup(TyperGroup):
     """The command group: click's usage errors become one ``error:`` line (click prints a usage box),
-    and an unexpected exception becomes one line too, not a traceback (``VFINFER_DEBUG=1`` shows it)."""
+    an unexpected exception becomes one line too, not a traceback (``VFINFER_DEBUG=1`` shows it), and a Python
+    warning a ``warning:`` line (:func:`warnings_in_words`)."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
-            rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var,
-                              standalone_mode=False, **extra)
+            with warnings_in_words():
+                rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var,
+                                  standalone_mode=False, **extra)
         except UsageError as exc:
             if type(exc).__name__.startswith("NoArgsIsHelp") and exc.ctx is not None:
                 typer.echo(exc.ctx.get_help())
@@ -208,3 +232,67 @@ def human_time(epoch: float | None, now: float | None = None) -> str:
     iso = datetime.fromtimestamp(epoch, tz=timezone.utc).astimezone().isoformat(sep=" ", timespec="seconds")
     ago = now - epoch
     return f"{iso} ({human_duration(ago)} ago)" if ago >= 0 else f"{iso} (in {human_duration(-ago)})"
+
+
+# ------------------------------------------------------------------------------------ progress in a log file
+#: Seconds between two progress lines when stderr is not a terminal (``VFINFER_PROGRESS_INTERVAL`` overrides it;
+#: the tests set a fraction of a second).
+PROGRESS_INTERVAL_S = 30.0
+
+
+class ProgressLines:
+    """Plain progress lines on stderr for a run whose stderr is not a terminal (a log file, ``nohup``, a batch
+    job), where a live bar draws nothing until the end and an hour's run cannot be told from a hang. A thread
+    prints the latest state every ``interval`` seconds (``VFINFER_PROGRESS_INTERVAL``, default
+    :data:`PROGRESS_INTERVAL_S`), so a line comes even while a long chunk reports nothing; elapsed time moves on
+    in each, the simulations only when work is done. On a terminal it prints nothing: the bar is there.
+
+    Use as a context manager; :meth:`update` with the stage, simulations done and expected (None: unknown) and
+    the ESS where there is one. A line: ``progress: <stage> · 120/400 simulations · ESS 35.2 · elapsed 1 min
+    02 s · about 3 min 05 s left``."""
+
+    def __init__(self, interval: float | None = None, stream=None):
+        self.stream = stream if stream is not None else sys.stderr
+        if interval is None:
+            try:
+                interval = float(os.environ.get("VFINFER_PROGRESS_INTERVAL", PROGRESS_INTERVAL_S))
+            except ValueError:
+                interval = PROGRESS_INTERVAL_S
+        self.interval = max(0.05, interval)
+        isatty = getattr(self.stream, "isatty", None)
+        self.enabled = not (isatty is not None and isatty())
+        self.t0 = time.perf_counter()
+        self.stage, self.done, self.total, self.ess = "starting", None, None, None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def update(self, stage: str, done: int | None = None, total: int | None = None, ess: float | None = None) -> None:
+        self.stage, self.done, self.total, self.ess = stage, done, total, ess
+
+    def line(self) -> str:
+        el = time.perf_counter() - self.t0
+        parts = [f"progress: {self.stage}"]
+        done, total = self.done, self.total
+        if done is not None:
+            parts.append(f"{done:,}/{total:,} simulations" if total else f"{done:,} simulations")
+        if self.ess is not None and self.ess == self.ess:
+            parts.append(f"ESS {self.ess:.1f}")
+        parts.append(f"elapsed {human_duration(el)}")
+        if done and total and total > done:
+            parts.append(f"about {human_duration(el / done * (total - done))} left")
+        return " · ".join(parts)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval):
+            print(self.line(), file=self.stream, flush=True)
+
+    def __enter__(self) -> "ProgressLines":
+        if self.enabled:
+            self._thread = threading.Thread(target=self._run, name="vfinfer-progress", daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()

@@ -17,7 +17,7 @@ from rich.table import Table
 
 from vfcore.config import contact_label
 
-from .cli_common import NON_NEGATIVE, POSITIVE, choice, fail, load_gaw
+from .cli_common import NON_NEGATIVE, POSITIVE, ProgressLines, choice, fail, load_gaw, warnings_in_words
 from .cli_options import AreaScale, Contact, ContactLayer, PriorSet, Uncalibrated, parse_area_scale
 from vfcore.diagnose.defaults import DEFAULT_ESTIMATE, DISCARD_S, DURATION_S
 from vfcore.diagnose.options import REFIT_STARTS, DiagnoseOptions
@@ -66,8 +66,9 @@ class StageReporter:
     """The command's progress: a line at each new stage, and a status line that follows the
     simulations (shown on a terminal only)."""
 
-    def __init__(self, status=None):
+    def __init__(self, status=None, lines=None):
         self.status = status
+        self.lines = lines                  # cli_common.ProgressLines: stderr that is not a terminal
         self.last = None
 
     def __call__(self, ev: dict) -> None:
@@ -77,6 +78,9 @@ class StageReporter:
             console.print(stage_line(ev), highlight=False)
         if self.status is not None:
             self.status.update(stage_line(ev))
+        if self.lines is not None:
+            where = ev["stage"] + (f" {ev['step']}/{ev['steps']}" if ev.get("step") and ev.get("steps") else "")
+            self.lines.update(where + (f" ({ev['entry']})" if ev.get("entry") else ""), ev["simulations"])
 
 
 def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
@@ -335,10 +339,11 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
 
     from .diagnosis import run_diagnose
     try:
-        with console.status("starting", spinner="dots") as status:
+        with console.status("starting", spinner="dots") as status, warnings_in_words() as raised, \
+                ProgressLines() as lines:
             if workers == 1:
                 cmap = CachedMap(map, store) if store is not None else None
-                report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status), base=base_post)
+                report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status, lines), base=base_post)
             else:
                 from concurrent.futures import ProcessPoolExecutor
 
@@ -346,10 +351,12 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
                 with ProcessPoolExecutor(workers) as pool:
                     cmap = CachedMap(pool.map, store) if store is not None else None
                     report = run_diagnose(problem, req, map=BalancedMap(cmap or pool.map, workers),
-                                          progress=StageReporter(status), base=base_post)
+                                          progress=StageReporter(status, lines), base=base_post)
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
-    return jsonable(account(report.to_dict(), cmap)), report
+    d = jsonable(account(report.to_dict(), cmap))
+    d["warnings"] = raised                  # shown as they came; the report lists them
+    return d, report
 
 
 #: the option that sets each model setting a ``--base`` posterior must share with the diagnosis

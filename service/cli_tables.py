@@ -23,8 +23,10 @@ def print_table(summary: dict, title: str = "Posterior") -> None:
     console.print(f"method={summary['method']}  simulations={summary['n_simulations']} "
                   f"(failed {summary['n_failed']})  ESS={summary['ess']:.1f}  "
                   f"log evidence={le if le is None else round(le, 3)} +- {se if se is None else round(se, 3)}")
+    from worker.reduce import convergence_note
     for name, q in (summary.get("predictive") or {}).items():
-        console.print(f"  {name}: {q['mean']:.4g} +- {q['sd']:.3g} {q['unit']} (90%: {q['q05']:.4g} .. {q['q95']:.4g})")
+        console.print(f"  {name}: {q['mean']:.4g} +- {q['sd']:.3g} {q['unit']} (90%: {q['q05']:.4g} .. {q['q95']:.4g})"
+                      f"{convergence_note(q)}", highlight=False, soft_wrap=True)
     print_identifiability(summary.get("identifiability"))
     for w in summary.get("warnings", []):
         warn(w)

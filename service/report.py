@@ -14,6 +14,7 @@ from html import escape
 from pathlib import Path
 
 from vfcore.config import contact_label
+from worker.reduce import convergence_note
 
 #: Figures of a job, in the order shown, with their captions.
 FIGURES = {
@@ -154,7 +155,7 @@ def render_report(summary: dict, images: dict[str, str], title: str, links: dict
     if pred:
         rows = [[escape(k.replace("_", " ")), escape(q.get("unit", "")), fmt_num(q.get("mean")), fmt_num(q.get("sd"), ".3g"),
                  f"{fmt_num(q.get('q05'))} – {fmt_num(q.get('q95'))}"
-                 + ("" if q.get("converged", True) else f" (depends on {q.get('depends_on', 'mesh and time step')})")]
+                 + escape(convergence_note(q))]
                 for k, q in pred.items()]
         parts.append("<h2>Flow and contact pressure</h2>"
                      + html_table(["quantity", "unit", "mean", "sd", "90 % interval"], rows, numeric_from=2))

@@ -248,6 +248,9 @@ def render_diagnosis_report(d: dict, figure: str | None, title: str, links: dict
                  "the entry with the material parameters held at the base posterior. Refit: base plus extension "
                  "fitted by SMC; dlogZ is its log-evidence gain over the reference, with its error.</p>"
                  + _entries(d))
+    raised = d.get("warnings") or []          # Python warnings the run raised, as the command line showed them
+    if raised:
+        parts.append("<h2>Warnings</h2>" + "".join(f"<div class='warn'>{escape(str(w))}</div>" for w in raised))
     notes = d.get("notes") or []
     if notes:
         parts.append("<h2>Notes</h2>" + "".join(f"<div class='warn'>{escape(str(n))}</div>" for n in notes))

@@ -10,3 +10,7 @@ import os
 
 for _name in ("COLUMNS", "LINES"):
     os.environ.pop(_name, None)
+
+# `vfinfer infer` builds a missing reach ensemble on first use (2,000 simulations, minutes): a test that wants
+# one sets the variable back and points VFINFER_CACHE_DIR at its own folder, never the user's cache.
+os.environ["VFINFER_REACH_BUILD"] = "0"

@@ -35,6 +35,12 @@ UNCONVERGED = frozenset({"mean_contact", "max_contact"})
 DEPENDS_ON = {"projection": "mesh and time step", "layer": "mesh"}
 
 
+def convergence_note(q: dict) -> str:
+    """`` (depends on mesh and time step)`` for a predictive summary entry that is not converged, else ``""``:
+    the one wording of the terminal and the HTML report, so that neither shows such a number bare."""
+    return "" if q.get("converged", True) else f" (depends on {q.get('depends_on', 'mesh and time step')})"
+
+
 def reduce_is_job(store_path: str) -> dict:
     """Importance-sampling reducer (a Dask task): read batch 0, reduce, publish."""
     from vfcore.inference.importance import reduce_importance

@@ -42,38 +42,43 @@ ROOT = Path(__file__).resolve().parents[2]
 def start_service(data_dir: Path, script: list[str] | None = None, env: dict | None = None
                   ) -> tuple[subprocess.Popen, int]:
     """``vfinfer serve`` (or ``script``, a command line run with this Python that serves the same way) in its own
-    process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir`` and a free port; returns
-    the process and its port once both workers answer. A port is free only until the service binds it, and
-    another process may take it in between: then the service exits at once with its one "in use" line, and it is
-    started again on another port."""
+    process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir``; returns the process and
+    its port once both workers answer. The service is given port 0 and binds before it starts anything else: the
+    port is the system's pick, named on its ``listening on`` line, and no other process can take it in between
+    (a port looked up free here and handed over would be free only until something else bound it)."""
     env = {**os.environ, "VFINFER_DATA_DIR": str(data_dir), "VFINFER_ALLOW_TOY": "1", "VFINFER_N_WORKERS": "2",
            "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1", **PLUGIN_ENV,
            **(env or {})}
     import httpx
-    for attempt in range(5):
-        port = free_port()
-        log = data_dir.parent / f"serve_{port}_{time.time_ns()}.log"       # kept for the error message
-        argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", str(port)]
-        with open(log, "wb") as fh:
-            p = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                 start_new_session=True)
-        t0 = time.time()
-        while True:
+    log = data_dir.parent / f"serve_{time.time_ns()}.log"       # kept for the error message
+    argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", "0"]
+    with open(log, "wb") as fh:
+        p = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
+    t0 = time.time()
+    port = None
+    while True:
+        if port is None:
+            port = listening_port(log.read_text(errors="replace"), r"listening on http://127\.0\.0\.1:")
+        if port is not None:
             try:
                 if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).json()["dask_workers"] == 2:
                     return p, port
             except (httpx.HTTPError, KeyError, ValueError):
                 pass
-            if time.time() - t0 > 180 or p.poll() is not None:
-                rc = p.poll()
-                kill_service(p)
-                tail = log.read_text(errors="replace")[-3000:]
-                if rc == 2 and "in use" in tail and attempt < 4:
-                    break
-                raise RuntimeError(f"service did not start on port {port} within {time.time() - t0:.0f} s "
-                                   f"(exit code {rc}); its output:\n{tail}")
-            time.sleep(0.2)
-    raise AssertionError("unreachable")
+        if time.time() - t0 > 180 or p.poll() is not None:
+            rc = p.poll()
+            kill_service(p)
+            raise RuntimeError(f"service did not start (port {port}) within {time.time() - t0:.0f} s "
+                               f"(exit code {rc}); its output:\n{log.read_text(errors='replace')[-3000:]}")
+        time.sleep(0.2)
+
+
+def listening_port(log: str, prefix: str) -> int | None:
+    """The port in the first ``<prefix><port>`` of a process's output (``prefix`` a regular expression), or None
+    before it is written."""
+    import re
+    m = re.search(prefix + r"(\d+)", log)
+    return int(m.group(1)) if m else None
 
 
 def kill_service(p: subprocess.Popen) -> None:
@@ -85,19 +90,19 @@ def kill_service(p: subprocess.Popen) -> None:
     p.wait(30)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class ServerThread:
+    """``app`` served by uvicorn in a thread of this process, on a socket bound here to a port the system picks
+    (bound before the app's lifespan starts anything, as ``vfinfer serve`` does)."""
+
     def __init__(self, app):
-        self.port = free_port()
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(2048)
+        self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}"
         self.server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning",
                                                     lifespan="on"))
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
     def __enter__(self):
         self.thread.start()
@@ -111,6 +116,7 @@ class ServerThread:
     def __exit__(self, *exc):
         self.server.should_exit = True
         self.thread.join(30)
+        self.sock.close()
 
 
 def wait_done(http, job_id: str, user: str, timeout: float = 120.0, states=("done", "failed", "cancelled")) -> dict:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -210,3 +211,64 @@ def test_serve_holds_its_port_before_the_app_starts(monkeypatch):
     r = CliRunner().invoke(app, ["serve", "--port", str(port)], env={"VFINFER_TOKENS": "user:a-long-token"})
     assert r.exit_code == 0, r.output
     assert seen == {"bind_refused": True, "served_on": [port]}
+
+
+def test_serve_on_port_0_binds_one_the_system_picks_and_names_it(monkeypatch):
+    """``--port 0``: the port is bound before the app starts and named on the ``listening on`` line, so a caller
+    (the service tests) never hands over a port that something else may take first."""
+    import re
+    import socket
+
+    import uvicorn
+
+    import service.main as main
+    seen = {}
+
+    def create_app(settings):
+        return object()
+
+    class Server:
+        def __init__(self, config):
+            pass
+
+        def run(self, sockets):
+            port = sockets[0].getsockname()[1]
+            with socket.socket() as s:               # the socket listens: a client connects
+                seen["connects"] = s.connect_ex(("127.0.0.1", port)) == 0
+            seen["served_on"] = port
+
+    monkeypatch.setattr(main, "create_app", create_app)
+    monkeypatch.setattr(uvicorn, "Server", Server)
+    r = CliRunner().invoke(app, ["serve", "--port", "0"], env={"VFINFER_TOKENS": "user:a-long-token"})
+    assert r.exit_code == 0, r.output
+    named = re.findall(r"^listening on http://127\.0\.0\.1:(\d+)$", r.stderr, re.M)
+    assert seen["connects"] and named == [str(seen["served_on"])] and seen["served_on"] != 0, r.stderr
+
+
+def test_infer_with_stderr_to_a_pipe_prints_plain_progress_lines(tmp_path):
+    """`vfinfer infer ... 2> log`: no bar can draw there, so plain progress lines come at the set interval
+    (VFINFER_PROGRESS_INTERVAL, 30 s unless set; a fraction of a second here), each with the stage, the
+    simulations and the elapsed time, and none of the bar's control characters. A tiny real FE job."""
+    import os
+    import re
+    import subprocess
+    import sys
+
+    from vfvideo.io import write_gaw_csv
+    t = np.arange(1400) / 4000.0
+    gaw = write_gaw_csv(tmp_path / "g.csv", t, 6.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0), 4000.0)
+    env = {**os.environ, "VFINFER_PROGRESS_INTERVAL": "0.3", "VFINFER_REACH_BUILD": "0",
+           "VFINFER_CACHE_DIR": str(tmp_path / "cache"), "OMP_NUM_THREADS": "1"}
+    p = subprocess.run([sys.executable, "-m", "service.cli", "infer", str(gaw), "--mesh", "coarse", "--dt", "1e-4",
+                        "--duration", "0.35", "--discard", "0.15", "--sampler", "is", "--n", "8", "--workers", "1",
+                        "--out", str(tmp_path / "o")],
+                       cwd=Path(__file__).resolve().parents[2], env=env, stdin=subprocess.DEVNULL,
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("progress: ")]
+    assert len(lines) >= 2, p.stderr
+    pattern = re.compile(r"^progress: [^·]+( · \d+(/\d+)? simulations)?( · ESS [\d.]+)? · elapsed [\d.]+ s")
+    assert all(pattern.match(ln) for ln in lines), lines
+    elapsed = [float(re.search(r"elapsed ([\d.]+) s", ln).group(1)) for ln in lines]
+    assert elapsed == sorted(elapsed) and elapsed[-1] > elapsed[0]          # a clock that moves: not a hang
+    assert "\x1b" not in p.stderr and "\r" not in p.stderr

@@ -3,6 +3,7 @@ not oscillate, negative GAW samples within noise kept as measured (deeper ones r
 (--overwrite to replace one), human times in `status`, and `list` / `cancel` against a running service."""
 from __future__ import annotations
 
+import json
 import re
 from types import SimpleNamespace
 
@@ -189,3 +190,54 @@ def test_list_status_cancel_on_the_service(service):
     assert r.exit_code == 2 and "404" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     r = _invoke(["list"], **{**env, "VFINFER_TOKEN": "wrong-token"})
     assert r.exit_code == 2 and "401" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+DEGENERATE = "DEGENERATE ENSEMBLE (smc): final generation acceptance 0.010, 3 distinct particles of 40"
+
+
+def test_a_python_warning_is_a_warning_line_in_words_and_the_report_lists_it(tmp_path, monkeypatch):
+    """A warning the library raises while a fit runs (the degenerate ensemble of the issue) is printed once as a
+    `warning:` line, with no file path, line number or source line, and the fit's products list it."""
+    import warnings
+
+    import zarr
+
+    import worker.run as wr
+    from vfcore.inference.diagnostics import DegenerateEnsembleWarning
+    summary = {"table": [], "method": "smc", "n_simulations": 40, "n_failed": 0, "ess": 3.0, "warnings": []}
+
+    def run_job(client, job_id, store_path, spec, report=None):
+        warnings.warn(DEGENERATE, DegenerateEnsembleWarning)
+        zarr.open_group(str(store_path), mode="a", path="posterior").attrs["summary"] = summary
+        return {"wall_s": 0.0}
+    monkeypatch.setattr(wr, "run_job", run_job)
+    out = tmp_path / "o"
+    r = _invoke(["infer", str(_toy_gaw(tmp_path / "g.csv")), *TOY, "--workers", "1", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    hits = [ln for ln in r.stderr.splitlines() if "DEGENERATE" in ln]
+    assert hits == [f"warning: {DEGENERATE}"], r.stderr
+    assert ".py:" not in r.output and "warnings.warn" not in r.output and "DegenerateEnsembleWarning" not in r.output
+    assert DEGENERATE in json.loads((out / "posterior.json").read_text())["warnings"]
+    assert DEGENERATE in (out / "index.html").read_text()
+
+
+def test_a_diagnosis_shows_a_python_warning_in_words_and_keeps_it_for_its_report(monkeypatch, capsys):
+    import warnings
+
+    import service.cli_diagnose as C
+    import vfcore.diagnose.pipeline as P
+    from service.api_models import DiagnoseRequest
+
+    class Report:
+        def to_dict(self):
+            return {}
+
+    def diagnose(problem, *, map, **kw):
+        warnings.warn(DEGENERATE, UserWarning)
+        warnings.warn(DEGENERATE, UserWarning)          # the same text twice is one line
+        return Report()
+    monkeypatch.setattr(P, "diagnose", diagnose)
+    d, _ = C.run_local(SimpleNamespace(), DiagnoseRequest(), 1, None, None)
+    err = capsys.readouterr().err
+    assert d["warnings"] == [DEGENERATE]
+    assert [ln for ln in err.splitlines() if "DEGENERATE" in ln] == [f"warning: {DEGENERATE}"] and ".py:" not in err

@@ -21,7 +21,7 @@ import pytest
 import yaml
 import zarr
 
-from svc_helpers import TOKENS, auth, free_port, toy_spec, wait_done
+from svc_helpers import TOKENS, auth, listening_port, toy_spec, wait_done
 from toy_model import PLUGIN_ENV
 
 from worker import store as st
@@ -140,10 +140,11 @@ class Procs:
         self.procs.append((p, log))
         return p
 
-    def log_of(self, p: subprocess.Popen) -> str:
+    def log_of(self, p: subprocess.Popen, tail: int | None = 3000) -> str:
         for q, log in self.procs:
             if q is p:
-                return log.read_text(errors="replace")[-3000:]
+                text = log.read_text(errors="replace")
+                return text if tail is None else text[-tail:]
         return ""
 
     def logs(self) -> str:
@@ -185,19 +186,34 @@ def _wait_http(procs: Procs, p: subprocess.Popen, url: str, ok, what: str, timeo
         time.sleep(0.1)
 
 
+def _port_of(procs: Procs, p: subprocess.Popen, prefix: str, what: str, timeout: float = 90.0) -> int:
+    """The port a process bound to port 0 names in its output after ``prefix``."""
+    t0 = time.time()
+    while (port := listening_port(procs.log_of(p, tail=None), prefix)) is None:
+        if p.poll() is not None or time.time() - t0 > timeout:
+            raise RuntimeError(f"{what} named no port after {time.time() - t0:.0f} s (exit code {p.poll()}); "
+                               f"its output:\n{procs.log_of(p)}")
+        time.sleep(0.1)
+    return port
+
+
 @contextmanager
 def deployed_cluster(tmp: Path):
+    """Scheduler, workers and API as the compose file starts them, each on ports the system picks (port 0) and
+    names in its output: a port looked up free here and handed over could be taken by another process (each
+    worker binds random ports of its own) before its owner bound it."""
     svcs = _compose()["services"]
     procs = Procs(tmp)
-    sched_port, sched_dash, api_port = free_port(), free_port(), free_port()
-    address = f"tcp://127.0.0.1:{sched_port}"
     data = tmp / "data"                    # stands in for the shared volume
     data.mkdir(parents=True)
     try:
         sch = svcs["scheduler"]
-        p_sch = procs.start("scheduler", _local(sch["command"], {"--host": "127.0.0.1", "--port": str(sched_port),
-                                                                 "--dashboard-address": f"127.0.0.1:{sched_dash}"}),
+        p_sch = procs.start("scheduler", _local(sch["command"], {"--host": "127.0.0.1", "--port": "0",
+                                                                 "--dashboard-address": "127.0.0.1:0"}),
                             _env(sch["environment"]))
+        sched_port = _port_of(procs, p_sch, r"Scheduler at:\s+tcp://127\.0\.0\.1:", "scheduler")
+        address = f"tcp://127.0.0.1:{sched_port}"
+        sched_dash = _port_of(procs, p_sch, r"dashboard at:\s+http://127\.0\.0\.1:", "scheduler's dashboard")
         # compose starts workers and API only once the scheduler's healthcheck passes: same probe
         _wait_http(procs, p_sch, f"http://127.0.0.1:{sched_dash}/health", lambda r: r.text == "ok", "scheduler")
 
@@ -205,7 +221,7 @@ def deployed_cluster(tmp: Path):
         n_workers = int(wrk.get("deploy", {}).get("replicas", 2))
         assert n_workers >= 2, "the fault test needs a worker to survive the kill"
         compose_addr = next(a for a in wrk["command"] if a.startswith("tcp://"))
-        workers = [procs.start(f"worker{i}", _local(wrk["command"], {"--dashboard-address": f"127.0.0.1:{free_port()}"},
+        workers = [procs.start(f"worker{i}", _local(wrk["command"], {"--dashboard-address": "127.0.0.1:0"},
                                                     {compose_addr: address}),
                                _env(wrk["environment"]))
                    for i in range(n_workers)]
@@ -214,7 +230,8 @@ def deployed_cluster(tmp: Path):
         api_env = _env(api["environment"], VFINFER_SCHEDULER=address, VFINFER_DATA_DIR=str(data),
                        VFINFER_TOKENS=",".join(f"{u}:{t}" for u, t in TOKENS.items()),
                        VFINFER_ALLOW_TOY="1")           # the test double; never set in compose
-        p_api = procs.start("api", _local(api["command"], {"--host": "127.0.0.1", "--port": str(api_port)}), api_env)
+        p_api = procs.start("api", _local(api["command"], {"--host": "127.0.0.1", "--port": "0"}), api_env)
+        api_port = _port_of(procs, p_api, r"listening on http://127\.0\.0\.1:", "api")
         url = f"http://127.0.0.1:{api_port}"
         _wait_http(procs, p_api, f"{url}/health",
                    lambda r: r.json()["status"] == "ok" and r.json()["dask_workers"] == n_workers, "api", timeout=120)

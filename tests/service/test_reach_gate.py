@@ -90,14 +90,14 @@ def test_reach_command_builds_caches_and_checks(tmp_path, gaw_200, empty_cache, 
     args = ["reach", "--mesh", "coarse", "--dt", "1e-4", "--fix", "E_lig=1.808", "--n", "6"]
     r = CliRunner().invoke(cli_app, args, env={"COLUMNS": "200"})
     assert r.exit_code == 0, r.output
-    assert "reach: 6/6 draws simulated" in r.output and "| f0 | Hz |" in r.output
+    assert "reach: 6 draws in" in r.output and "| f0 | Hz |" in r.output
     files = list(empty_cache.glob("reach_*.csv"))
     assert len(files) == 1
     # a second call reads the cache instead of simulating, and --check compares a recording
     monkeypatch.setattr(vfcore.batch, "simulate_many", None)
     r = CliRunner().invoke(cli_app, [*args, "--check", str(gaw_200)], env={"COLUMNS": "200"})
     assert r.exit_code == 0, r.output
-    assert f"ensemble of 6 draws from {files[0]}" in r.output and "draws simulated" not in r.output
+    assert f"ensemble of 6 draws from {files[0]}" in r.output and "draws in" not in r.output
     assert "outside: recording outside this model's reach: recording f0 200 Hz" in r.output
 
 
@@ -200,3 +200,45 @@ def test_an_element_hint_is_a_command_the_cli_runs(tmp_path, empty_cache, monkey
     ens, exact = rc.find_ensemble(cfg, prior)
     assert exact and ens.sim_config().element == "anp"
     assert getattr(rc.find_ensemble(cfg.replace(element="p1"), prior)[0], "key", None) != ens.key
+
+
+def test_infer_builds_a_missing_ensemble_on_first_use_caches_it_and_says_which(tmp_path, gaw_200, empty_cache,
+                                                                                  monkeypatch):
+    """The paper's medium mesh has no shipped ensemble: the first `vfinfer infer` builds one of the prior set (a
+    line says so, with its cost and where it goes), the recording is checked against it, and the next run reads
+    it from the cache; the coarse default says "shipped"; VFINFER_REACH_BUILD=0 builds nothing. Stand-in
+    simulator (vfinfer reach's test), stand-in fit."""
+    import vfcore.batch
+    import service.cli as cli
+    from vfcore.inference import reach as rc
+    from vfcore.inference.prior import Prior as PriorBox
+    monkeypatch.setattr(cli, "run_local", lambda spec, out, workers, job_id="local": {
+        "table": [], "method": "importance", "n_simulations": 4, "n_failed": 0, "ess": 3.0})
+    monkeypatch.setattr(rc, "DEFAULT_N", 40)
+    args = ["infer", str(gaw_200), "--mesh", "medium", "--fix", "x0=8.4", "--sampler", "is", "--n", "4",
+            "--workers", "1", "--force-reach"]
+    monkeypatch.setenv("VFINFER_REACH_BUILD", "0")
+    r = CliRunner().invoke(cli_app, [*args, "--out", str(tmp_path / "o0")], env={"COLUMNS": "200"})
+    assert r.exit_code == 0 and "was not checked" in r.output and "building" not in r.output, r.output
+    assert not list(empty_cache.glob("reach_*.csv"))
+
+    monkeypatch.setenv("VFINFER_REACH_BUILD", "1")
+    monkeypatch.setattr(vfcore.batch, "simulate_many", fake_simulate)
+    r = CliRunner().invoke(cli_app, [*args, "--out", str(tmp_path / "o1")], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    files = list(empty_cache.glob("reach_*.csv"))
+    assert len(files) == 1
+    assert "building one now: 40 prior draws" in r.output and f"cached in {files[0]}" in r.output
+    assert "reach: built now: 40 draws" in r.output
+    ens = rc.ReachEnsemble.load(files[0])
+    assert ens.sim_config().mesh == "medium" and ens.prior_obj().to_dict() == PriorBox.default().to_dict()
+    assert "was not checked: no reach ensemble" not in r.output
+    assert "outside this model's reach" in r.output and f"(reach ensemble: built now, {files[0]})" in r.output
+
+    monkeypatch.setattr(rc, "build_ensemble", None)            # the cache answers: nothing is built
+    r = CliRunner().invoke(cli_app, [*args, "--out", str(tmp_path / "o2")], env={"COLUMNS": "200"})
+    assert r.exit_code == 0 and f"(reach ensemble: cached ensemble of 40 draws, {files[0]})" in r.output, r.output
+    assert "building" not in r.output
+    r = CliRunner().invoke(cli_app, ["infer", str(gaw_200), *CHEAP, "--force-reach", "--out", str(tmp_path / "o3")],
+                           env={"COLUMNS": "200"})
+    assert r.exit_code == 0 and "(reach ensemble: shipped ensemble of 2000 draws, " in r.output, r.output

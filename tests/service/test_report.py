@@ -76,3 +76,28 @@ def test_the_report_says_which_independent_runs_were_pooled(post):
     assert f"{top - 12.0:.1f} (left out)" in lines and "more than 3 nats below the best" in lines
     assert "the intervals are not calibrated" in lines
     assert "independent" not in " ".join(t for _, t in _diagnostics(posterior_summary(post)))
+
+
+@pytest.mark.parametrize("contact, depends_on", [("projection", "mesh and time step"), ("layer", "mesh")])
+def test_terminal_and_report_both_label_the_unconverged_contact_peaks(tmp_path, post, capsys, contact, depends_on):
+    """The nodal peak pressures depend on the resolution: `vfinfer infer`'s table and the HTML page both say on
+    what; the flow, which converges, carries no such label in either."""
+    from types import SimpleNamespace
+
+    from service.cli_tables import print_table
+    from service.report import write_report
+    from worker.reduce import _predictive_summary, posterior_summary
+    rng = np.random.default_rng(0)
+    pred = SimpleNamespace(gaw=None, mean_flow=rng.uniform(1e-4, 2e-4, 40), max_contact=rng.uniform(1e4, 3e4, 40),
+                           mean_contact=None, contact_impulse=None, contact_pressure_in_contact=None)
+    summary = posterior_summary(post, _predictive_summary(pred, contact)[0])
+    print_table(summary)
+    lines = capsys.readouterr().out.splitlines()
+    contact_line = next(ln for ln in lines if ln.strip().startswith("max_contact:"))
+    flow_line = next(ln for ln in lines if ln.strip().startswith("mean_flow:"))
+    assert contact_line.endswith(f"(depends on {depends_on})"), contact_line
+    assert "depends on" not in flow_line
+    page = write_report(tmp_path, summary).read_text()
+    row = next(r for r in page.split("<tr>") if "max contact" in r)
+    assert f"(depends on {depends_on})" in row
+    assert "depends on" not in next(r for r in page.split("<tr>") if "mean flow" in r)

@@ -144,6 +144,18 @@ def find_ensemble(config: SimConfig, prior: Prior) -> tuple[ReachEnsemble | None
 
 
 
+def origin(ens: ReachEnsemble) -> str:
+    """Where ``ens`` came from: "shipped" (``vfcore/data``) or "cached" (the user cache, built earlier)."""
+    return "shipped" if Path(ens.source).resolve().parent == SHIPPED_DIR else "cached"
+
+
+def first_use_prior(prior: Prior, prior_set: Prior) -> Prior:
+    """The prior an ensemble built on first use simulates: the named ``prior_set``'s box when it contains
+    ``prior``, as a shipped ensemble does (one build then serves every fix and narrowing of the set, checked as
+    an ensemble of a wider prior), else ``prior`` itself."""
+    return prior_set if _contains(prior_set.to_dict(), prior.to_dict()) else prior
+
+
 def reach_for(gaw, fps: float, config: SimConfig, prior: Prior,
               area_scale: tuple[float, float] | None = None) -> ReachVerdict:
     """Find the ensemble for ``config`` and ``prior`` and check the recording ``gaw`` at ``fps`` against it
@@ -180,5 +192,5 @@ def build_hint(config: SimConfig, prior: Prior) -> str:
 __all__ = ["DEFAULT_N", "DEFAULT_SEED", "F0_AGREEMENT", "HARD_MEASURES", "MEASURES", "NEAR_AREA", "NEAR_F0",
            "PHONATION_MIN_AMPLITUDE", "QUANTILES", "REACH_FPS", "REACH_VERSION", "SUSTAIN_RATIO", "ReachEnsemble",
            "ReachVerdict", "build_ensemble", "build_hint", "cache_dir", "check_reach", "config_key_dict",
-           "draw_measures", "ensemble_path", "find_ensemble", "format_table", "reach_for", "reach_key",
-           "recording_measures", "save_cached"]
+           "draw_measures", "ensemble_path", "find_ensemble", "first_use_prior", "format_table", "origin",
+           "reach_for", "reach_key", "recording_measures", "save_cached"]
