@@ -9,26 +9,23 @@ so the load, and through it the waveform and the log-likelihood, jumps between n
 Here every nodal pressure is a continuous function of the nodes' signed half gaps (negative while a node overlaps
 the midline), and the lumping by halves stays the paper's:
 
-- **attachment downstream of the narrowest node k**: the Bernoulli deficit ``q = dp (1 - (g_sep / g)^2)``,
-  ``g_sep = sep_ratio * g_min``, clipped at 0 (a node at or past ``g_sep`` has p_sup: the paper's separation,
-  which is continuous in the nodal values) and weighted by ``1 - w((G - g_sep) / (ZETA g_sep))``, G the largest gap
-  between k and the node: a narrowing behind a widening past ``(1 + ZETA) g_sep`` is separated, one behind a
-  lower ridge is attached in proportion, so a ridge sinking through ``g_sep`` no longer switches a whole
-  downstream stretch from p_sup to Bernoulli suction;
 - **the narrowest node**: each node within ``MIN_BLEND * g_min`` of the narrowest is weighted in as the node the
-  flow separates behind (weight ``1 - w((g_k - g_min) / (MIN_BLEND g_min))``, normalised), so two narrow places,
-  adjacent or apart, trading places blend instead of switching;
-- **near closure** (``g_min < g_reg``) the Bernoulli suction fades with ``w(g_min / g_reg)`` (viscous losses
-  dominate in a slit that narrow; docs/model.md, "Closure regularisation"): p_sub up to and including the
-  narrowest node, p_sup downstream, as the closed load continues it;
-- **closed** (``g_min <= 0``): p_sub up to and including the first node at or past the midline, p_sup beyond;
-- **a second closure upstream** of the first: a node downstream of a nearly closed node k, behind a widening (a
-  pocket), fades to p_sup by k's closedness ``1 - w(g_k / g_reg)`` times the pocket's depth ``w(rise / g_k)``,
-  so no node's pressure jumps when k touches the midline.
+  flow separates behind (weight ``1 - w((g_k - g_min) / (MIN_BLEND g_min))``, normalised), and each candidate k
+  gives the paper's distribution: upstream of k the paper's near-closure blend ``w_c Bern + (1 - w_c) p_sub``,
+  ``w_c = w(g_min / g_reg)``; from k on the Bernoulli value;
+- **attachment downstream of k**: the Bernoulli deficit ``q = dp (1 - (g_sep / g)^2)``, ``g_sep = sep_ratio *
+  g_min``, clipped at 0 (a node at or past ``g_sep`` has p_sup: the paper's separation, which is continuous in the
+  nodal values) and weighted by ``1 - w((G - g_sep) / (ZETA g_sep))``, G the largest gap between k and the node: a
+  narrowing behind a ridge past ``(1 + ZETA) g_sep`` is separated, one behind a lower ridge attached in proportion,
+  so a ridge sinking through ``g_sep`` no longer switches a whole stretch from p_sup to Bernoulli suction;
+- **closed** (``g_min <= 0``): p_sub upstream of the first node at or past the midline, p_sup from it on;
+- **near a closure**: every node's pressure above p_sup is multiplied by ``w(R / g_reg)``, R the narrowest gap up to
+  and including that node, so a node nearing the midline, and every node behind it, fades to p_sup before it
+  closes: the closure front moving upstream, or a second closure upstream of the first, moves no pressure at once;
+  downstream of the narrowest node the factor is ``w_c``, the paper's blend weight.
 
 ``w(s) = s^2 (3 - 2 s)`` on [0, 1]. When the glottis is open wider than ``g_reg`` with one narrowest node and no
-narrowing behind the separation, every weight is 0 or 1 and the load equals the paper's, bit for bit in the
-Bernoulli values. docs/model.md, "The continuous flow load".
+narrowing behind the separation, every weight is 0 or 1 and the load equals the paper's to rounding. docs/model.md, "The continuous flow load".
 """
 from __future__ import annotations
 
@@ -65,7 +62,7 @@ def surface_loads_continuous(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, g_r
         the reference edges; kept for the paper rule's signature).
     nxs, nzs : (m,) reference coordinates whose edges give the load directions, m.
     gap : (m,) signed half gap to the midline, m (negative while a node overlaps it).
-    g_reg : near-closure scale, m (0 = the suction never fades and a pocket fades only once closed).
+    g_reg : near-closure scale, m (0 = no blend: the paper's hard switch, a node fades only once closed).
     fx, fz : (m,) nodal forces per unit depth, N/m, into the fold (written). pres : (m,) nodal pressures, Pa
         (written).
     Returns (min half gap clamped at 0, half gap at separation (0 when closed), the first node at or past the
