@@ -21,6 +21,8 @@ again at dt 2.5e-5 s. ``--epithelium E_KPA,H_MM`` adds the epithelium membrane (
         --meshes medium,xfine,xxfine,x3fine
     python benchmarks/bench_mesh_refinement.py --points C --sep-ratio 1.0 --meshes x4fine
     python benchmarks/bench_mesh_refinement.py --points "C,D,Table 3" --meshes xfine,xxfine,x3fine --epithelium 30,0.05
+    python benchmarks/bench_mesh_refinement.py --points "Table 3,C,D" --meshes coarse,medium,fine,xfine,xxfine \
+        --flow continuous
 """
 from __future__ import annotations
 
@@ -61,14 +63,15 @@ def register_built(folder: Path, names) -> None:
 
 
 def row(p, mesh: str, element: str, dt: float, sep_ratio: float | None = None,
-        epithelium: tuple[float, float] | None = None) -> list:
+        epithelium: tuple[float, float] | None = None, flow: str = "paper") -> list:
     from vfcore import SimConfig, simulate
     from vfcore.mesh import load_mesh
     t0 = time.perf_counter()
     extra = {} if sep_ratio is None else {"sep_ratio": sep_ratio}
     if epithelium is not None:
         extra.update(epithelium_E_kpa=epithelium[0], epithelium_h_mm=epithelium[1])
-    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", **extra))
+    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", flow=flow,
+                                **extra))
     if not r.ok:
         return [mesh, load_mesh(mesh).n_triangles, element, dt, math.nan, math.nan, math.nan, math.nan, math.nan,
                 math.nan, time.perf_counter() - t0]
@@ -86,6 +89,7 @@ def main(argv=None) -> int:
     ap.add_argument("--elements", default="anp")
     ap.add_argument("--points", default="Table 3,A,B")
     ap.add_argument("--dt-check", action="store_true")
+    ap.add_argument("--flow", default="paper", help="SimConfig.flow: the paper's node-wise load or the continuous one")
     ap.add_argument("--meshes", default=",".join(SHIPPED + ("x3fine",)))
     ap.add_argument("--sep-ratio", type=float, default=None,
                     help="flow separation at this multiple of the narrowest gap (default: SimConfig.sep_ratio's)")
@@ -104,7 +108,7 @@ def main(argv=None) -> int:
         meshes = [m.strip() for m in a.meshes.split(",")]
         register_built(Path(tmp), [m for m in BUILT if m in meshes or (a.dt_check and m == "x3fine")])
         from vfcore import SimConfig
-        print(f"sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}, epithelium "
+        print(f"flow {a.flow}, sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}, epithelium "
               + ("none" if epi is None else f"{epi[0]:g} kPa, {epi[1]:g} mm"))
         print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
               "impulse (mN s/m) | p in contact (Pa) | wall (s) |")
@@ -116,7 +120,7 @@ def main(argv=None) -> int:
                 if a.dt_check:
                     runs += [("xxfine", 2.5e-5), ("x3fine", 2.5e-5)]
                 for mesh, dt in runs:
-                    m, n, el, h, f0, lo, hi, cq, imp, pic, wall = row(p, mesh, element, dt, a.sep_ratio, epi)
+                    m, n, el, h, f0, lo, hi, cq, imp, pic, wall = row(p, mesh, element, dt, a.sep_ratio, epi, a.flow)
                     print(f"| {name} | {m} ({n}) | {el} | {h:g} | {f0:.2f} | {lo:.2f} | {hi:.2f} | {cq:.3f} | "
                           f"{imp:.3f} | {pic:.1f} | {wall:.0f} |", flush=True)
     return 0
