@@ -60,7 +60,7 @@ def _move_sample(kval, mval, dval, Lx, u, v, a, src, dst) -> None:
     _move_column(a, src, dst)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')     # see the sample_* functions of _kernels
 def _sample(mod, cpl, mat, st, out, ws, s, b):
     """The groups of :func:`._kernels.integrate_ws` for the sample ``b`` in slot ``s``: its entries of the
     per-sample fields (columns of the (., B) arrays, rows of the (B, ...) ones) and the shared work arrays."""

@@ -441,7 +441,10 @@ def projection_impulse(indptr, mval, d, vd, ad, h, gamma):
     return md * (vd + h * (1.0 - gamma) * ad)
 
 
-@njit(cache=True)
+# The per-sample phases of a step, shared by integrate_ws (scalar, CUDA) and the lock-step kernel. Inlined in
+# numba's IR (inline='always'): the lock-step kernel calls them per sample and step on freshly built views and
+# argument tuples, and as calls that cost it 12-16 % (block 16, medium mesh); inlined, about what it cost before.
+@njit(cache=True, inline='always')
 def sample_start(mod):
     """Carry of one sample between steps, at t_0: (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet):
     the inlet pressure (Pa) and the last two flows (m^3/s) of the subglottal coupling, the trajectory frames
@@ -450,7 +453,7 @@ def sample_start(mod):
     return (float(mod.p_sub), 0.0, 0.0, 0, 0.0, -np.inf, np.inf, np.inf, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def sample_loads(pat, mod, p_in, u, ws) -> None:
     """Surface positions of the state ``u`` (n,) and their flow load at inlet pressure ``p_in``: ws.fx, ws.fz (m,)."""
     sdx, sdz, sX, sZ = pat.sdx, pat.sdz, pat.sX, pat.sZ
@@ -467,7 +470,7 @@ def sample_loads(pat, mod, p_in, u, ws) -> None:
                   ws.pres, mod.flow)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def sample_contact(stp, pat, mod, cpl, G, u, ws):
     """Midline contact on the unconstrained u_{n+1} in ``ws.r`` (corrected in place; ``u`` (n,) is u_n): the
     compliant layer or the rigid midline. Writes ws.lam, ws.active; returns the active-set iterations, -1 if it
@@ -478,7 +481,7 @@ def sample_contact(stp, pat, mod, cpl, G, u, ws):
     return contact_correct_ws(ws.r, pat.sdx, pat.sX, mod.x_mid, G, ws.lam, ws.active, 50, ws.u0, ws.S, ws.rhs, ws.idx)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry):
     """What follows the state update of step k for one sample: the inelastic projection (rigid midline), the
     step's outputs, the subglottal resonators and the trajectory frame. ``mval`` (nnz,) the sample's mass
@@ -521,7 +524,7 @@ def sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry):
     return (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def sample_window(k, n_steps, stop, cpl, st, out, vm, carry):
     """Settled-response bookkeeping of step k for one sample, ``vm`` its largest nodal speed (m/s) after the step.
     Returns (settled, new carry); once settled, every per-step output of the remaining steps repeats step k's
