@@ -23,9 +23,9 @@ Pattern = namedtuple("Pattern", "indptr indices Lp Lj sdx sdz sX sZ")
 #: g_reg (m, small-gap regularisation), flow (``FLOW_PAPER`` / ``FLOW_CONTINUOUS``), blowup (m).
 Model = namedtuple("Model", "p_sub p_sup sep_ratio x_mid closed_tol g_reg flow blowup")
 
-#: Model extensions: sub_coef (n_modes, 3) subglottal resonators (0 rows = off), flow_coef (2 L sqrt(2 / rho_air):
-#: the glottal flow is Q = flow_coef * gsep * sqrt(p_in - p_sup), m^3/s), layer (bool: compliant contact layer instead of the rigid midline), kc (m,) N/m^2
-#: and cc (m,) N s/m^2 (the layer's spring and dashpot).
+#: Model extensions: sub_coef (n_modes, 3) subglottal resonators (0 rows = off); flow_coef = 2 L sqrt(2 / rho_air)
+#: (the glottal flow is Q = flow_coef * gsep * sqrt(p_in - p_sup), m^3/s); layer (bool: the compliant contact layer
+#: instead of the rigid midline); kc (m,) N/m^2 and cc (m,) N s/m^2, the layer's spring and dashpot.
 Coupling = namedtuple("Coupling", "sub_coef flow_coef layer kc cc")
 
 #: Settled-response stop: window (steps, 0 = off), width (m), vel (m/s).

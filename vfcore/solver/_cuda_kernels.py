@@ -70,6 +70,7 @@ def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flo
              wm[4, :, s], wm[5, :, s], wm[6, :, s], active[:, s], S[:, :, s], wm[7, :, s], idx[:, s], wm[8, :, s],
              wm[9, :, s], subw[0, :, s], subw[1, :, s]))
 
+
 if SIMULATOR:
     # The simulator hands a kernel its arrays wrapped in its own Python objects, which an @njit function
     # cannot take; unwrapped, the thread runs the same compiled run_sample on the same NumPy memory.

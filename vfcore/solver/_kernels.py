@@ -443,7 +443,7 @@ def projection_impulse(indptr, mval, d, vd, ad, h, gamma):
 
 # The per-sample phases of a step, shared by integrate_ws (scalar, CUDA) and the lock-step kernel. Inlined in
 # numba's IR (inline='always'): the lock-step kernel calls them per sample and step on freshly built views and
-# argument tuples, and as calls that cost it 12-16 % (block 16, medium mesh); inlined, about what it cost before.
+# argument tuples; as calls they cost it 12-16 % (block 16, medium mesh), inlined a few per cent.
 @njit(cache=True, inline='always')
 def sample_start(mod):
     """Carry of one sample between steps, at t_0: (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet):
@@ -489,24 +489,26 @@ def sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry):
     p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet = carry
     sdx, sX = pat.sdx, pat.sX
     u, v, a = st.u, st.v, st.a
+    active, lam, proj, lam_out = ws.active, ws.lam, out.proj, out.lam
+    layer, x_mid = cpl.layer, mod.x_mid
     m = sdx.size
     # inelastic impact: a node held at the midline keeps no normal velocity or
     # acceleration (the trapezoidal rule would otherwise bounce it back every step)
-    rec = out.proj.shape[0] > 0
+    rec = proj.shape[0] > 0
     for j in range(m):
-        if ws.active[j] and not cpl.layer:
+        if active[j] and not layer:
             d = sdx[j]
             if rec:
-                out.proj[k - 1, j] = projection_impulse(pat.indptr, mval, d, v[d], a[d], stp.h, stp.gamma)
+                proj[k - 1, j] = projection_impulse(pat.indptr, mval, d, v[d], a[d], stp.h, stp.gamma)
             v[d] = 0.0
             a[d] = 0.0
     gmin = 1e300
     for j in range(m):
         xj = sX[j] + (u[sdx[j]] if sdx[j] >= 0 else 0.0)
-        g = mod.x_mid - xj
+        g = x_mid - xj
         if g < gmin:
             gmin = g
-        out.lam[k - 1, j] = -ws.lam[j] * lam_scale
+        lam_out[k - 1, j] = -lam[j] * lam_scale
     out.width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
     out.gsep[k - 1] = mod.sep_ratio * gmin if gmin > mod.closed_tol else 0.0
     if cpl.sub_coef.shape[0] > 0:
@@ -516,10 +518,11 @@ def sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry):
         q2 = q1
         q1 = q
         out.p_in[k - 1] = p_in
-    if out.traj_every > 0 and k % out.traj_every == 0 and ntr < out.traj_u.shape[0]:
+    traj_u, traj_v = out.traj_u, out.traj_v
+    if out.traj_every > 0 and k % out.traj_every == 0 and ntr < traj_u.shape[0]:
         for i in range(u.size):
-            out.traj_u[ntr, i] = u[i]
-            out.traj_v[ntr, i] = v[i]
+            traj_u[ntr, i] = u[i]
+            traj_v[ntr, i] = v[i]
         ntr += 1
     return (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
 
@@ -541,24 +544,25 @@ def sample_window(k, n_steps, stop, cpl, st, out, vm, carry):
         quiet = win_hi - win_lo <= stop.width and win_v <= stop.vel and win_v <= prev_v
         if quiet and prev_quiet:
             out.stop[0] = k
-            rec = out.proj.shape[0] > 0
+            width, gsep, lam, proj, p_io = out.width, out.gsep, out.lam, out.proj, out.p_in
+            rec = proj.shape[0] > 0
             nmod = cpl.sub_coef.shape[0]
-            m = out.lam.shape[1]
+            m = lam.shape[1]
             for kk in range(k, n_steps):
-                out.width[kk] = out.width[k - 1]
-                out.gsep[kk] = out.gsep[k - 1]
+                width[kk] = width[k - 1]
+                gsep[kk] = gsep[k - 1]
                 for j in range(m):
-                    out.lam[kk, j] = out.lam[k - 1, j]
+                    lam[kk, j] = lam[k - 1, j]
                     if rec:
-                        out.proj[kk, j] = out.proj[k - 1, j]
+                        proj[kk, j] = proj[k - 1, j]
                 if nmod > 0:
-                    out.p_in[kk] = out.p_in[k - 1]
+                    p_io[kk] = p_io[k - 1]
             if out.traj_every > 0:
-                u, v = st.u, st.v
-                for t in range(ntr, out.traj_u.shape[0]):
+                u, v, traj_u, traj_v = st.u, st.v, out.traj_u, out.traj_v
+                for t in range(ntr, traj_u.shape[0]):
                     for i in range(u.size):
-                        out.traj_u[t, i] = u[i]
-                        out.traj_v[t, i] = v[i]
+                        traj_u[t, i] = u[i]
+                        traj_v[t, i] = v[i]
             return True, (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
         prev_quiet = quiet
         prev_v = win_v
@@ -641,13 +645,14 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
     indptr, indices, sdx, sdz = pat.indptr, pat.indices, pat.sdx, pat.sdz
     kval, mval, dval = mat.kval, mat.mval, mat.dval
     u, v, a = st.u, st.v, st.a
-    y1, y2, r = ws.y1, ws.y2, ws.r
+    y1, y2, r, fx, fz, active, sub_p1, sub_p2 = ws.y1, ws.y2, ws.r, ws.fx, ws.fz, ws.active, ws.sub_p1, ws.sub_p2
+    Lp, Lj, Lx = pat.Lp, pat.Lj, mat.Lx
     blowup = mod.blowup
     for i in range(cpl.sub_coef.shape[0]):
-        ws.sub_p1[i] = 0.0
-        ws.sub_p2[i] = 0.0
+        sub_p1[i] = 0.0
+        sub_p2[i] = 0.0
     for j in range(m):
-        ws.active[j] = False
+        active[j] = False
     carry = sample_start(mod)
     for k in range(1, stp.n_steps + 1):
         sample_loads(pat, mod, carry[0], u, ws)
@@ -662,9 +667,9 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
             r[i] = s
         for j in range(m):
             if sdx[j] >= 0:
-                r[sdx[j]] += ws.fx[j]
-                r[sdz[j]] += ws.fz[j]
-        chol_solve(pat.Lp, pat.Lj, mat.Lx, r)
+                r[sdx[j]] += fx[j]
+                r[sdz[j]] += fz[j]
+        chol_solve(Lp, Lj, Lx, r)
         for i in range(n):
             r[i] += u[i]          # r is now u_{n+1} before contact
         if sample_contact(stp, pat, mod, cpl, mat.G, u, ws) < 0:
