@@ -23,6 +23,7 @@ from .scalar import simulate_one
 from .simcore import (BLOWUP, CLOSED_TOL, as_params, assemble_result, contact_law, flow_code, flow_coefficient, midline, setup,
                       stop_settings)
 from .solver import _kernels as kern
+from .solver._args import Coupling, Matrices, Model, Outputs, Pattern, State, Stepper, Stop
 from .solver._batch_kernels import integrate_many
 from .solver.system import get_system
 
@@ -156,11 +157,14 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     status = np.zeros(B, dtype=np.int64)
     proj = np.zeros((B, n_steps, m))
     stop = np.zeros(B, dtype=np.int64)
-    integrate_many(n_steps, config.dt, *blk.coefs, system.indptr, system.indices, blk.kv, blk.mv, blk.dv, system.Lp,
-                   system.Lj, blk.Lx, blk.G, system.sdx, system.sdz, system.sX, system.sZ, blk.u, v, a, blk.p_sub,
-                   config.p_sup, blk.sep, blk.x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3, flow_code(config), BLOWUP,
-                   width, gsep, lam, blk.traj_every, tu, tv, status, blk.sub_coef, flow_coefficient(config), p_in, proj,
-                   config.contact == "layer", blk.kc, blk.cc, *stop_settings(config), stop)
+    integrate_many(Stepper(n_steps, config.dt, *blk.coefs),
+                   Pattern(system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz, system.sX,
+                           system.sZ),
+                   Model(blk.p_sub, config.p_sup, blk.sep, blk.x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3,
+                         flow_code(config), BLOWUP),
+                   Coupling(blk.sub_coef, flow_coefficient(config), config.contact == "layer", blk.kc, blk.cc),
+                   Stop(*stop_settings(config)), Matrices(blk.kv, blk.mv, blk.dv, blk.Lx, blk.G), State(blk.u, v, a),
+                   Outputs(width, gsep, lam, proj, p_in, blk.traj_every, tu, tv, stop), status)
     return assemble_block(blk, ps, configs, status, width, gsep, lam, tu, p_in, proj, stop, t_wall)
 
 

@@ -13,6 +13,7 @@ from .result import SimResult
 from .simcore import (BLOWUP, CLOSED_TOL, assemble_result, contact_law, flow_code, flow_coefficient, midline, setup,
                       stop_settings)
 from .solver import _kernels as kern
+from .solver._args import Coupling, Matrices, Model, Outputs, Pattern, State, Stepper, Stop
 from .solver.system import get_system
 
 __all__ = ["simulate_one"]
@@ -47,11 +48,14 @@ def simulate_one(p: Params, config: SimConfig) -> SimResult:
     # no resonator rows: exactly kern.integrate (the inlet pressure stays p_sub)
     p_in = np.full(n_steps, si["p_sub"]) if config.has_subglottal else np.zeros(0)
     status = kern.integrate_coupled(
-        n_steps, h, am, af, beta, gamma, system.indptr, system.indices, K_vals, M_vals,
-        D_vals, system.Lp, system.Lj, Lx, G, system.sdx, system.sdz, system.sX, system.sZ,
-        u, v, a, si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL,
-        config.closure_gap_mm * 1e-3, flow_code(config), BLOWUP, width, gsep, lam, traj_every, tu, tv,
-        kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config), p_in, proj,
-        config.contact == "layer", *contact_law(p, config, system), *stop_settings(config), stop)
+        Stepper(n_steps, h, am, af, beta, gamma),
+        Pattern(system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz, system.sX, system.sZ),
+        Model(si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3,
+              flow_code(config), BLOWUP),
+        Coupling(kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config),
+                 config.contact == "layer", *contact_law(p, config, system)),
+        Stop(*stop_settings(config)),
+        Matrices(K_vals, M_vals, D_vals, Lx, G), State(u, v, a),
+        Outputs(width, gsep, lam, proj, p_in, traj_every, tu, tv, stop))
     return assemble_result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,
                            p_in if config.has_subglottal else None, proj, int(stop[0]))

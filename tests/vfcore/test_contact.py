@@ -7,6 +7,7 @@ import pytest
 
 from vfcore import TABLE3, SimConfig, simulate
 from vfcore import forward as fw
+from vfcore.solver import _args as A
 from vfcore.solver import _kernels as kern
 
 
@@ -32,12 +33,14 @@ def _masses_series(mass, v0, gap, h, n_steps, kc=None, cc=None):
     v = np.array([v0, 0.0, v0, 0.0])
     lam, proj = np.zeros((n_steps, m)), np.zeros((n_steps, m))
     layer = kc is not None
-    st = kern.integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
-                                sdx, sdz, sX, sZ, u, v, a, 0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 0, 1.0,
-                                np.zeros(n_steps), np.zeros(n_steps), lam, 0, np.zeros((0, n)), np.zeros((0, n)),
-                                np.zeros((0, 3)), 0.0, np.zeros(0), proj, layer,
-                                np.full(m, kc if layer else 0.0), np.full(m, cc if layer else 0.0),
-                                0, 0.0, 0.0, np.zeros(1, dtype=np.int64))
+    st = kern.integrate_coupled(A.Stepper(n_steps, h, am, af, beta, gamma),
+                                A.Pattern(indptr, indices, Lp, Lj, sdx, sdz, sX, sZ),
+                                A.Model(0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 0, 1.0),
+                                A.Coupling(np.zeros((0, 3)), 0.0, layer, np.full(m, kc if layer else 0.0),
+                                           np.full(m, cc if layer else 0.0)),
+                                A.Stop(0, 0.0, 0.0), A.Matrices(kval, mval, dval, Lx, G), A.State(u, v, a),
+                                A.Outputs(np.zeros(n_steps), np.zeros(n_steps), lam, proj, np.zeros(0), 0,
+                                          np.zeros((0, n)), np.zeros((0, n)), np.zeros(1, dtype=np.int64)))
     assert st == 0
     return lam, proj, u[sdx], v[sdx]
 

@@ -19,6 +19,7 @@ from vfcore import forward as fw
 from vfcore.fem.assemble import ELEMENTS, _shear, _volumetric, assemble_unit, lame, nodal_volumetric
 from vfcore.measures import cycle_boundaries, estimate_f0
 from vfcore.mesh import load_mesh
+from vfcore.solver import _args as A
 from vfcore.solver import _kernels as kern
 from vfcore.solver.system import get_system
 
@@ -236,10 +237,12 @@ def test_anp_newmark_conserves_energy_undamped():
     am, af, beta, gamma = kern.newmark_coefficients(h, 1.0)
     tu, tv = np.zeros((n_steps, s.n)), np.zeros((n_steps, s.n))
     u0 = u.copy()
-    st = kern.integrate(n_steps, h, am, af, beta, gamma, s.indptr, s.indices, K_vals, m_vals, d_vals, s.Lp, s.Lj, Lx,
-                        s.contact_columns(Lx), s.sdx, s.sdz, s.sX, s.sZ, u, v, a, 0.0, 0.0, 1.3, 1.0,
-                        fw.CLOSED_TOL, 0.0, fw.BLOWUP, np.zeros(n_steps), np.zeros(n_steps),
-                        np.zeros((n_steps, s.sdx.size)), 1, tu, tv)
+    st = kern.integrate(A.Stepper(n_steps, h, am, af, beta, gamma),
+                        A.Pattern(s.indptr, s.indices, s.Lp, s.Lj, s.sdx, s.sdz, s.sX, s.sZ),
+                        A.Model(0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, 0, fw.BLOWUP),
+                        A.Matrices(K_vals, m_vals, d_vals, Lx, s.contact_columns(Lx)), A.State(u, v, a),
+                        A.Outputs(np.zeros(n_steps), np.zeros(n_steps), np.zeros((n_steps, s.sdx.size)),
+                                  np.zeros((0, s.sdx.size)), np.zeros(0), 1, tu, tv, np.zeros(1, dtype=np.int64)))
     assert st == 0 and np.abs(tu).max() > 1e-5
     e0 = 0.5 * u0 @ (K @ u0)
     energy = 0.5 * np.einsum("ij,ij->i", tv, (M @ tv.T).T) + 0.5 * np.einsum("ij,ij->i", tu, (K @ tu.T).T)

@@ -8,6 +8,7 @@ import pytest
 
 from vfcore import TABLE3, Params, SimConfig, simulate, simulate_batch
 from vfcore import forward as fw
+from vfcore.solver import _args as A
 from vfcore.solver import _kernels as kern
 from vfcore.solver.system import get_system
 
@@ -47,9 +48,12 @@ def _free_vibration(eta_si, rho_inf=1.0, n_steps=1500, h=5e-5):
     m = s.sdx.size
     tu, tv = np.zeros((n_steps, s.n)), np.zeros((n_steps, s.n))
     u0, v0 = u.copy(), v.copy()
-    st = kern.integrate(n_steps, h, am, af, beta, gamma, s.indptr, s.indices, K_vals, m_vals, d_vals, s.Lp, s.Lj, Lx, G,
-                        s.sdx, s.sdz, s.sX, s.sZ, u, v, a, 0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, fw.BLOWUP,
-                        np.zeros(n_steps), np.zeros(n_steps), np.zeros((n_steps, m)), 1, tu, tv)
+    st = kern.integrate(A.Stepper(n_steps, h, am, af, beta, gamma),
+                        A.Pattern(s.indptr, s.indices, s.Lp, s.Lj, s.sdx, s.sdz, s.sX, s.sZ),
+                        A.Model(0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, 0, fw.BLOWUP),
+                        A.Matrices(K_vals, m_vals, d_vals, Lx, G), A.State(u, v, a),
+                        A.Outputs(np.zeros(n_steps), np.zeros(n_steps), np.zeros((n_steps, m)), np.zeros((0, m)),
+                                  np.zeros(0), 1, tu, tv, np.zeros(1, dtype=np.int64)))
     assert st == 0
     U = np.vstack([u0, tu])
     V = np.vstack([v0, tv])

@@ -32,6 +32,7 @@ import numpy as np
 from numba import cuda, njit
 from numba.core import config as _numba_config
 
+from ._args import Coupling, Matrices, Model, Outputs, Pattern, State, Stepper, Stop, Work
 from ._kernels import integrate_ws
 
 #: numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, read when numba is first imported) runs kernels as
@@ -51,16 +52,23 @@ def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flo
                sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out, p_in_out, traj_u, traj_v,
                status, stop_out):
     """Integrate sample ``s`` (a column of the interleaved arrays; see the module docstring) and write its
-    status (0, the step it diverged at, or minus the step its contact did not settle at)."""
+    status (0, the step it diverged at, or minus the step its contact did not settle at).
+
+    The launch takes flat arrays and scalars; the argument groups of :mod:`._args` that ``integrate_ws`` takes
+    are built here, in device code, from the sample's columns."""
     status[s] = integrate_ws(
-        n_steps, h, am, af, beta, gamma, indptr, indices, kdm[0, :, s], kdm[1, :, s], kdm[2, :, s], Lp, Lj,
-        Lx[:, s], G[:, :, s], sdx, sdz, sX, sZ, uva[0, :, s], uva[1, :, s], uva[2, :, s], spar[0, s], p_sup,
-        spar[1, s], spar[2, s], closed_tol, g_reg, flow, blowup, width[:, s], gsep[:, s], lam_out[:, :, s], traj_every,
-        traj_u[:, :, s], traj_v[:, :, s], sub_coef[:, :, s], flow_coef, p_in_out[:, s], proj_out[:, :, s], layer,
-        kcc[0, :, s], kcc[1, :, s], stop_window, stop_width, stop_vel, stop_out[s:s + 1],
-        wn[0, :, s], wn[1, :, s], wn[2, :, s], wn[3, :, s],
-        wm[0, :, s], wm[1, :, s], wm[2, :, s], wm[3, :, s], wm[4, :, s], wm[5, :, s], wm[6, :, s],
-        active[:, s], S[:, :, s], wm[7, :, s], idx[:, s], wm[8, :, s], wm[9, :, s], subw[0, :, s], subw[1, :, s])
+        Stepper(n_steps, h, am, af, beta, gamma),
+        Pattern(indptr, indices, Lp, Lj, sdx, sdz, sX, sZ),
+        Model(spar[0, s], p_sup, spar[1, s], spar[2, s], closed_tol, g_reg, flow, blowup),
+        Coupling(sub_coef[:, :, s], flow_coef, layer, kcc[0, :, s], kcc[1, :, s]),
+        Stop(stop_window, stop_width, stop_vel),
+        Matrices(kdm[0, :, s], kdm[1, :, s], kdm[2, :, s], Lx[:, s], G[:, :, s]),
+        State(uva[0, :, s], uva[1, :, s], uva[2, :, s]),
+        Outputs(width[:, s], gsep[:, s], lam_out[:, :, s], proj_out[:, :, s], p_in_out[:, s], traj_every,
+                traj_u[:, :, s], traj_v[:, :, s], stop_out[s:s + 1]),
+        Work(wn[0, :, s], wn[1, :, s], wn[2, :, s], wn[3, :, s], wm[0, :, s], wm[1, :, s], wm[2, :, s], wm[3, :, s],
+             wm[4, :, s], wm[5, :, s], wm[6, :, s], active[:, s], S[:, :, s], wm[7, :, s], idx[:, s], wm[8, :, s],
+             wm[9, :, s], subw[0, :, s], subw[1, :, s]))
 
 
 if SIMULATOR:

@@ -11,6 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ._args import Coupling, Stop, Work
 from ._flow import surface_loads_continuous
 
 #: ``flow`` argument of the kernels: the paper's node-wise load, or the continuous one of :mod:`._flow`
@@ -440,112 +441,221 @@ def projection_impulse(indptr, mval, d, vd, ad, h, gamma):
     return md * (vd + h * (1.0 - gamma) * ad)
 
 
-@njit(cache=True)
-def integrate(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
-              u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
-              width, gsep_out, lam_out, traj_every, traj_u, traj_v):
-    """:func:`integrate_coupled` without subglottal resonators (the inlet pressure is ``p_sub``)."""
-    return integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G,
-                             sdx, sdz, sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
-                             width, gsep_out, lam_out, traj_every, traj_u, traj_v,
-                             np.zeros((0, 3)), 0.0, np.zeros(0), np.zeros((0, sdx.size)),
-                             False, np.zeros(sdx.size), np.zeros(sdx.size), 0, 0.0, 0.0, np.zeros(1, dtype=np.int64))
+# The per-sample phases of a step, shared by integrate_ws (scalar, CUDA) and the lock-step kernel. Inlined in
+# numba's IR (inline='always'): the lock-step kernel calls them per sample and step on freshly built views and
+# argument tuples; as calls they cost it 12-16 % (block 16, medium mesh), inlined a few per cent.
+@njit(cache=True, inline='always')
+def sample_start(mod):
+    """Carry of one sample between steps, at t_0: (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet):
+    the inlet pressure (Pa) and the last two flows (m^3/s) of the subglottal coupling, the trajectory frames
+    written, and the settled-response window (largest speed m/s, width range m, the previous window's speed and
+    quietness)."""
+    return (float(mod.p_sub), 0.0, 0.0, 0, 0.0, -np.inf, np.inf, np.inf, False)
+
+
+@njit(cache=True, inline='always')
+def sample_loads(pat, mod, p_in, u, ws) -> None:
+    """Surface positions of the state ``u`` (n,) and their flow load at inlet pressure ``p_in``: ws.fx, ws.fz (m,)."""
+    sdx, sdz, sX, sZ = pat.sdx, pat.sdz, pat.sX, pat.sZ
+    xs, zs, gap = ws.xs, ws.zs, ws.gap
+    for j in range(sdx.size):
+        if sdx[j] >= 0:
+            xs[j] = sX[j] + u[sdx[j]]
+            zs[j] = sZ[j] + u[sdz[j]]
+        else:
+            xs[j] = sX[j]
+            zs[j] = sZ[j]
+        gap[j] = mod.x_mid - xs[j]
+    surface_loads(xs, zs, sX, sZ, gap, p_in, mod.p_sup, mod.sep_ratio, mod.closed_tol, mod.g_reg, ws.fx, ws.fz,
+                  ws.pres, mod.flow)
+
+
+@njit(cache=True, inline='always')
+def sample_contact(stp, pat, mod, cpl, G, u, ws):
+    """Midline contact on the unconstrained u_{n+1} in ``ws.r`` (corrected in place; ``u`` (n,) is u_n): the
+    compliant layer or the rigid midline. Writes ws.lam, ws.active; returns the active-set iterations, -1 if it
+    did not settle."""
+    if cpl.layer:
+        return contact_layer_ws(ws.r, u, stp.h, 1.0 - stp.af, pat.sdx, pat.sX, mod.x_mid, G, cpl.kc, cpl.cc, ws.lam,
+                                ws.active, 50, ws.u0, ws.S, ws.rhs, ws.idx, ws.keff, ws.bb)
+    return contact_correct_ws(ws.r, pat.sdx, pat.sX, mod.x_mid, G, ws.lam, ws.active, 50, ws.u0, ws.S, ws.rhs, ws.idx)
+
+
+@njit(cache=True, inline='always')
+def sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry):
+    """What follows the state update of step k for one sample: the inelastic projection (rigid midline), the
+    step's outputs, the subglottal resonators and the trajectory frame. ``mval`` (nnz,) the sample's mass
+    values; ``carry`` from :func:`sample_start`. Returns the new carry."""
+    p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet = carry
+    sdx, sX = pat.sdx, pat.sX
+    u, v, a = st.u, st.v, st.a
+    active, lam, proj, lam_out = ws.active, ws.lam, out.proj, out.lam
+    layer, x_mid = cpl.layer, mod.x_mid
+    m = sdx.size
+    # inelastic impact: a node held at the midline keeps no normal velocity or
+    # acceleration (the trapezoidal rule would otherwise bounce it back every step)
+    rec = proj.shape[0] > 0
+    for j in range(m):
+        if active[j] and not layer:
+            d = sdx[j]
+            if rec:
+                proj[k - 1, j] = projection_impulse(pat.indptr, mval, d, v[d], a[d], stp.h, stp.gamma)
+            v[d] = 0.0
+            a[d] = 0.0
+    gmin = 1e300
+    for j in range(m):
+        xj = sX[j] + (u[sdx[j]] if sdx[j] >= 0 else 0.0)
+        g = x_mid - xj
+        if g < gmin:
+            gmin = g
+        lam_out[k - 1, j] = -lam[j] * lam_scale
+    out.width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
+    out.gsep[k - 1] = mod.sep_ratio * gmin if gmin > mod.closed_tol else 0.0
+    if cpl.sub_coef.shape[0] > 0:
+        dpq = p_in - mod.p_sup
+        q = cpl.flow_coef * out.gsep[k - 1] * math.sqrt(dpq) if dpq > 0.0 else 0.0
+        p_in = mod.p_sub - subglottal_step(cpl.sub_coef, ws.sub_p1, ws.sub_p2, q, q2)
+        q2 = q1
+        q1 = q
+        out.p_in[k - 1] = p_in
+    traj_u, traj_v = out.traj_u, out.traj_v
+    if out.traj_every > 0 and k % out.traj_every == 0 and ntr < traj_u.shape[0]:
+        for i in range(u.size):
+            traj_u[ntr, i] = u[i]
+            traj_v[ntr, i] = v[i]
+        ntr += 1
+    return (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
+
+
+@njit(cache=True, inline='always')
+def sample_window(k, n_steps, stop, cpl, st, out, vm, carry):
+    """Settled-response bookkeeping of step k for one sample, ``vm`` its largest nodal speed (m/s) after the step.
+    Returns (settled, new carry); once settled, every per-step output of the remaining steps repeats step k's
+    and the trajectories the last state, and ``out.stop[0] = k``."""
+    p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet = carry
+    if vm > win_v:
+        win_v = vm
+    wk = out.width[k - 1]
+    if wk > win_hi:
+        win_hi = wk
+    if wk < win_lo:
+        win_lo = wk
+    if k % stop.window == 0:
+        quiet = win_hi - win_lo <= stop.width and win_v <= stop.vel and win_v <= prev_v
+        if quiet and prev_quiet:
+            out.stop[0] = k
+            width, gsep, lam, proj, p_io = out.width, out.gsep, out.lam, out.proj, out.p_in
+            rec = proj.shape[0] > 0
+            nmod = cpl.sub_coef.shape[0]
+            m = lam.shape[1]
+            for kk in range(k, n_steps):
+                width[kk] = width[k - 1]
+                gsep[kk] = gsep[k - 1]
+                for j in range(m):
+                    lam[kk, j] = lam[k - 1, j]
+                    if rec:
+                        proj[kk, j] = proj[k - 1, j]
+                if nmod > 0:
+                    p_io[kk] = p_io[k - 1]
+            if out.traj_every > 0:
+                u, v, traj_u, traj_v = st.u, st.v, out.traj_u, out.traj_v
+                for t in range(ntr, traj_u.shape[0]):
+                    for i in range(u.size):
+                        traj_u[t, i] = u[i]
+                        traj_v[t, i] = v[i]
+            return True, (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
+        prev_quiet = quiet
+        prev_v = win_v
+        win_v = 0.0
+        win_hi = -np.inf
+        win_lo = np.inf
+    return False, (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
 
 
 @njit(cache=True)
-def integrate_coupled(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
-                      u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
-                      width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
-                      proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out):
+def integrate(stp, pat, mod, mat, st, out):
+    """:func:`integrate_coupled` without the model extensions (no subglottal resonators: the inlet pressure is
+    ``mod.p_sub``; the rigid midline) and without the settled-response stop; ``out.stop`` is not written."""
+    m = pat.sdx.size
+    cpl = Coupling(np.zeros((0, 3)), 0.0, False, np.zeros(m), np.zeros(m))
+    return integrate_coupled(stp, pat, mod, cpl, Stop(0, 0.0, 0.0), mat, st, out)
+
+
+@njit(cache=True)
+def integrate_coupled(stp, pat, mod, cpl, stop, mat, st, out):
     """Generalised-alpha / Newmark integration with Bernoulli loads and midline contact.
+
+    Arguments: the groups of :mod:`._args` (``stp`` Stepper, ``pat`` Pattern, ``mod`` Model, ``cpl`` Coupling,
+    ``stop`` Stop, ``mat`` Matrices, ``st`` State, ``out`` Outputs), shapes as given there.
 
     Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
     load F is evaluated on the configuration at t_n. State u, v, a (n,) in the solver's
-    dof ordering is advanced in place. Per step k (1..n_steps) writes width[k-1]
-    (2 x min half gap, m), gsep_out[k-1] (half gap at separation, m; 0 when closed)
-    and lam_out[k-1, :] (contact force per surface node, N/m, >= 0). Every
-    ``traj_every`` steps (0 = never) u and v are stored in traj_u/v.
+    dof ordering is advanced in place. Per step k (1..n_steps) writes out.width[k-1]
+    (2 x min half gap, m), out.gsep[k-1] (half gap at separation, m; 0 when closed)
+    and out.lam[k-1, :] (contact force per surface node, N/m, >= 0). Every
+    ``out.traj_every`` steps (0 = never) u and v are stored in out.traj_u/v.
     Returns 0 on success, the (1-based) step at which the state became non-finite or
-    exceeded ``blowup`` metres, or minus the step at which contact did not settle.
+    exceeded ``mod.blowup`` metres, or minus the step at which contact did not settle.
 
-    Subglottal coupling (``sub_coef`` (n_modes, 3) from :func:`subglottal_coefficients`; 0 rows =
+    Subglottal coupling (``cpl.sub_coef`` (n_modes, 3) from :func:`subglottal_coefficients`; 0 rows =
     off, then the loads use ``p_sub`` and nothing else is done per step): the loads of step k use
     the inlet pressure p_in(t_{k-1}) = p_sub - sum_k p_k(t_{k-1}); after step k the flow
     Q(t_k) = flow_coef * gsep(t_k) * sqrt(max(p_in(t_{k-1}) - p_sup, 0)) (explicit: the previous
     p_in; flow_coef = 2 L sqrt(2 / rho_air)) drives the resonators, which give p_in(t_k), written
-    to ``p_in_out[k-1]``. Before t = 0 the flow and the resonators are at rest (p_in(t_0) = p_sub).
+    to ``out.p_in[k-1]``. Before t = 0 the flow and the resonators are at rest (p_in(t_0) = p_sub).
 
-    ``proj_out`` (n_steps, m) or (0, m) = not recorded: the lateral momentum per unit length (N s/m)
+    ``out.proj`` (n_steps, m) or (0, m) = not recorded: the lateral momentum per unit length (N s/m)
     the inelastic projection takes from each surface node at step k, :func:`projection_impulse`.
 
-    ``layer`` False: the paper's rigid midline (exact multipliers, then the inelastic projection);
+    ``cpl.layer`` False: the paper's rigid midline (exact multipliers, then the inelastic projection);
     True: the compliant contact layer of :func:`contact_layer_ws` with per-node spring ``kc`` (m,), N/m^2,
-    and dashpot ``cc`` (m,), N s/m^2; no projection (``proj_out`` stays zero). docs/model.md, "Contact".
+    and dashpot ``cc`` (m,), N s/m^2; no projection (``out.proj`` stays zero). docs/model.md, "Contact".
 
-    Settled-response stop (``stop_window`` steps, 0 = off): the steps are cut into windows of
-    ``stop_window``; a window is quiet when the glottal width varied by at most ``stop_width`` (m) over it,
-    the largest nodal speed in it is at most ``stop_vel`` (m/s) and no larger than in the window before.
+    Settled-response stop (``stop.window`` steps, 0 = off): the steps are cut into windows of
+    ``stop.window``; a window is quiet when the glottal width varied by at most ``stop.width`` (m) over it,
+    the largest nodal speed in it is at most ``stop.vel`` (m/s) and no larger than in the window before.
     After two quiet windows in a row the response has settled: the run stops, every per-step output of
-    the remaining steps repeats the last step's (trajectories the last state), and ``stop_out[0]`` gets
+    the remaining steps repeats the last step's (trajectories the last state), and ``out.stop[0]`` gets
     the step (0 = ran to the end). docs/model.md, "Stopping settled simulations".
     """
-    n = u.size
-    m = sdx.size
-    nmod = sub_coef.shape[0]
-    return integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz,
-                        sX, sZ, u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup, width, gsep_out,
-                        lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out, proj_out, layer, kc, cc,
-                        stop_window, stop_width, stop_vel, stop_out,
-                        np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m), np.empty(m),
-                        np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.zeros(m, dtype=np.bool_),
-                        np.empty((m, m)), np.empty(m), np.empty(m, dtype=np.int64), np.empty(m), np.empty(m),
-                        np.zeros(nmod), np.zeros(nmod))
+    n = st.u.size
+    m = pat.sdx.size
+    nmod = cpl.sub_coef.shape[0]
+    ws = Work(np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m), np.empty(m),
+              np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.zeros(m, dtype=np.bool_), np.empty((m, m)),
+              np.empty(m), np.empty(m, dtype=np.int64), np.empty(m), np.empty(m), np.zeros(nmod), np.zeros(nmod))
+    return integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws)
 
 
 @njit(cache=True)
-def integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, dval, Lp, Lj, Lx, G, sdx, sdz, sX, sZ,
-                 u, v, a, p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup,
-                 width, gsep_out, lam_out, traj_every, traj_u, traj_v, sub_coef, flow_coef, p_in_out,
-                 proj_out, layer, kc, cc, stop_window, stop_width, stop_vel, stop_out,
-                 y1, y2, r, ws_u0, xs, zs, gap, fx, fz, pres, lam, active, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb,
-                 sub_p1, sub_p2):
-    """:func:`integrate_coupled` with caller-owned work arrays: y1, y2, r, ws_u0 (n,); xs, zs, gap, fx, fz, pres,
-    lam (m,); active (m,) bool; ws_S (m, m); ws_rhs (m,); ws_idx (m,) int64; ws_keff, ws_bb (m,); sub_p1, sub_p2
-    (n_modes,) (zeroed here). Every array may be a strided view.
+def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
+    """:func:`integrate_coupled` with caller-owned work arrays ``ws`` (a :class:`._args.Work`; sub_p1, sub_p2
+    are zeroed here). Every array may be a strided view.
 
     It allocates nothing and assigns no slices, so numba's CUDA target compiles it as a device function:
     :mod:`vfcore.solver._cuda_kernels` runs it once per GPU thread on the sample's columns of interleaved
-    ``[entry, sample]`` arrays, the same arithmetic as the scalar kernel.
+    ``[entry, sample]`` arrays, the same arithmetic as the scalar kernel. The per-sample phases of a step
+    (:func:`sample_loads`, :func:`sample_contact`, :func:`sample_record`, :func:`sample_window`) are those
+    the lock-step kernel runs; the linear algebra between them is written here for one sample.
     """
-    n = u.size
-    m = sdx.size
-    c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, am, af, beta, gamma)
-    wl = 1.0 - af
-    ntr = 0
-    nmod = sub_coef.shape[0]
-    for i in range(nmod):
+    n = st.u.size
+    m = pat.sdx.size
+    h, gamma = stp.h, stp.gamma
+    c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, stp.am, stp.af, stp.beta, gamma)
+    indptr, indices, sdx, sdz = pat.indptr, pat.indices, pat.sdx, pat.sdz
+    kval, mval, dval = mat.kval, mat.mval, mat.dval
+    u, v, a = st.u, st.v, st.a
+    y1, y2, r, fx, fz, active, sub_p1, sub_p2 = ws.y1, ws.y2, ws.r, ws.fx, ws.fz, ws.active, ws.sub_p1, ws.sub_p2
+    Lp, Lj, Lx = pat.Lp, pat.Lj, mat.Lx
+    blowup = mod.blowup
+    for i in range(cpl.sub_coef.shape[0]):
         sub_p1[i] = 0.0
         sub_p2[i] = 0.0
     for j in range(m):
         active[j] = False
-    q1 = 0.0
-    q2 = 0.0
-    p_in = p_sub
-    win_v = 0.0
-    win_hi = -np.inf
-    win_lo = np.inf
-    prev_v = np.inf
-    prev_quiet = False
-    for k in range(1, n_steps + 1):
-        for j in range(m):
-            if sdx[j] >= 0:
-                xs[j] = sX[j] + u[sdx[j]]
-                zs[j] = sZ[j] + u[sdz[j]]
-            else:
-                xs[j] = sX[j]
-                zs[j] = sZ[j]
-            gap[j] = x_mid - xs[j]
-        surface_loads(xs, zs, sX, sZ, gap, p_in, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres, flow)
+    carry = sample_start(mod)
+    for k in range(1, stp.n_steps + 1):
+        sample_loads(pat, mod, carry[0], u, ws)
         for i in range(n):
             y1[i] = m_v * v[i] + m_a * a[i]
             y2[i] = d_v * v[i] + d_a * a[i]
@@ -562,12 +672,7 @@ def integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, d
         chol_solve(Lp, Lj, Lx, r)
         for i in range(n):
             r[i] += u[i]          # r is now u_{n+1} before contact
-        if layer:
-            settled = contact_layer_ws(r, u, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, 50, ws_u0, ws_S, ws_rhs,
-                                       ws_idx, ws_keff, ws_bb)
-        else:
-            settled = contact_correct_ws(r, sdx, sX, x_mid, G, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx)
-        if settled < 0:
+        if sample_contact(stp, pat, mod, cpl, mat.G, u, ws) < 0:
             return -k          # contact active set did not settle: a failure, never silent penetration
         bad = False
         for i in range(n):
@@ -580,70 +685,13 @@ def integrate_ws(n_steps, h, am, af, beta, gamma, indptr, indices, kval, mval, d
                 bad = True
         if bad:
             return k
-        # inelastic impact: a node held at the midline keeps no normal velocity or
-        # acceleration (the trapezoidal rule would otherwise bounce it back every step)
-        rec = proj_out.shape[0] > 0
-        for j in range(m):
-            if active[j] and not layer:
-                if rec:
-                    proj_out[k - 1, j] = projection_impulse(indptr, mval, sdx[j], v[sdx[j]], a[sdx[j]], h, gamma)
-                v[sdx[j]] = 0.0
-                a[sdx[j]] = 0.0
-        gmin = 1e300
-        for j in range(m):
-            xj = sX[j] + (u[sdx[j]] if sdx[j] >= 0 else 0.0)
-            g = x_mid - xj
-            if g < gmin:
-                gmin = g
-            lam_out[k - 1, j] = -lam[j] * lam_scale
-        width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
-        gsep_out[k - 1] = sep_ratio * gmin if gmin > closed_tol else 0.0
-        if nmod > 0:
-            dpq = p_in - p_sup
-            q = flow_coef * gsep_out[k - 1] * math.sqrt(dpq) if dpq > 0.0 else 0.0
-            p_in = p_sub - subglottal_step(sub_coef, sub_p1, sub_p2, q, q2)
-            q2 = q1
-            q1 = q
-            p_in_out[k - 1] = p_in
-        if traj_every > 0 and k % traj_every == 0 and ntr < traj_u.shape[0]:
-            for i in range(n):
-                traj_u[ntr, i] = u[i]
-                traj_v[ntr, i] = v[i]
-            ntr += 1
-        if stop_window > 0:
+        carry = sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry)
+        if stop.window > 0:
             vm = 0.0
             for i in range(n):
                 av = abs(v[i])
                 vm = av if av > vm else vm
-            if vm > win_v:
-                win_v = vm
-            wk = width[k - 1]
-            if wk > win_hi:
-                win_hi = wk
-            if wk < win_lo:
-                win_lo = wk
-            if k % stop_window == 0:
-                quiet = win_hi - win_lo <= stop_width and win_v <= stop_vel and win_v <= prev_v
-                if quiet and prev_quiet:
-                    stop_out[0] = k
-                    for kk in range(k, n_steps):
-                        width[kk] = width[k - 1]
-                        gsep_out[kk] = gsep_out[k - 1]
-                        for j in range(m):
-                            lam_out[kk, j] = lam_out[k - 1, j]
-                            if rec:
-                                proj_out[kk, j] = proj_out[k - 1, j]
-                        if nmod > 0:
-                            p_in_out[kk] = p_in_out[k - 1]
-                    if traj_every > 0:
-                        for t in range(ntr, traj_u.shape[0]):
-                            for i in range(n):
-                                traj_u[t, i] = u[i]
-                                traj_v[t, i] = v[i]
-                    return 0
-                prev_quiet = quiet
-                prev_v = win_v
-                win_v = 0.0
-                win_hi = -np.inf
-                win_lo = np.inf
+            settled, carry = sample_window(k, stp.n_steps, stop, cpl, st, out, vm, carry)
+            if settled:
+                return 0
     return 0
