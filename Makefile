@@ -10,7 +10,7 @@ export MKL_NUM_THREADS := 1
 export NUMBA_NUM_THREADS ?= 2
 export MPLBACKEND := Agg
 
-.PHONY: install test test-slow test-all lock demo bench meshes clean
+.PHONY: install test test-slow test-all lock demo bench meshes lint docs clean
 
 # Installs exactly the committed lock (hashes checked), then the project itself
 # without resolving anything: a fresh clone gets the versions CI tested.
@@ -53,6 +53,11 @@ demo: install
 
 bench: install
 	$(PY) benchmarks/bench_forward.py
+
+# Lint and format check (ruff; settings in pyproject.toml).
+lint: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 meshes: install
 	$(PY) scripts/make_meshes.py

@@ -73,12 +73,12 @@ def main(argv=None) -> int:
         print(f"{label:38s} {1e3 * (time.perf_counter() - t0) / a.repeats:7.3f} ms per alignment")
 
     # the leak's integration over one simulation, as ExtendedEvaluator does it
+    from vfcore.config import SimConfig
     from vfcore.diagnose import quadrature as quad
     from vfcore.diagnose.extensions import get
     from vfcore.diagnose.fit import observer, quad_cells
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem, aligned_loglik
-    from vfcore.config import SimConfig
     fps = 2000.0                                   # the suite's: 600 simulated frames, 200 lags
     cfg = SimConfig(duration=0.55, discard=0.25, fps=fps)
     sim = _record(601, q, seed=2, fps=fps)

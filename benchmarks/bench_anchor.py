@@ -18,7 +18,6 @@ cover the truth's values.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time

@@ -58,9 +58,9 @@ def main(argv=None) -> int:
     ap.add_argument("--dt", type=float, default=None, help="time step, s (default: the suites')")
     ap.add_argument("--contact", default=None, help="contact law (default: the suites')")
     a = ap.parse_args(argv)
-    from scipy.stats import qmc
-
     import dataclasses as dc
+
+    from scipy.stats import qmc
 
     from vfcore.diagnose.regularity import sensitivity
     from vfcore.inference import Prior

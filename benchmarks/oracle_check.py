@@ -110,8 +110,8 @@ def entry_at(problem, name: str | None, theta_base: np.ndarray, *, polish_materi
 
 
 def check_case(cases_dir: Path, out_dir: Path, cid: str, *, polish_materials: bool = False) -> dict:
-    from benchmarks.suite import case_problem
     from benchmarks.scoring import load_suite, reference_rms
+    from benchmarks.suite import case_problem
     from vfcore.diagnose.extensions import CATALOGUE, physics_of
     meta = json.loads((cases_dir / "cases.json").read_text())
     case = next(c for c in meta["cases"] if c["id"] == cid)

@@ -16,9 +16,24 @@ from .config import SimConfig
 from .params import PARAM_NAMES
 from .result import SimResult
 from .scalar import simulate_one
-from .simcore import (BLOWUP, CLOSED_TOL, MIN_CYCLE_AMPLITUDE, RHO_AIR, STOP_VEL, STOP_WIDTH, STOP_WINDOW_S,
-                      as_params, assemble_result, contact_law, cycle_summary, flow_coefficient, midline, prestress,
-                      setup, stop_settings)
+from .simcore import (
+    BLOWUP,
+    CLOSED_TOL,
+    MIN_CYCLE_AMPLITUDE,
+    RHO_AIR,
+    STOP_VEL,
+    STOP_WIDTH,
+    STOP_WINDOW_S,
+    as_params,
+    assemble_result,
+    contact_law,
+    cycle_summary,
+    flow_coefficient,
+    midline,
+    prestress,
+    setup,
+    stop_settings,
+)
 
 __all__ = ["simulate", "simulate_batch", "BLOWUP", "CLOSED_TOL", "MIN_CYCLE_AMPLITUDE", "RHO_AIR", "STOP_VEL",
            "STOP_WIDTH", "STOP_WINDOW_S", "as_params", "assemble_result", "contact_law", "cycle_summary",

@@ -2,13 +2,11 @@
 
 Both are off by default; off means bit-identical to the default model.
 """
-import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 import scipy.linalg as sla
-import scipy.sparse as sp
 
 from vfcore import TABLE3, SimConfig, simulate
 from vfcore.fem.assemble import membrane_unit
@@ -20,7 +18,7 @@ SHORT = dict(duration=0.12, discard=0.06)
 MODE = (600.0, 0.1, 2e6)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sim(**kw):
     return simulate(TABLE3, SimConfig(**kw))
 

@@ -7,7 +7,7 @@ A GAW likelihood therefore cannot tell theta from c * theta; a measured paramete
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ def scaled(p, c, names=SCALED):
     return p.replace(**{n: getattr(p, n) * c for n in names})
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sim(c: float, contact: str = "projection"):
     r = simulate(scaled(TABLE3, c), CFG.replace(contact=contact))
     assert r.ok, r.message
@@ -76,7 +76,7 @@ def test_scaled_parameters_give_the_same_gaw_and_scaled_products(c):
     np.testing.assert_allclose(r.cycles.mean_flow, math.sqrt(c) * r0.cycles.mean_flow, rtol=1e-6, atol=0)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _observation():
     """The Table 3 waveform's first 300 frames plus N(0, 1 mm^2) noise."""
     y = _sim(1.0).gaw[:300]

@@ -31,9 +31,9 @@ def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
     import numpy as np
 
     from vfcore.config import SimConfig
-    from vfcore.params import TABLE3
     from vfcore.forward import simulate
     from vfcore.gawio import write_gaw_csv
+    from vfcore.params import TABLE3
 
     d = DEMO_TRUTH
     r = simulate(TABLE3, SimConfig(mesh=d["mesh"], dt=d["dt"], duration=d["duration"], discard=d["discard"],

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from ..inference.problem import Problem
 from ..inference.runs import SEED_STRIDE
 from .material import material_first, material_sentence
 from .state import DiagnosisState, Run

@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
+from .amend import local_passes, prefer_nested, promote_local
 from .continuation import SEED_OFFSET, search_base
 from .extensions import get
 from .fit import null_drops, param_table
 from .mode_fits import base_near
-from .amend import local_passes, prefer_nested, promote_local
 from .rank import RankReport, null_consistent
 from .refits import keep_if_higher
 from .state import DiagnosisState, Run

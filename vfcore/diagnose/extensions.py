@@ -21,8 +21,8 @@ Sources and prior ranges are in ``docs/diagnose.md``.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -217,7 +217,7 @@ def _leak(base, th, fps, **kw):
     g, f = _gaw_fps(base, fps)
     extra = leak_extra(g, th["leak_mm2"], th["chink_fraction"])
     out = g + extra
-    if hasattr(base, "flow") and hasattr(base, "params") and getattr(base, "flow").size:
+    if hasattr(base, "flow") and hasattr(base, "params") and base.flow.size:
         # SimResult.flow is sampled with SimResult.gaw (one value per frame)
         q = np.asarray(base.flow, dtype=float) + leak_flow(extra, base.params.p_sub - base.config.p_sup)
         return {"gaw": out, "flow": q}

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..result import HR_OVERSAMPLE
 from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
+from ..result import HR_OVERSAMPLE
 from .extensions import SUB_LOG10_Z_OFF, Extension, get
 from .observers import entrain_pair, observe_extended, observer, pair_observer, right_fold_params
 

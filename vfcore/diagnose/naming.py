@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 
+from .amend import prefer_parsimonious
 from .checks import local_check, mode_check, nested_check
 from .extensions import get
-from .amend import prefer_parsimonious
 from .rank import RankReport, rank_best_of_base, rank_extensions
 from .state import DiagnosisState, Run
 

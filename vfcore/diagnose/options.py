@@ -205,7 +205,7 @@ class DiagnoseOptions:
         if self.candidates is not None:
             object.__setattr__(self, "candidates", tuple(self.candidates))
 
-    def replace(self, **changes) -> "DiagnoseOptions":
+    def replace(self, **changes) -> DiagnoseOptions:
         """A checked copy with ``changes``; an unknown name raises TypeError naming it."""
         known = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(changes) - known)

@@ -22,7 +22,7 @@ the same function runs on a laptop and on a cluster.
 """
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem

@@ -8,8 +8,8 @@ import time
 
 from ..inference.posterior import Posterior
 from ..inference.smc import WHOLE_RUN_OPTIONS
-from .fit import fit_extended, null_drops, param_table
 from .extensions import get
+from .fit import fit_extended, null_drops, param_table
 from .locate import locate
 from .mode_fits import base_reference, referenced
 from .rank import null_consistent, residual_removed

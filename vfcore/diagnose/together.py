@@ -15,7 +15,7 @@ the rows simulated beside it (``tests/vfcore/test_batch.py``).
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

@@ -26,8 +26,8 @@ six, or a measurement (``Problem(measurements=...)``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
@@ -209,7 +209,7 @@ class _LogView:
     cov: np.ndarray
 
     @classmethod
-    def of(cls, names, X: np.ndarray, w: np.ndarray, prior: Prior) -> "_LogView":
+    def of(cls, names, X: np.ndarray, w: np.ndarray, prior: Prior) -> _LogView:
         cols = [i for i, n in enumerate(names) if np.all(X[:, i] > 0)]
         L = np.log(X[:, cols])
         lmom = [uniform_log_moments(prior.lo[i], prior.hi[i]) for i in cols]

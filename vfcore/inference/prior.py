@@ -7,8 +7,8 @@ estimated nor fixed take the measured silicone values of Table 3 (``vfcore.param
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 
@@ -119,7 +119,7 @@ class Prior:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def default(cls, fixed: Mapping[str, float] | None = None, prior_set: str = "paper") -> "Prior":
+    def default(cls, fixed: Mapping[str, float] | None = None, prior_set: str = "paper") -> Prior:
         """The priors of ``prior_set`` (``PRIOR_SETS``: "paper" = Table 2, "human"); names in ``fixed`` are
         held at the given values instead."""
         if prior_set not in PRIOR_SETS:
@@ -196,7 +196,7 @@ class Prior:
         return {"bounds": {n: [lo, hi] for n, (lo, hi) in self.bounds.items()}, "fixed": dict(self.fixed)}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "Prior":
+    def from_dict(cls, d: Mapping) -> Prior:
         if not isinstance(d, Mapping) or "bounds" not in d:
             raise ValueError("Prior.from_dict needs a mapping with a 'bounds' entry")
         unknown = set(d) - {"bounds", "fixed"}

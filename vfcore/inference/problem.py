@@ -35,12 +35,23 @@ from ..config import SimConfig
 from ..measures import estimate_f0
 from ..observe import ALIGNMENTS, LAG_SEARCHES, align, align_many, alignment_window
 from ..params import PARAM_NAMES, PARAM_UNITS, Params
-from .likelihood import (gaussian_loglik, marginal_gaussian_loglik,  # noqa: F401 (re-exported)
-                         sample_area_scale, scaled_gaussian_loglik, scaled_marginal_gaussian_loglik)
 from .evaluation import Evaluation  # noqa: F401 (re-exported)
+from .likelihood import (  # noqa: F401 (re-exported)
+    gaussian_loglik,
+    marginal_gaussian_loglik,
+    sample_area_scale,
+    scaled_gaussian_loglik,
+    scaled_marginal_gaussian_loglik,
+)
 from .prior import Prior
-from .scoring import (ProblemEvaluator, aligned_loglik, contact_means, cycle_means, evaluate,  # noqa: F401
-                      score_results)                                              # (re-exported)
+from .scoring import (  # noqa: F401
+    ProblemEvaluator,
+    aligned_loglik,
+    contact_means,
+    cycle_means,
+    evaluate,
+    score_results,  # (re-exported)
+)
 
 
 # ---------------------------------------------------------------------------- observation
@@ -246,7 +257,7 @@ class Problem:
                 "area_scale": None if self.area_scale is None else list(self.area_scale)}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Problem":
+    def from_dict(cls, d: dict) -> Problem:
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
         if unknown:

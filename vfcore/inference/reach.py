@@ -42,17 +42,38 @@ re-exported here, the one place callers import them from.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 from ..config import SimConfig
 from ..params import PARAM_NAMES
 from .prior import Prior
-from .reach_ensemble import (DEFAULT_N, DEFAULT_SEED, F0_AGREEMENT, MEASURES, PHONATION_MIN_AMPLITUDE, QUANTILES,
-                             REACH_FPS, REACH_VERSION, SUSTAIN_RATIO, ReachEnsemble, build_ensemble, config_hash,
-                             config_key_dict, draw_measures, reach_key)
-from .reach_verdict import (HARD_MEASURES, NEAR_AREA, NEAR_F0, ReachVerdict, check_reach, format_table,
-                            recording_measures)
+from .reach_ensemble import (
+    DEFAULT_N,
+    DEFAULT_SEED,
+    F0_AGREEMENT,
+    MEASURES,
+    PHONATION_MIN_AMPLITUDE,
+    QUANTILES,
+    REACH_FPS,
+    REACH_VERSION,
+    SUSTAIN_RATIO,
+    ReachEnsemble,
+    build_ensemble,
+    config_hash,
+    config_key_dict,
+    draw_measures,
+    reach_key,
+)
+from .reach_verdict import (
+    HARD_MEASURES,
+    NEAR_AREA,
+    NEAR_F0,
+    ReachVerdict,
+    check_reach,
+    format_table,
+    recording_measures,
+)
 
 SHIPPED_DIR = Path(__file__).resolve().parent.parent / "data"
 

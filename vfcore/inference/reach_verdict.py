@@ -6,8 +6,8 @@ the unknown area scale) are stated in :mod:`.reach`'s docstring.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 

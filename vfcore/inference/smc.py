@@ -42,18 +42,18 @@ is deterministic for a seed and independent of how batches were evaluated.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from .diagnostics import systematic_resample
 from .importance import map_evaluate, resolve_target
-from .moves import COORDS, check_moves, delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
+from .moves import check_moves, delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
 from .posterior import Posterior
 from .prior import Prior
 from .problem import Evaluation, Problem, model_record
 from .smc_posterior import posterior_of
-from .tempering import next_temperature, reweight
+from .tempering import reweight
 
 _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
 

@@ -26,8 +26,8 @@ contact impulse by ``c``, the flow rate by ``sqrt(c)``, because the Bernoulli ve
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 

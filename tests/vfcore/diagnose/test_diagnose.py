@@ -7,8 +7,18 @@ import numpy as np
 import pytest
 
 from vfcore import measures as M
-from vfcore.diagnose import (CATALOGUE, NO_FINDING, PHASES, get, locate, measure_pvalues, phase_labels,
-                             predictive_measures, rank_extensions, residual_removed)
+from vfcore.diagnose import (
+    CATALOGUE,
+    NO_FINDING,
+    PHASES,
+    get,
+    locate,
+    measure_pvalues,
+    phase_labels,
+    predictive_measures,
+    rank_extensions,
+    residual_removed,
+)
 from vfcore.diagnose import extensions as X
 
 FPS = 4000.0
@@ -501,9 +511,8 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
     """Base runs whose log-evidences differ beyond their errors trigger more particles; agreeing
     runs do not. A fake sampler: evidence depends on the seed at 40 particles (mode hopping) and
     is stable at 80."""
-    from types import SimpleNamespace
-
     import sys
+    from types import SimpleNamespace
 
     from vfcore.diagnose.baseline import base_fit
     smc_mod = sys.modules["vfcore.inference.smc"]       # the package re-exports the function under the same name
@@ -621,9 +630,9 @@ def test_confusable_entries_are_always_rivals():
 def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred():
     """The asymmetry entry nests the scale entry: at zero phase difference its observation is
     A (1 + lr_amp) / 2 exactly; prefer_nested names the simpler entry with a note."""
+    from vfcore.diagnose.amend import prefer_nested
     from vfcore.diagnose.extensions import get
     from vfcore.diagnose.fit import observe_extended
-    from vfcore.diagnose.amend import prefer_nested
     assert get("asymmetry").nests == (("scale", ("lr_phase",)),)
     t = np.arange(6000) / 20000.0
     y = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0)

@@ -144,6 +144,7 @@ def test_search_never_returns_less_than_its_start():
     (without that guard, on a concealed frame-rate error the base search from the base fit's best
     particle ended 115 nats below that fit's log-evidence)."""
     from types import SimpleNamespace
+
     from vfcore.diagnose.search import CONTINUATION, _Continuer
     prior = SimpleNamespace(lo=np.zeros(2), width=np.ones(2))
     evs = [_Quadratic(0.2, 0.3), _Quadratic(0.2, 0.3), _Quadratic(0.8, 0.01, spike=True)]
@@ -159,6 +160,7 @@ def test_halving_drops_the_worse_half_after_each_window_and_keeps_the_leaders_pa
     without halving, a dropped start keeps its own whole-window value, and fewer simulations are
     spent in all."""
     from types import SimpleNamespace
+
     from vfcore.diagnose.search import CONTINUATION, _Continuer, _halving_search
     prior = SimpleNamespace(lo=np.zeros(2), width=np.ones(2), ndim=2)
     evs = [_Quadratic(0.3, 0.3), _Quadratic(0.3, 0.2), _Quadratic(0.3, 0.1)]
