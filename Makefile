@@ -59,8 +59,13 @@ lint: install
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
+# The documentation site (docs/, Sphinx + MyST), offline: every warning is an error, so a broken internal
+# reference ({ref}, :ref:, a page missing from the toctree, an unreadable image) fails the build.
+docs: install
+	$(VENV)/bin/sphinx-build -q -W --keep-going -b html docs docs/_build/html
+
 meshes: install
 	$(PY) scripts/make_meshes.py
 
 clean:
-	rm -rf $(VENV) .lockenv demo_output .pytest_cache
+	rm -rf $(VENV) .lockenv demo_output .pytest_cache docs/_build docs/_generated

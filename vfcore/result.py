@@ -73,7 +73,9 @@ class SimResult:
     ``ok`` is False when the simulation failed (non-finite state, no oscillation is
     *not* a failure); then ``message`` says why and the arrays are empty.
 
-    Attributes (n = frames at ``fps`` after discarding the transient; m = free-surface nodes)
+    Shapes: n = frames at ``fps`` after discarding the transient; m = free-surface nodes.
+
+    Attributes
     ----------
     t : (n,) s, from 0 at the start of the kept window.
     gaw : (n,) glottal area, mm^2.
