@@ -2,7 +2,7 @@
 
 An integrated extension (leak, zipper, asymmetry, frame rate, ...) scores each forward simulation
 at a few hundred quadrature nodes, and each node is one profile alignment over every tenth-of-a-
-frame lag (docs/diagnose.md, "Integrated parameters"), so alignment is most of that entry's cost
+frame lag (:ref:`diagnose-cost-integrated-parameters`), so alignment is most of that entry's cost
 beyond the simulation. Printed:
 
 1. ms per alignment score vector, for the library's FFT form (``vfcore.observe._profile_scores``)

@@ -3,7 +3,7 @@
 One twin (truth at Table 3 unless --truth-seed draws one from the Table 2 box; x0 fixed), fitted by SMC with
 all six scaled parameters free and with each anchor in turn:
 
-* none: the common scale is set by the prior's box (the exact symmetry of docs/inference.md);
+* none: the common scale is set by the prior's box (the exact symmetry of :ref:`inference`);
 * p_sub measured with a relative sd of 5 % and of 1 % (``Problem.measurements``; the measured value is the
   truth plus a draw of its error, so the anchor is an honest noisy measurement);
 * rho fixed at the truth (``--fix rho``): the five others free, no symmetry left.

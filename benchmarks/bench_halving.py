@@ -7,7 +7,7 @@ but the last only the better half of the starts go on). Prints each one's whole-
 log-likelihood, its simulations and its wall time, and the log-likelihood each start reached
 without halving, so a lost winner shows as a start that was behind early and ahead at the end.
 
-Run it only on suites already scored (development data; docs/diagnose.md section 5): a suite
+Run it only on suites already scored (development data; :ref:`validation-diagnose`): a suite
 that still measures the code must not inform a setting. The search reads the public recordings
 and ``cases.json``, never the truth. The suite of seed 8 (regenerated with
 ``python -m benchmarks.concealed.generate --out runs/concealedS8 --seed 8 --material three``):

@@ -6,7 +6,7 @@ round's alignments in one batch or one at a time.
 For each catalogue entry with integrated parameters (or ``--entries``): ``--rows`` draws from the entry's
 prior around one case of a concealed-effect suite are simulated once (the refit stage's evaluator,
 ``ExtendedEvaluator(integrate=True)``), then their scoring (``ExtendedEvaluator._integrated``: the nested
-quadrature over the integrated parameters, docs/diagnose.md "Integrated parameters") is timed
+quadrature over the integrated parameters, :ref:`diagnose-cost-integrated-parameters`) is timed
 ``--repeats`` times each way, interleaved:
 
 - batched (the library): every point of a quadrature round is aligned in one call

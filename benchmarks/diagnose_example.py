@@ -1,4 +1,4 @@
-"""The worked example of docs/diagnose.md: wrong fixed parameters and a real left-out effect, before and after.
+"""The worked example of :ref:`diagnose`: wrong fixed parameters and a real left-out effect, before and after.
 
 A recording of the model with eta and E_lig far from Table 3 (1.5 Poise and 2.6 kPa against 3.079 and 1.808)
 and a constant 1.2 mm^2 glottal leak, camera noise 0.3 mm^2. The base model estimates E_body, E_cover and

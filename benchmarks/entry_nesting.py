@@ -2,7 +2,7 @@
 report, the base model's log-likelihood at the report's base posterior mean against each entry's at the same
 material point with its own parameters at their null values (an entry whose prior holds no null: every
 combination of its bounds, the best kept). An entry that contains the base (leak 0, scale 1, ...) gives the base's
-log-likelihood; the rescue of a failed refit (docs/diagnose.md, section 4) assumes every entry comes close to it.
+log-likelihood; the rescue of a failed refit (:ref:`diagnose-pipeline`) assumes every entry comes close to it.
 The last column moves each null 1 % of its box inwards: how far below the base the entry is just off its null.
 
     python benchmarks/entry_nesting.py --cases runs/full10 --report runs/diagnose_full10/case_19.json --id 19

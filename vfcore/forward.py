@@ -1,6 +1,6 @@
 """Public face of the forward model: ``simulate(params, config) -> SimResult``.
 
-Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in docs/model.md. The scalar kernel's
+Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in :ref:`model`. The scalar kernel's
 driver is :mod:`vfcore.scalar`; the set-up and result assembly live in :mod:`vfcore.simcore`, shared with the
 lock-step :mod:`vfcore.batch`; the constants and steps are re-exported here, where callers read them as
 ``vfcore.forward.X``.

@@ -20,7 +20,7 @@ class CycleSummary:
     from one upward crossing of the mid-range area to the next, so each closed phase lies inside one
     cycle.
 
-    Contact (docs/model.md, "Contact"; every quantity per unit fold length, from the per-step
+    Contact (:ref:`model-contact`; every quantity per unit fold length, from the per-step
     contact forces f_j(t_k) >= 0 of the surface nodes, N/m, step h):
 
     * ``contact_impulse`` (N s/m): h * sum_k sum_j f_j(t_k) over the cycle's steps, the normal

@@ -125,7 +125,7 @@ def test_epithelium_raises_lowest_eigenfrequency_monotonically():
         K = s.matrix(K0 + s.epithelium_values(E, 0.05)[0]).toarray()
         lam = sla.eigh(K, M, eigvals_only=True, subset_by_index=[0, 2])
         f1.append(np.sqrt(lam[0]) / (2 * np.pi))
-    assert abs(f1[0] - 54.9) < 0.5                      # docs/model.md: 54.9 Hz at Table 3
+    assert abs(f1[0] - 54.9) < 0.5                      # :ref:`model`: 54.9 Hz at Table 3
     assert np.all(np.diff(f1) > 0.1), f1
 
 

@@ -1,6 +1,6 @@
 """The common-scale symmetry of the model: multiplying E_body, E_cover, E_lig, p_sub, rho and eta by one
 factor c (x0 unchanged) leaves the glottal area waveform unchanged, scales every contact quantity by c
-and the flow rate by sqrt(c) (docs/inference.md, "The common scale"). Each fold-side term of the model
+and the flow rate by sqrt(c) (:ref:`inference-scale-the-common-scale-what-a`). Each fold-side term of the model
 carries one power of mass (stiffness, subglottal and Bernoulli loads, mass, damping) and the air density
 enters the flow velocity only, so c is a change of the unit of mass that lengths and times do not see.
 A GAW likelihood therefore cannot tell theta from c * theta; a measured parameter can."""

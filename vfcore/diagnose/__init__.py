@@ -1,6 +1,6 @@
 """Find the missing physics: locate a fit/recording mismatch on the glottal cycle, a catalogue of
 optional model extensions, and an evidence-based ranking; :func:`diagnose` runs the whole diagnosis
-with the settings of a :class:`DiagnoseOptions`. See docs/diagnose.md."""
+with the settings of a :class:`DiagnoseOptions`. See :ref:`diagnose`."""
 from .extensions import CATALOGUE, Extension, ExtParam, get, implemented, matching
 from .locate import (
                      DEFAULT_MEASURES,

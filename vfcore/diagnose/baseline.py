@@ -1,5 +1,5 @@
 """The base fit: independent SMC runs of the base model, their between-run error, the escalation when
-they disagree, the base fit's summary and its regularity (docs/diagnose.md section 4, "Base fit")."""
+they disagree, the base fit's summary and its regularity (:ref:`diagnose-pipeline-base-fit`)."""
 from __future__ import annotations
 
 import math

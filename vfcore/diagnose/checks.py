@@ -1,4 +1,4 @@
-"""The checks made before a winner is named (docs/diagnose.md section 3): the base model re-fitted in
+"""The checks made before a winner is named (:ref:`diagnose-naming`): the base model re-fitted in
 a candidate's material mode (mode check; the gain may be the mode, not the physics), the local
 comparison with that fit when only the between-run error swamps a gain, and the nested check of a
 winner that sits where it reduces to a simpler catalogue entry."""

@@ -3,7 +3,7 @@
 recording) and fitted by an SMC started about the optimum (:func:`.search.continued_fit`). The base
 model's fit joins the references as ``"base near continuation"``, so every gain is measured against
 the best base fit found the same way; an entry's replaces its refit when its evidence is higher
-(docs/diagnose.md section 4, "Continuation")."""
+(:ref:`diagnose-search-continuation-search`)."""
 from __future__ import annotations
 
 import math

@@ -16,7 +16,7 @@ Kinds:
   ``NotImplementedError``) so that the ranking can name what a signature would point to
   before it can be fitted; every entry of :data:`CATALOGUE` is implemented.
 
-Sources and prior ranges are in ``docs/diagnose.md``.
+Sources and prior ranges are in ``:ref:`diagnose`.
 """
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ class ExtParam:
     """One extra parameter: uniform prior ``[lo, hi]`` in ``unit``. ``null``: the value at which
     the extension is the base model; ``None`` where the prior holds no such value (a membrane's
     stiffness or a resonance frequency, which act only through a thickness or an impedance that has
-    one). Used by the naming rule to tell a physics gain from a mode-finding gain (docs/diagnose.md,
+    one). Used by the naming rule to tell a physics gain from a mode-finding gain (:ref:`diagnose`,
     section 3)."""
     name: str
     lo: float

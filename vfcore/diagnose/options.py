@@ -3,7 +3,7 @@
 :func:`vfcore.diagnose.diagnose`, ``vfinfer diagnose`` and ``POST /jobs/{id}/diagnose`` all read their
 defaults from :class:`DiagnoseOptions` and their bounds from :data:`BOUNDS`, so the library runs the
 same diagnosis as the command line and the service. The defaults are the settings the
-concealed-effect benchmark measures (``benchmarks/bench_diagnose.py``, docs/diagnose.md section 5):
+concealed-effect benchmark measures (``benchmarks/bench_diagnose.py``, :ref:`validation-diagnose`):
 a benchmark run with other settings than the user's would measure another tool.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ REFIT_STARTS = ("prior", "base", "mixed")
 
 @dataclass(frozen=True)
 class DiagnoseOptions:
-    """Every setting of :func:`vfcore.diagnose.diagnose`; docs/diagnose.md explains each stage.
+    """Every setting of :func:`vfcore.diagnose.diagnose`; :ref:`diagnose` explains each stage.
 
     The defaults are the command line's and the service's (they were the benchmark's settings
     before the library shared them): 40 base particles, 24 refit particles, continuation on for
@@ -89,7 +89,7 @@ class DiagnoseOptions:
         posterior, the forward-level ones from the prior. A refit started from the base is not
         rescued by the same method again. ``"prior"`` stays the default: on nine scored cases the base
         start saved 28 % of the simulations and named one effect fewer right and two more wrong
-        (docs/diagnose.md, "Refits started from the base").
+        (:ref:`validation-diagnose-pipeline-refits-started-from-the-base`).
     escalate_tau : float or None
         When the base runs' between-run error exceeds this (nats), more base runs are made with
         ``escalate_factor`` times the particles, and every later fit uses that factor too

@@ -1,5 +1,5 @@
 """The refits: every chosen entry fitted by SMC with the base model's likelihood (base + extension
-parameters; docs/diagnose.md section 4, "Refit"), each summarised against the base fit, and the rule by
+parameters; :ref:`diagnose-pipeline-refit`), each summarised against the base fit, and the rule by
 which a later fit of an entry (rescue, shared mode, continuation, nested check) replaces its first."""
 from __future__ import annotations
 

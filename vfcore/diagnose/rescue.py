@@ -1,6 +1,6 @@
 """The rescue: a refit that ended far below the base missed the base-like region of its own model
 (every entry is, or comes arbitrarily close to, the base model at its null value), so it is refitted
-near the base's material mode and the new evidence kept when larger (docs/diagnose.md section 4,
+near the base's material mode and the new evidence kept when larger (:ref:`diagnose-pipeline`,
 "Rescue"). How it is refitted is a strategy chosen once (:data:`RESCUES`)."""
 from __future__ import annotations
 

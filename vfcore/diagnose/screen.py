@@ -1,4 +1,4 @@
-"""Screening: which catalogue entries are worth a full refit (docs/diagnose.md section 4, "Screen").
+"""Screening: which catalogue entries are worth a full refit (:ref:`diagnose-pipeline-screen`).
 
 Every implemented extension is tried at a few base-posterior particles: an observation-level one at
 ``screen_obs`` parameter draws each (no new simulation: the operators act on the stored oversampled

@@ -1,5 +1,5 @@
 """The shared mode: every refitted entry gets a second SMC started from the leading refit's material mode,
-so that every entry is compared in the best material mode any of them found (docs/diagnose.md section 4,
+so that every entry is compared in the best material mode any of them found (:ref:`diagnose-pipeline`,
 "Shared mode"; ``DiagnoseOptions.shared_mode``, off by default)."""
 from __future__ import annotations
 

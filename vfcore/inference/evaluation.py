@@ -20,7 +20,7 @@ class Evaluation:
     pressure over the contact patch while in contact (see :class:`vfcore.result.CycleSummary`; these
     converge with the time step and mesh far better than the nodal peaks); ``mean_contact`` /
     ``max_contact`` (k,) Pa, the time-mean and maximum of the nodal peak contact pressure, which grow
-    as the time step shrinks and change with the mesh (docs/model.md, "Contact") and are kept for
+    as the time step shrinks and change with the mesh (:ref:`model-contact`) and are kept for
     comparison with the paper's Table 7 only.
     ``extra`` (k, m) float64: per-draw summaries a likelihood adds (the integrated parameters'
     conditional means and sds of :class:`vfcore.diagnose.fit.ExtendedEvaluator`).

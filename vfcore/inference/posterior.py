@@ -143,7 +143,7 @@ class Posterior:
         """The resampled draws' predicted GAWs as the camera records them, succeeded draws only,
         ``(n_ok, n_frames)`` mm^2: the model's areas, or with an unknown area scale each draw's areas times
         its least-squares ``k = y.A / A.A`` against the recording, clipped to the box (the centre of ``k``'s
-        conditional given the draw, docs/inference.md, "Unknown area scale"), so that residuals and measures
+        conditional given the draw, :ref:`inference-scale-unknown-area-scale`), so that residuals and measures
         compare like with like. ValueError without predictions."""
         rp = self.resampled_predictive()
         if rp is None or rp.gaw is None:

@@ -25,7 +25,7 @@ TABLE2_BOUNDS: dict[str, tuple[float, float]] = {
     "x0": (7.4, 8.4),            # mm
 }
 
-#: Priors for human vocal folds (docs/inference.md, "Prior sets"). The 2D section has no longitudinal tension, the
+#: Priors for human vocal folds (:ref:`inference-reach-prior-sets`). The 2D section has no longitudinal tension, the
 #: main control of f0 in a human larynx, so its in-plane moduli are effective ones that stand for it too. Cover:
 #: the lamina propria's transverse Young's modulus, about 1 kPa at low strain and 10-15 times that at high strain
 #: (Alipour & Vigmostad 2012, J Voice 26(6):816.e21), here up to 10 kPa, softer than the body; body: the range

@@ -7,7 +7,7 @@ draw phonates. :func:`check_reach` compares the same measures of a recording wit
 sampling, and says whether the recording lies inside, at the margin of, or outside what the model and prior
 reach, with the numbers and what would help.
 
-Definitions (docs/inference.md, "The model's reach"):
+Definitions (:ref:`inference`, "The model's reach"):
 
 * a draw *phonates* when its simulation succeeds and its GAW (after the discarded transient, at
   ``REACH_FPS``) has at least two cycles, a mean peak-to-peak amplitude of at least

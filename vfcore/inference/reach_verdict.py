@@ -213,7 +213,7 @@ def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exa
 
 
 def format_table(ens: ReachEnsemble) -> str:
-    """Markdown table of an ensemble's reach (docs/inference.md, "The model's reach")."""
+    """Markdown table of an ensemble's reach (:ref:`inference`, "The model's reach")."""
     st = ens.stats()
     lines = ["| measure | unit | 5 % | 50 % | 95 % | min | max |", "|---|---|---|---|---|---|---|"]
     for col, label, unit, fmt in MEASURES:

@@ -459,7 +459,7 @@ def smc_many(target, jobs, prior: Prior | None = None, *, map: Callable = map, c
              **options) -> list[Posterior]:
     """Several runs of :func:`smc` on one target (``jobs``: ``(n_particles, seed)`` each), run together
     (:func:`run_together`): at each round the pending batch of every unfinished run goes to ``map`` as one
-    batch, so a worker's lock-step blocks are wider (docs/model.md, "Speed") and a cluster has every run's
+    batch, so a worker's lock-step blocks are wider (:ref:`validation-model-speed`) and a cluster has every run's
     rows at once. Each posterior equals ``smc(target, prior, n_particles, seed, ...)`` alone, bit for bit.
     ``on_done(i, posterior)`` as run ``i`` finishes. ``options`` are the sampler's
     (:class:`SMCSampler`); a cheaper ``screen`` target and pooled ``runs`` are :func:`smc`'s only."""

@@ -210,7 +210,7 @@ def test_blind_diagnosis_with_continuation_names_the_scale(scaled_problem):
 
 
 def test_every_entry_contains_the_base_model(scaled_problem):
-    """The rescue's premise (docs/diagnose.md, section 4): with its own parameters at their null values (a parameter
+    """The rescue's premise (:ref:`diagnose-pipeline`): with its own parameters at their null values (a parameter
     without one at either of its bounds: it has no effect once the others are at theirs), every entry gives the
     base model's log-likelihood, here at a material point off Table 3, to 1e-6 nats (lr_stiffness too: its two
     folds are the same simulation at equal stiffness, and the pair is read at the fold's own instants, the

@@ -1,5 +1,5 @@
 """Unknown area scale (uncalibrated px/mm): k integrated out of the likelihood in closed form
-(vfcore.inference.likelihood; docs/inference.md, "Unknown area scale")."""
+(vfcore.inference.likelihood; :ref:`inference-scale-unknown-area-scale`)."""
 from __future__ import annotations
 
 import math
