@@ -52,7 +52,7 @@ demo: install
 	$(PY) -m service.cli demo --out demo_output
 
 bench: install
-	$(PY) benchmarks/bench_forward.py
+	$(PY) -m benchmarks forward
 
 # Lint and format check (ruff; settings in pyproject.toml).
 lint: install

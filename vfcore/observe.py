@@ -86,7 +86,7 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
     difference of running sums taken per residue ``j mod q`` (one cumulative sum over the record
     folded into rows of ``q``). Equal to the direct sum to ~1e-11 relative (cancellation in
     ``S2 - 2C``); 1.7-1.9x faster than ``q`` direct correlations of the decimated record (400
-    frames, 200 lags of 10 fine steps; ``benchmarks/bench_alignment.py``), which are 5x faster
+    frames, 200 lags of 10 fine steps; ``benchmarks/studies/bench_alignment.py``), which are 5x faster
     than gathering every window.
 
     ``hr`` may hold several records, one per row (``(m, N)``; scores ``(m, j_max + 1)``): the

@@ -14,7 +14,7 @@ the runs' final particles, each run's particles sharing its weight equally:
 * ``kept``: equal weights over the runs whose log Z is within ``--gap`` nats of the best run's, the others
   dropped (a basin ``gap`` nats below holds exp(-gap) of the mass).
 
-    python benchmarks/bench_independent_runs.py --ids 0,5,13 --runs 4 --workers 2      # ~30 min on 2 cores
+    python benchmarks/studies/bench_independent_runs.py --ids 0,5,13 --runs 4 --workers 2      # ~30 min on 2 cores
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ import warnings
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

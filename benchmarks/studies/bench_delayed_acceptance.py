@@ -10,7 +10,7 @@ Reported per twin and run: full simulations (and screening ones), wall time, and
 combinations a GAW determines (``vfcore.inference.identify``): the largest change of a posterior mean against
 plain seed 0 in its posterior sds and of a posterior sd (relative), and the truth's largest |z|.
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_delayed_acceptance.py --twins 3 --workers 2 --particles 100
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/studies/bench_delayed_acceptance.py --twins 3 --workers 2 --particles 100
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

@@ -1,6 +1,6 @@
 """The refit stage of a diagnosis: every catalogue entry's SMC fit, one after another or run together.
 
-    python benchmarks/bench_refits.py --cases runs/full10 --id 19 --workers 2
+    python benchmarks/studies/bench_refits.py --cases runs/full10 --id 19 --workers 2
 
 Fits every implemented catalogue entry (or ``--entries``) to one case of a concealed-effect suite with the
 refit stage's settings (``DiagnoseOptions``: ``refit_n`` particles, integrated waveform parameters, the
@@ -21,7 +21,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from benchmarks.suite import case_problem, one_case  # noqa: E402
 from vfcore.inference.importance import BalancedMap  # noqa: E402

@@ -12,7 +12,7 @@ that still measures the code must not inform a setting. The search reads the pub
 and ``cases.json``, never the truth. The suite of seed 8 (regenerated with
 ``python -m benchmarks.concealed.generate --out runs/concealedS8 --seed 8 --material three``):
 
-    python benchmarks/bench_halving.py --cases runs/concealedS8 \
+    python benchmarks/studies/bench_halving.py --cases runs/concealedS8 \
         --runs 00:frame_rate,06:leak,05:base [--seed 1] [--n-keep 4]
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
 def main(argv=None) -> int:

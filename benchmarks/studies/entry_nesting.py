@@ -5,7 +5,7 @@ combination of its bounds, the best kept). An entry that contains the base (leak
 log-likelihood; the rescue of a failed refit (:ref:`diagnose-pipeline`) assumes every entry comes close to it.
 The last column moves each null 1 % of its box inwards: how far below the base the entry is just off its null.
 
-    python benchmarks/entry_nesting.py --cases runs/full10 --report runs/diagnose_full10/case_19.json --id 19
+    python benchmarks/studies/entry_nesting.py --cases runs/full10 --report runs/diagnose_full10/case_19.json --id 19
 
 Reads only the public ``cases.json``, the recording and the report; prints one line per entry.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

@@ -1,7 +1,7 @@
 """What integrating an entry's waveform-level parameters out costs per simulation, with each quadrature
 round's alignments in one batch or one at a time.
 
-    python benchmarks/bench_integrated.py --cases runs/full10 --id 19 [--entries leak,asymmetry,zipper] [--rows 12]
+    python benchmarks/studies/bench_integrated.py --cases runs/full10 --id 19 [--entries leak,asymmetry,zipper] [--rows 12]
 
 For each catalogue entry with integrated parameters (or ``--entries``): ``--rows`` draws from the entry's
 prior around one case of a concealed-effect suite are simulated once (the refit stage's evaluator,
@@ -28,7 +28,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from benchmarks.suite import case_problem, one_case  # noqa: E402
 

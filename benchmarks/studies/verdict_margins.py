@@ -6,7 +6,7 @@ plugin to record, for every :func:`vfcore.diagnose.pipeline.diagnose` call made 
 evidence margin ``dlogZ - max(min_gain, k_se * se)`` and the effect-size margin
 ``rms_gain - min_rms_gain`` of every ranked entry, and print the leading entry's margins at the end::
 
-    .venv/bin/python -m pytest -p benchmarks.verdict_margins tests/vfcore/diagnose/test_diagnose_fit.py
+    .venv/bin/python -m pytest -p benchmarks.studies.verdict_margins tests/vfcore/diagnose/test_diagnose_fit.py
 
 Set ``VERDICT_MARGINS=path.jsonl`` to keep the records (one JSON object per diagnosis); running the
 suite on two installs (the lock and the oldest allowed versions) and comparing the files shows

@@ -18,8 +18,8 @@ is evaluated there too. The figures are then set against the diagnosis' own fits
 The materials are the generator's; the fitted model at them is not necessarily at its own best,
 so ``--polish-materials`` lets the materials move too (a Nelder-Mead from the truth).
 
-    python benchmarks/oracle_check.py --cases runs/concealedS8 --out runs/diagnoseS8 --ids 01,14
-    python benchmarks/oracle_check.py ... --json oracle.json
+    python benchmarks/studies/oracle_check.py --cases runs/concealedS8 --out runs/diagnoseS8 --ids 01,14
+    python benchmarks/studies/oracle_check.py ... --json oracle.json
 
 The truth is read here; nothing in ``vfcore`` reads it.
 """
@@ -35,7 +35,7 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

@@ -3,7 +3,7 @@ narrower blocks, one core, rows near Table 3 (each of the six material parameter
 Prints the median of --reps runs per case; the basis of ``vfcore.batch.LOCKSTEP_WIDTH``. Run it with a core to
 itself.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_block_width.py [--reps 3]
+    OMP_NUM_THREADS=1 python benchmarks/studies/bench_block_width.py [--reps 3]
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pathlib import Path
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

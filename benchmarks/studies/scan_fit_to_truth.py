@@ -10,7 +10,7 @@ with ``simulate`` rather than ``vfcore.inference.evaluate``, because the f0 is w
 paper's Table 2 box with the calibration's fixed parameters at Table 3 (``--prior-set human`` calibrations are
 not supported; the truth check below refuses them).
 
-    python benchmarks/scan_fit_to_truth.py DIR/calibration.json --dataset 0 --seed 2000 --dt 5e-5 --contact layer
+    python benchmarks/studies/scan_fit_to_truth.py DIR/calibration.json --dataset 0 --seed 2000 --dt 5e-5 --contact layer
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ import warnings
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

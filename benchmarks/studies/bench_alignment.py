@@ -14,7 +14,7 @@ beyond the simulation. Printed:
    (``vfcore.diagnose._kernels.strip_sum``) against shifting and adding each strip with
    numpy (``vfcore.diagnose.observers.delayed_copy``, the baseline), with their largest difference.
 
-Usage: python benchmarks/bench_alignment.py [--repeats 300]
+Usage: python benchmarks/studies/bench_alignment.py [--repeats 300]
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

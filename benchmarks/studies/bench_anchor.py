@@ -13,7 +13,7 @@ the least narrowed principal direction, the scale-invariant combinations) and th
 contact pressure while in contact, the contact impulse per cycle and the mean flow rate, with whether they
 cover the truth's values.
 
-    python benchmarks/bench_anchor.py --particles 100 --workers 2
+    python benchmarks/studies/bench_anchor.py --particles 100 --workers 2
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

@@ -6,7 +6,7 @@ service and the command line cut without a balanced map) and in equal parts, one
 (checked here, and in tests/vfcore/inference/test_balanced_map.py). Prints the median of
 ``--reps`` interleaved repetitions; run it with the machine to itself.
 
-    python benchmarks/bench_split.py [--rows 24,48] [--workers 2] [--reps 5]
+    python benchmarks/studies/bench_split.py [--rows 24,48] [--workers 2] [--reps 5]
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from pathlib import Path
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 

@@ -10,7 +10,7 @@ p_sub with the rest at Table 3, as the diagnosis did before material-first:
 Small settings so it runs in minutes on 2 cores (coarse mesh, 0.35 s simulated, 200 frames, 16 particles,
 four candidate entries, no continuation search); the verdicts, residuals and costs are printed.
 
-    python benchmarks/diagnose_example.py [--workers 2]
+    python benchmarks/studies/diagnose_example.py [--workers 2]
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 
