@@ -66,7 +66,8 @@ class DiagnoseOptions:
         standard errors, a residual RMS at least ``min_rms_gain`` lower, parameters not within
         ``null_sd`` sd of their null value.
     base_runs : int
-        Independent base SMC runs (seeds ``seed``, ``seed + 7919``, ...).
+        Independent base SMC runs, each seeded by its own child of the base stage's ``SeedSequence``
+        (:mod:`vfcore.diagnose.seeds`).
     mode_checks : int
         Before a winner is named the base model is re-fitted around its material mode
         (:func:`.mode_fits.base_near`), at most this many times (0: off).

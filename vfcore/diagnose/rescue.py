@@ -13,6 +13,7 @@ from ..inference.posterior import Posterior
 from .extensions import get
 from .mode_fits import base_near, reference_refit, reference_refits
 from .refits import keep_if_higher, starts_from_base
+from .seeds import stage_seed
 from .state import DiagnosisState, Run
 
 __all__ = ["Rescue", "RESCUES", "rescue_refits"]
@@ -87,7 +88,7 @@ def rescue_refits(run: Run, st: DiagnosisState) -> None:
         z1, s1 = float(st.refits[name].log_evidence), float(st.refits[name].log_evidence_se)
         if math.isfinite(z1) and z1 >= z0 - max(o.min_gain, o.k_se * math.hypot(s0, s1)):
             continue
-        due.append((name, o.seed + 262147 + j, z1, s1, int(st.refits[name].n_simulations)))
+        due.append((name, stage_seed(o.seed, "rescue", j), z1, s1, int(st.refits[name].n_simulations)))
     together = None
     if strategy.refit_many is not None and len(due) > 1:
         t1 = time.perf_counter()
