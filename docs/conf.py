@@ -29,7 +29,9 @@ autodoc_member_order = "bysource"
 autodoc_typehints = "none"
 autodoc_default_options = {"members": False, "show-inheritance": False}
 
-# Internal references are checked: a `{ref}` or `:ref:` to a missing label fails the build (-W).
+# A `{ref}`/`:ref:` to a missing label, a link to a missing page and an unreadable image always warn, so
+# `make docs` (-W) fails on them. Nitpicky mode would also demand that every Python name a docstring mentions
+# resolve, which a reference page of the library's face (not every module) cannot give.
 nitpicky = False
 
 html_theme = "alabaster"
