@@ -194,7 +194,9 @@ def test_continued_fit_estimates_the_evidence_from_the_found_mode(scaled_problem
 @pytest.mark.slow
 def test_blind_diagnosis_with_continuation_names_the_scale(scaled_problem):
     from vfcore.diagnose.pipeline import diagnose
-    rep = diagnose(scaled_problem, free_material=False, n_particles=16, refit_particles=None, continuation_entries=None, seed=3, candidates=["scale", "exposure"], base_runs=1,
+    # seed 2: its first scale refit ends below the continued one, so the continued refit and its mode check run
+    # (seeds 0, 1, 3 and 4 keep the first refit and name the scale all the same)
+    rep = diagnose(scaled_problem, free_material=False, n_particles=16, refit_particles=None, continuation_entries=None, seed=2, candidates=["scale", "exposure"], base_runs=1,
                    continuation=True, continuation_options=SMALL)
     assert rep.winner == "scale", rep.verdict
     mc = rep.before["mode_checks"]["continuation"]
