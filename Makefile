@@ -10,7 +10,7 @@ export MKL_NUM_THREADS := 1
 export NUMBA_NUM_THREADS ?= 2
 export MPLBACKEND := Agg
 
-.PHONY: install test test-slow test-all lock demo bench meshes clean
+.PHONY: install test test-slow test-all lock demo bench meshes lint docs clean
 
 # Installs exactly the committed lock (hashes checked), then the project itself
 # without resolving anything: a fresh clone gets the versions CI tested.
@@ -52,10 +52,20 @@ demo: install
 	$(PY) -m service.cli demo --out demo_output
 
 bench: install
-	$(PY) benchmarks/bench_forward.py
+	$(PY) -m benchmarks forward
+
+# Lint and format check (ruff; settings in pyproject.toml).
+lint: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+# The documentation site (docs/, Sphinx + MyST), offline: every warning is an error, so a broken internal
+# reference ({ref}, :ref:, a page missing from the toctree, an unreadable image) fails the build.
+docs: install
+	$(VENV)/bin/sphinx-build -q -W --keep-going -b html docs docs/_build/html
 
 meshes: install
 	$(PY) scripts/make_meshes.py
 
 clean:
-	rm -rf $(VENV) .lockenv demo_output .pytest_cache
+	rm -rf $(VENV) .lockenv demo_output .pytest_cache docs/_build docs/_generated

@@ -49,12 +49,11 @@ from scipy import stats  # noqa: E402
 
 from vfcore.config import SimConfig  # noqa: E402
 from vfcore.inference import Prior, importance_sample, make_twin, smc  # noqa: E402
-from vfcore.inference.runs import RUN_RULES, pool_runs, run_seeds  # noqa: E402
 from vfcore.inference.identify import SCALED, combination_label, scale_invariant_combinations  # noqa: E402
+from vfcore.inference.runs import RUN_RULES, pool_runs, run_seeds  # noqa: E402
 from vfcore.params import PARAM_NAMES, TABLE3  # noqa: E402
 
-
-#: held values of the parameters not estimated with ``--prior-set human`` (inside its box; docs/inference.md)
+#: held values of the parameters not estimated with ``--prior-set human`` (inside its box; :ref:`inference`)
 HUMAN_HELD = {"E_body": 100.0, "E_cover": 5000.0, "E_lig": 15.0, "p_sub": 1500.0, "rho": 1050.0, "eta": 3.0, "x0": 8.4}
 
 

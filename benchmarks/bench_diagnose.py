@@ -8,7 +8,7 @@ GAW files while fitting; ``truth.json`` is opened afterwards, for scoring only (
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --workers 2
     python benchmarks/bench_diagnose.py --cases runs/concealed --out runs/diagnose --score
 
-Defaults (docs/diagnose.md, section 5): the simulated window of the suite's public forward-model
+Defaults (:ref:`validation-diagnose`): the simulated window of the suite's public forward-model
 settings (``cases.json`` "model": 0.55 s simulated with 0.25 s discarded, the paper's and
 ``SimConfig``'s default), 2 base SMC runs of 40 particles (larger evidence kept), every catalogue
 entry refitted with 24 particles, a refit that ended far below the base rescued from the base's

@@ -23,7 +23,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from vfcore import TABLE3, SimConfig, simulate  # noqa: E402
+from vfcore import TABLE3, simulate  # noqa: E402
 from vfcore.batch import simulate_many  # noqa: E402
 from vfcore.data import DATA_DIR  # noqa: E402
 from vfcore.inference import TABLE2_BOUNDS, Prior, Problem, smc  # noqa: E402

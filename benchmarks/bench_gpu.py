@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from vfcore import SimConfig, TABLE3  # noqa: E402
+from vfcore import TABLE3, SimConfig  # noqa: E402
 from vfcore.batch import prepare_block, simulate_group_cuda, simulate_many  # noqa: E402
 from vfcore.params import Params  # noqa: E402
 

@@ -28,8 +28,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from vfcore.config import SimConfig  # noqa: E402
-from vfcore.inference import (DegenerateEnsembleWarning, Prior, compare, flow_contact_table,  # noqa: E402
-                              importance_sample, make_twin, plot_marginals, plot_predictive, smc)
+from vfcore.inference import (  # noqa: E402
+    DegenerateEnsembleWarning,
+    Prior,
+    compare,
+    flow_contact_table,
+    importance_sample,
+    make_twin,
+    plot_marginals,
+    plot_predictive,
+    smc,
+)
 from vfcore.params import PARAM_NAMES, TABLE3  # noqa: E402
 
 
@@ -108,7 +117,7 @@ def main(argv=None) -> int:
     print(hdr)
     for j, n in enumerate(names):
         line = f"{n:<8} {twin.truth[j]:10.4g}"
-        for k, (p, _) in res.items():
+        for p, _ in res.values():
             z = abs(p.mean[j] - twin.truth[j]) / p.sd[j] if p.sd[j] > 0 else float("inf")
             line += f" | {p.mean[j]:11.5g} {p.sd[j]:9.3g} {p.pct[j]:6.2f} {z:5.2f}"
         print(line)

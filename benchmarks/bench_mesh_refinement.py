@@ -1,10 +1,10 @@
 """Does the limit cycle converge under mesh refinement? f0, opening and closure on six meshes, up to 15,000 triangles.
 
-Protocol (docs/model.md, "Mesh convergence"): the locking-free element (``element="anp"``, whose eigenfrequencies
+Protocol (:ref:`validation-model-mesh-convergence-not-reached-with`): the locking-free element (``element="anp"``, whose eigenfrequencies
 converge) and the compliant contact layer (``contact="layer"``, whose pressures converge in the step), so that
 neither the element nor the contact law is what fails to converge. dt 5e-5 s, 0.35 s simulated, the first 0.15 s
 discarded. Parameters: Table 3, and two points inside the region where the three shipped meshes all oscillate
-with anp (docs/model.md, "The oscillation map"): A = Table 3 with E_cover 850 Pa, p_sub 800 Pa; B = E_cover 950 Pa,
+with anp (:ref:`validation-model-the-oscillation-map`): A = Table 3 with E_cover 850 Pa, p_sub 800 Pa; B = E_cover 950 Pa,
 p_sub 1000 Pa; two louder ones where the 1,049-triangle mesh closes: C = E_cover 500 Pa, p_sub 1200 Pa; D = E_cover
 700 Pa, p_sub 1400 Pa. ``--sep-ratio`` sets the flow's separation ratio (the Bernoulli pressure at the narrowest
 gap is p_sub - sep_ratio^2 (p_sub - p_sup): a suction for any ratio above 1; 1.0 has none; default the model's).
@@ -13,7 +13,7 @@ Meshes: the five shipped ones, "x3fine", the M5 section meshed by gmsh at a char
 hour on one core); neither is shipped, both are built here into a temporary folder. Per run: f0
 (autocorrelation), the smallest and largest area of the kept window, the closed quotient, the contact impulse
 per cycle and the pressure in contact (0 when the glottis does not close). ``--dt-check``: the finest two meshes
-again at dt 2.5e-5 s. ``--epithelium E_KPA,H_MM`` adds the epithelium membrane (docs/model.md, "Model extensions").
+again at dt 2.5e-5 s. ``--epithelium E_KPA,H_MM`` adds the epithelium membrane (:ref:`model-extensions`).
 
     python benchmarks/bench_mesh_refinement.py             # ~10 min on one core, most of it x3fine
     python benchmarks/bench_mesh_refinement.py --elements anp,p1 --dt-check

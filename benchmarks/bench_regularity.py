@@ -6,8 +6,8 @@ noise (``--sigma`` mm^2, 500 frames at 2 kHz) is the recording, and
 :func:`vfcore.diagnose.regularity.sensitivity` measures how much a relative 1e-6 change of the
 parameters moves the log-likelihood (the *roughness*; > 1 nat = irregular), the second difference
 at a relative 1e-4 and the waveform's aperiodicity (> 3 nats either = rough). Prints one line per
-draw and the irregular and rough fractions per subglottal-pressure band (docs/diagnose.md section 4,
-"Regularity"; docs/inference.md, "Aperiodic vibration"). ``--six`` frees all six scaled parameters
+draw and the irregular and rough fractions per subglottal-pressure band (:ref:`diagnose-pipeline`,
+"Regularity"; :ref:`validation-inference-roughness`). ``--six`` frees all six scaled parameters
 of the paper's Table 2 box (x0 at Table 3), as the six-parameter calibrations do; ``--dt`` and
 ``--contact`` set the forward model.
 
@@ -58,9 +58,9 @@ def main(argv=None) -> int:
     ap.add_argument("--dt", type=float, default=None, help="time step, s (default: the suites')")
     ap.add_argument("--contact", default=None, help="contact law (default: the suites')")
     a = ap.parse_args(argv)
-    from scipy.stats import qmc
-
     import dataclasses as dc
+
+    from scipy.stats import qmc
 
     from vfcore.diagnose.regularity import sensitivity
     from vfcore.inference import Prior

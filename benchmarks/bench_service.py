@@ -44,10 +44,10 @@ def main() -> None:
     import httpx
     import numpy as np
     from distributed import Client, LocalCluster
+    from svc_helpers import TOKENS, ServerThread, auth, toy_spec
 
     from service.main import create_app
     from service.settings import Settings
-    from svc_helpers import TOKENS, ServerThread, auth, toy_spec
     from vfcore.inference.importance import importance_sample
     from worker.jobspec import JobSpec
     from worker.run import chunk_size_for, evaluator_for
@@ -98,10 +98,10 @@ def status_load(workers: int, n_jobs: int = 20, target_ms: float = 250.0) -> Non
     import httpx
     import numpy as np
     from distributed import Client, LocalCluster
+    from svc_helpers import TOKENS, ServerThread, auth, toy_spec
 
     from service.main import create_app
     from service.settings import Settings
-    from svc_helpers import TOKENS, ServerThread, auth, toy_spec
     users = list(TOKENS)
     specs = [toy_spec(n=240, seed=100 + i, delay=0.004) for i in range(n_jobs)]
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \

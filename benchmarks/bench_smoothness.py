@@ -1,6 +1,6 @@
 """Is the six-parameter log-likelihood a smooth function of the parameters? Contact law and time step compared.
 
-Protocol (fixed before the runs that docs/inference.md reports): the twins of the six-parameter calibration
+Protocol (fixed before the runs that :ref:`inference` reports): the twins of the six-parameter calibration
 (``bench_calibration.py``: ``make_twin`` with seeds 1000 + i, all six scaled parameters free on Table 2, x0 at
 Table 3, coarse mesh, 0.55 s with 0.25 s discarded, 400 frames at 2 kHz, noise 1 mm^2), each made with the
 forward model under test. Through each twin's truth, along a random unit direction of log-ratios (a direction

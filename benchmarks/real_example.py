@@ -3,7 +3,7 @@
 The clip is the public OpenHSV example (``../shared/data/hsv/oscillating_vocal_folds.mp4``, 47 frames; not
 shipped). Its frame rate and pixel size are not stated, so both are inputs here: the area scale is fitted
 (``--uncalibrated``: k on [0.25, 4], a px/mm wrong by up to 2x either way) and the frame rate is a stated
-assumption whose consequences the reach check spells out (docs/video.md, "The real clip, end to end").
+assumption whose consequences the reach check spells out (:ref:`validation-video-the-real-clip-end-to`).
 
     python benchmarks/real_example.py [--fps 1000] [--particles 40] [--workers 1] [--out DIR] [--no-fit]
 

@@ -2,7 +2,7 @@
 
 Targets follow Hadwin et al. (2019), Section 4.1 / Fig. 8: about 172, 205 (default)
 and 263 triangles; "xfine" and "xxfine" halve and quarter the fine mesh's size (about 4x and
-16x its triangles) for convergence studies (docs/model.md, "Contact"). The characteristic
+16x its triangles) for convergence studies (:ref:`model-contact`). The characteristic
 length is searched on a grid around each target's and the closest triangle count wins.
 
     python scripts/make_meshes.py            # every mesh

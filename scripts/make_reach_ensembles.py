@@ -1,4 +1,4 @@
-"""Build the reach ensembles shipped in ``vfcore/data`` (docs/inference.md, "The model's reach").
+"""Build the reach ensembles shipped in ``vfcore/data`` (:ref:`inference`, "The model's reach").
 
 Protocol: for each configuration below, ``--n`` draws (default 2000, seed ``reach.DEFAULT_SEED``) from a prior
 set (``--prior-set``: "paper" = Table 2, "human"; all seven parameters free), simulated in lock-step blocks of 32 (``vfcore.batch.simulate_many``)

@@ -7,8 +7,8 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 from fastapi_offline import FastAPIOffline
 
-from .cluster import close_client, make_client
 from . import errors
+from .cluster import close_client, make_client
 from .db import JobDB
 from .limits import BodySizeLimit
 from .manager import JobManager

@@ -173,7 +173,7 @@ def _entries(d: dict) -> str:
         r, a, s = ranking.get(n) or {}, refits.get(n) or {}, screening.get(n) or {}
         kind, sig = _entry_info(n)
         ext = {k: v for k, v in (a.get("params") or {}).items() if isinstance(v, dict)}
-        ext_names = set((s.get("best_phi") or {}))
+        ext_names = set(s.get("best_phi") or {})
         try:
             from vfcore.diagnose.extensions import get
             ext_names |= set(get(n).param_names)

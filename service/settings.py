@@ -61,7 +61,7 @@ class Settings(BaseModel):
         return self.data_dir / "stores"
 
     @classmethod
-    def from_env(cls, **overrides) -> "Settings":
+    def from_env(cls, **overrides) -> Settings:
         env = os.environ
         kw: dict = {}
         if "VFINFER_DATA_DIR" in env:

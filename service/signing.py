@@ -18,7 +18,7 @@ import re
 import secrets
 import time
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Annotated
 from urllib.parse import urlencode
 
@@ -44,7 +44,7 @@ def _b64(raw: bytes) -> str:
 
 
 def _utc(epoch: float) -> str:
-    return datetime.fromtimestamp(epoch, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return datetime.fromtimestamp(epoch, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ class Signer:
         self.ttl_s = int(ttl_s)
 
     @classmethod
-    def from_settings(cls, s: Settings) -> "Signer":
+    def from_settings(cls, s: Settings) -> Signer:
         """The configured secret, or 32 random bytes when none is (links then hold until a restart)."""
         configured = s.link_secret.get_secret_value().encode() if s.link_secret is not None else None
         return cls(configured or secrets.token_bytes(32), s.link_ttl_s)

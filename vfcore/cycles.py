@@ -2,7 +2,7 @@
 
 All functions take a 1D GAW ``gaw`` (area, normally mm^2) sampled at ``fps`` frames
 per second and use numpy only. Sources and exact definitions are collected in
-``docs/measures.md``; the measures built on these cycles are in :mod:`vfcore.measures`,
+``:ref:`measures`; the measures built on these cycles are in :mod:`vfcore.measures`,
 which re-exports every public name here.
 
 Cycle convention

@@ -9,7 +9,7 @@ import numpy as np
 from .config import SimConfig
 from .forward import midline, simulate
 from .mesh import LAYER_NAMES, load_mesh
-from .params import Params, TABLE3
+from .params import TABLE3, Params
 
 LAYER_COLOURS = ("#c9a27e", "#6f9fd8", "#e07a7a")
 

@@ -1,6 +1,6 @@
 """Public face of the forward model: ``simulate(params, config) -> SimResult``.
 
-Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in docs/model.md. The scalar kernel's
+Hadwin et al. (2019), Sections 3 and 4.1; every choice is documented in :ref:`model`. The scalar kernel's
 driver is :mod:`vfcore.scalar`; the set-up and result assembly live in :mod:`vfcore.simcore`, shared with the
 lock-step :mod:`vfcore.batch`; the constants and steps are re-exported here, where callers read them as
 ``vfcore.forward.X``.
@@ -16,9 +16,24 @@ from .config import SimConfig
 from .params import PARAM_NAMES
 from .result import SimResult
 from .scalar import simulate_one
-from .simcore import (BLOWUP, CLOSED_TOL, MIN_CYCLE_AMPLITUDE, RHO_AIR, STOP_VEL, STOP_WIDTH, STOP_WINDOW_S,
-                      as_params, assemble_result, contact_law, cycle_summary, flow_coefficient, midline, prestress,
-                      setup, stop_settings)
+from .simcore import (
+    BLOWUP,
+    CLOSED_TOL,
+    MIN_CYCLE_AMPLITUDE,
+    RHO_AIR,
+    STOP_VEL,
+    STOP_WIDTH,
+    STOP_WINDOW_S,
+    as_params,
+    assemble_result,
+    contact_law,
+    cycle_summary,
+    flow_coefficient,
+    midline,
+    prestress,
+    setup,
+    stop_settings,
+)
 
 __all__ = ["simulate", "simulate_batch", "BLOWUP", "CLOSED_TOL", "MIN_CYCLE_AMPLITUDE", "RHO_AIR", "STOP_VEL",
            "STOP_WIDTH", "STOP_WINDOW_S", "as_params", "assemble_result", "contact_law", "cycle_summary",

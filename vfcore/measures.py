@@ -2,7 +2,7 @@
 
 All functions take a 1D GAW ``gaw`` (area, normally mm^2) sampled at ``fps`` frames
 per second and use numpy only. Sources and exact definitions are collected in
-``docs/measures.md``; every function's docstring states its units and source. The f0, the
+``:ref:`measures`; every function's docstring states its units and source. The f0, the
 cycle boundaries and the per-cycle timings the measures are built on (and the cycle
 convention) are :mod:`vfcore.cycles`; their names are re-exported here.
 

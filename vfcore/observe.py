@@ -49,7 +49,7 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int, search: str = "win
     1.5-period search cannot reach the part of the simulation that matches (measured on a
     concealed-effect suite, at the true parameters without the effect: misfits up to
     18 mm^2 RMS with ``"periods"``, at most 0.14 mm^2 in every case with ``"window"``;
-    docs/model.md, "Lag range"). Either way, when the simulation is too short for the whole observation the
+    :ref:`model-numerics-observation`). Either way, when the simulation is too short for the whole observation the
     observation is trimmed to ``n_sim - max_lag`` frames.
 
     Returns (max_lag, n_compare) in frames.
@@ -86,7 +86,7 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
     difference of running sums taken per residue ``j mod q`` (one cumulative sum over the record
     folded into rows of ``q``). Equal to the direct sum to ~1e-11 relative (cancellation in
     ``S2 - 2C``); 1.7-1.9x faster than ``q`` direct correlations of the decimated record (400
-    frames, 200 lags of 10 fine steps; ``benchmarks/bench_alignment.py``), which are 5x faster
+    frames, 200 lags of 10 fine steps; ``benchmarks/studies/bench_alignment.py``), which are 5x faster
     than gathering every window.
 
     ``hr`` may hold several records, one per row (``(m, N)``; scores ``(m, j_max + 1)``): the
@@ -179,7 +179,7 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
     nuisance). For an exactly periodic simulation the two agree up to whole periods; when
     cycles differ slightly the first-two-cycle correlation is nearly tied between lags one
     period apart and flips between them as the parameters change, which makes the
-    likelihood jump (docs/model.md, "Observation").
+    likelihood jump (:ref:`model-numerics-observation`).
 
     Without ``sim_hr`` the lag is a whole number of frames. With ``sim_hr`` (the same
     simulated GAW sampled ``oversample`` times faster from the same start, e.g.

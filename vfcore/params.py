@@ -58,14 +58,14 @@ class Params:
                 f"parameter x0 must lie in (0, {FOLD_WIDTH_MM}] mm (8.4 = no medial compression), got {self.x0}")
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Params":
+    def from_dict(cls, d: dict) -> Params:
         unknown = set(d) - set(PARAM_NAMES)
         if unknown:
             raise ValueError(f"unknown parameter name(s): {sorted(unknown)}; known: {list(PARAM_NAMES)}")
         return cls(**d)
 
     @classmethod
-    def from_array(cls, a) -> "Params":
+    def from_array(cls, a) -> Params:
         a = np.asarray(a, dtype=float)
         if a.shape != (len(PARAM_NAMES),):
             raise ValueError(f"parameter array must have shape ({len(PARAM_NAMES)},), got {a.shape}")
@@ -81,7 +81,7 @@ class Params:
         """Parameters in SI units (Pa, kg/m^3, Pa s, m)."""
         return {n: getattr(self, n) * TO_SI[n] for n in PARAM_NAMES}
 
-    def replace(self, **kw) -> "Params":
+    def replace(self, **kw) -> Params:
         d = self.as_dict()
         d.update(kw)
         return Params.from_dict(d)

@@ -20,7 +20,7 @@ class CycleSummary:
     from one upward crossing of the mid-range area to the next, so each closed phase lies inside one
     cycle.
 
-    Contact (docs/model.md, "Contact"; every quantity per unit fold length, from the per-step
+    Contact (:ref:`model-contact`; every quantity per unit fold length, from the per-step
     contact forces f_j(t_k) >= 0 of the surface nodes, N/m, step h):
 
     * ``contact_impulse`` (N s/m): h * sum_k sum_j f_j(t_k) over the cycle's steps, the normal
@@ -73,7 +73,9 @@ class SimResult:
     ``ok`` is False when the simulation failed (non-finite state, no oscillation is
     *not* a failure); then ``message`` says why and the arrays are empty.
 
-    Attributes (n = frames at ``fps`` after discarding the transient; m = free-surface nodes)
+    Shapes: n = frames at ``fps`` after discarding the transient; m = free-surface nodes.
+
+    Attributes
     ----------
     t : (n,) s, from 0 at the start of the kept window.
     gaw : (n,) glottal area, mm^2.

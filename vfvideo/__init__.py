@@ -4,7 +4,7 @@
 >>> ex = extract_gaw("clip.mp4", fps=2000, px_per_mm=24.4)
 >>> ex.write_csv("gaw.csv"); ex.f0, ex.measures
 
-See ``docs/video.md``.
+See ``:ref:`video`.
 """
 from .extract import GawExtraction, extract_gaw, select_segment
 from .figure import plot_extraction

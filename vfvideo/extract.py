@@ -9,7 +9,7 @@ import numpy as np
 
 from vfcore.measures import estimate_f0, gaw_measures
 
-from .io import Frames, VideoError, read_frames, write_gaw_csv
+from .io import Frames, read_frames, write_gaw_csv
 from .segment import Segmentation, segment_frames
 
 __all__ = ["GawExtraction", "extract_gaw", "select_segment"]

@@ -1,6 +1,6 @@
 """Glottis segmentation in high-speed video frames.
 
-Steps (each documented in ``docs/video.md``):
+Steps (each documented in ``:ref:`video`):
 
 1. Region of interest: the glottis is the part of the image that changes most over
    time. The temporal standard deviation, smoothed, is thresholded and its

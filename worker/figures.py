@@ -169,7 +169,7 @@ def fig_corner(post, bands=None, truth: dict | None = None) -> bytes:
 
 def fig_contact(post, bands=None) -> bytes:
     """Posterior predictive histograms of flow and contact pressure with mean and 90 % interval; * marks the
-    nodal peaks that depend on the mesh and time step (docs/model.md, "Contact")."""
+    nodal peaks that depend on the mesh and time step (:ref:`model-contact`)."""
     from matplotlib.ticker import MaxNLocator
     plt = _plt()
     pred = post.resampled_predictive()

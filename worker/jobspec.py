@@ -6,11 +6,19 @@ re-run from its store alone.  Validation errors name the offending field (pydant
 """
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import (BaseModel, ConfigDict, Field, FiniteFloat, PrivateAttr, ValidationError, field_validator,
-                      model_validator)
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from vfcore.config import CONTACT_LAYER_MM, CONTACTS, MESHES
 from vfcore.params import PARAM_NAMES
@@ -43,7 +51,7 @@ class _Derived:
     def __reduce__(self):
         return _Derived, ()
 
-    def __deepcopy__(self, memo) -> "_Derived":
+    def __deepcopy__(self, memo) -> _Derived:
         return _Derived()
 
 
@@ -71,7 +79,7 @@ class GAWSpec(_Strict):
         return v
 
     @model_validator(mode="after")
-    def _two_cycles(self) -> "GAWSpec":
+    def _two_cycles(self) -> GAWSpec:
         from vfcore.inference.problem import validate_observation
         try:
             validate_observation(self.areas, self.fps)   # NaN/inf, constant, < 2 cycles
@@ -115,7 +123,7 @@ class SMCSettings(_Strict):
                                   "posterior stays the job's model's")
 
     @model_validator(mode="after")
-    def _moves(self) -> "SMCSettings":
+    def _moves(self) -> SMCSettings:
         if self.min_moves > self.max_moves:
             raise ValueError(f"sampler.min_moves ({self.min_moves}) must be <= max_moves ({self.max_moves})")
         return self
@@ -125,7 +133,7 @@ class SMCSettings(_Strict):
                 "min_moves": self.min_moves, "max_moves": self.max_moves}
 
 
-SamplerSettings = Annotated[Union[ISSettings, SMCSettings], Field(discriminator="kind")]
+SamplerSettings = Annotated[ISSettings | SMCSettings, Field(discriminator="kind")]
 
 
 class JobSpec(_Strict):
@@ -253,7 +261,7 @@ class JobSpec(_Strict):
         return v
 
     @model_validator(mode="after")
-    def _consistent(self) -> "JobSpec":
+    def _consistent(self) -> JobSpec:
         both = set(self.priors or {}) & set(self.fixed)
         if both:
             raise ValueError(f"fixed: parameter(s) {sorted(both)} both fixed and given a prior")
@@ -282,7 +290,7 @@ class JobSpec(_Strict):
         return self
 
     # ------------------------------------------------------------------ derived quantities
-    def __copy__(self) -> "JobSpec":
+    def __copy__(self) -> JobSpec:
         # model_copy(update=...) makes a spec with other fields: it must not keep this spec's Problem
         m = super().__copy__()
         m.__pydantic_private__["_derived"] = _Derived()
@@ -299,7 +307,7 @@ class JobSpec(_Strict):
         return self.model_dump_json()
 
     @classmethod
-    def from_json(cls, s: str | bytes) -> "JobSpec":
+    def from_json(cls, s: str | bytes) -> JobSpec:
         return cls.model_validate_json(s)
 
     def sim_config(self):

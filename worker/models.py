@@ -12,8 +12,9 @@ from __future__ import annotations
 import importlib
 import os
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 #: Environment variable naming the modules (comma-separated) that register further models when imported.
 PLUGINS_ENV = "VFINFER_MODEL_PLUGINS"

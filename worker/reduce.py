@@ -25,12 +25,12 @@ from .jobspec import JobSpec
 #: Posterior-predictive summaries. ``contact_impulse`` (per cycle and unit fold length) and
 #: ``contact_pressure_in_contact`` (mean over the contact patch while in contact) are the contact
 #: products to read; ``mean_contact`` / ``max_contact`` are the paper's nodal peak pressures, which grow
-#: as the time step shrinks and change with the mesh (docs/model.md, "Contact").
+#: as the time step shrinks and change with the mesh (:ref:`model-contact`).
 SUMMARY_QUANTITIES = {"mean_flow": "m^3/s", "contact_impulse": "N s/m", "contact_pressure_in_contact": "Pa",
                       "mean_contact": "Pa", "max_contact": "Pa"}
 #: Summaries that are not converged: their entries carry ``"converged": False`` and ``"depends_on"``, the
 #: resolution they depend on. With the compliant contact layer the nodal peaks converge in the time step but,
-#: like every contact quantity, not in the mesh (docs/model.md, "Contact").
+#: like every contact quantity, not in the mesh (:ref:`model-contact`).
 UNCONVERGED = frozenset({"mean_contact", "max_contact"})
 DEPENDS_ON = {"projection": "mesh and time step", "layer": "mesh"}
 
@@ -112,7 +112,7 @@ def regularity_of(spec: JobSpec, post) -> dict | None:
     """The regularity check (vfcore.diagnose.regularity; 7 simulations) at the posterior's heaviest
     sample of an FE job: is the fitted vibration regular, so that the waveform likelihood is a
     smooth function of the parameters? ``None`` for another model; an error is reported, not raised
-    (docs/inference.md, "Irregular vibration")."""
+    (:ref:`inference-samplers-irregular-and-aperiodic-vibration-the`)."""
     if spec.model != "fe":
         return None
     try:
@@ -143,7 +143,7 @@ def regularity_warning(reg: dict | None) -> str | None:
 def runs_warning(spec: JobSpec) -> str | None:
     """The summary's warning for a single SMC run where all six scaled parameters are estimated: one run cannot
     show that it missed a basin, and on six-parameter twins single runs covered about two thirds of what their
-    90 % intervals claimed (docs/inference.md, "Independent runs"); None otherwise."""
+    90 % intervals claimed (:ref:`inference-samplers-independent-runs`); None otherwise."""
     from vfcore.inference.identify import SCALED
     sampler = spec.sampler
     if getattr(sampler, "kind", None) != "smc" or sampler.runs > 1:
@@ -245,7 +245,7 @@ def reach_of(spec: JobSpec) -> dict | None:
 
 
 def edge_warnings(spec: JobSpec, post, nc: dict | None) -> list[str]:
-    """Plain warnings for a posterior at the edges (docs/inference.md, "The model's reach"): each parameter
+    """Plain warnings for a posterior at the edges (:ref:`inference`, "The model's reach"): each parameter
     piled against a bound of the prior's box (:func:`vfcore.inference.identify.at_bounds`), and a residual
     RMS more than ``MISFIT_RATIO_WARN`` times the recording's own noise sd (``nc``: :func:`noise_check`)."""
     from vfcore.inference.identify import at_bounds

@@ -15,9 +15,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from scipy.special import logsumexp
@@ -89,7 +89,7 @@ LOCKSTEP_BLOCK = 32
 
 
 #: SMC simulations per particle over a whole run (initial population, every move of every generation),
-#: the range measured on FE fits of 2 to 6 free parameters (docs/inference.md, "Cost before a run").
+#: the range measured on FE fits of 2 to 6 free parameters (:ref:`inference-samplers-cost-before-a-run`).
 SMC_SIMS_PER_PARTICLE = (20, 90)
 
 
@@ -116,7 +116,7 @@ def expected_simulations(spec: JobSpec) -> tuple[int, int]:
 
 
 #: Simulations per task on a GPU worker: one launch of one thread per simulation needs thousands of them to
-#: keep the device busy (docs/gpu.md).
+#: keep the device busy (:ref:`gpu`).
 GPU_CHUNK = 4096
 
 

@@ -43,6 +43,8 @@ import zarr
 from vfcore.inference.evaluation import Evaluation
 
 LAYOUT_VERSION = 1
+# zarr 3 raises its own error for a missing node; an older zarr, KeyError
+_NODE_NOT_FOUND = zarr.errors.NodeNotFoundError if hasattr(zarr, "errors") else KeyError
 EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "contact_impulse",
                "contact_pressure_in_contact")
 SUMMARY_ARRAYS = ("mean_flow", "mean_contact", "max_contact", "contact_impulse", "contact_pressure_in_contact")
@@ -152,7 +154,7 @@ def read_blob(path: Path, name: str) -> bytes | None:
         return None
     try:
         a = zarr.open_array(str(path), mode="r", path=f"products/{name}")
-    except (KeyError, FileNotFoundError, zarr.errors.NodeNotFoundError if hasattr(zarr, "errors") else KeyError):
+    except (KeyError, FileNotFoundError, _NODE_NOT_FOUND):
         return None
     return bytes(np.asarray(a[...], dtype=np.uint8))
 

@@ -15,7 +15,7 @@ That objective is a thin ridge in f0: a draw whose f0 is 1 % off drifts a fifth 
 the ~20 compared cycles and scores like an unrelated waveform, so a design point is almost never
 near the ridge and a polish from the truth stays on the truth's side of it. The base model can
 absorb a time stretch (frame rate) or an amplitude change (scale) by moving *along* the ridge to
-another material mode, which that search does not reach (docs/diagnose.md section 5: concealed
+another material mode, which that search does not reach (:ref:`validation-diagnose`: concealed
 cases 04, 09, 11 and 12 of seed 5 were fitted by the diagnosis' base model to within 2–30 % of the
 noise floor where the generator had measured 1.6–9.3 sigma unabsorbed).
 

@@ -26,7 +26,7 @@ TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.
 #: The material truth of a recording whose every parameter is unknown: the five scale-invariant
 #: combinations of the six scaled parameters drawn from Table 2, the common scale fixed by
 #: ``SCALE_ANCHOR``. The glottal area waveform is exactly unchanged when E_body, E_cover, E_lig,
-#: p_sub, rho and eta are multiplied by one factor (docs/inference.md, "The common scale"), so a
+#: p_sub, rho and eta are multiplied by one factor (:ref:`inference-scale-the-common-scale-what-a`), so a
 #: truth drawn with rho elsewhere in Table 2's [950, 1200] kg/m^3 is the same recording as its
 #: rescaled copy with rho at the anchor; drawing the other five at the anchor keeps them in the box.
 FULL_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "E_lig": (0.5, 3.0), "p_sub": (400.0, 1800.0),

@@ -41,10 +41,22 @@ from vfcore.measures import estimate_f0
 
 from .absorb import AUDIT_SEARCH, MaterialSpace, audit_presence, certify_absorption, unabsorbed_rms
 from .config import BASE_CONFIG, MATERIAL_SETS, N_OBS, N_Y, PRESENCE_SIGMA, SCALE_ANCHOR, TRUTH_BOUNDS
-from .mechanisms import (PIXEL_MM, SUB_C, asymmetric_area, boxcar_average, epithelium_profile,
-                         forward_extensions_available, frame_times, gap_profile, hr_times, leak_area,
-                         quantise_scale, sample_hr, subglottal_modes, zipper_area)
-
+from .mechanisms import (
+    PIXEL_MM,
+    SUB_C,
+    asymmetric_area,
+    boxcar_average,
+    epithelium_profile,
+    forward_extensions_available,
+    frame_times,
+    gap_profile,
+    hr_times,
+    leak_area,
+    quantise_scale,
+    sample_hr,
+    subglottal_modes,
+    zipper_area,
+)
 
 __all__ = [
     "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",

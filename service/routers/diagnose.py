@@ -15,8 +15,7 @@ from fastapi.responses import HTMLResponse
 from worker import store as st
 
 from ..access import done_job, own_job, page_reader
-from ..api_models import (DiagnoseRequest, DiagnoseStarted, DiagnosisSpec, DiagnosisStatus, ExpectedDiagnosis,
-                          LinkOut)
+from ..api_models import DiagnoseRequest, DiagnoseStarted, DiagnosisSpec, DiagnosisStatus, ExpectedDiagnosis, LinkOut
 from ..db import ACTIVE
 from ..deps import JobIdDep, ManagerDep, UserDep
 from ..diagnosis import expected, read_report

@@ -47,7 +47,7 @@ def _status(manager, rec: dict) -> JobStatus:
 
 
 def reach_gate(spec: JobSpec) -> tuple[JSONResponse | None, dict]:
-    """The reach check at submission (docs/inference.md, "The model's reach"): a 422 response for a recording
+    """The reach check at submission (:ref:`inference`, "The model's reach"): a 422 response for a recording
     outside the reach unless ``force_reach``, else the notes to store with the job (its warnings). Where no
     ensemble matches, none is built here (minutes): the job goes on with a warning saying how to build one."""
     v = spec.reach()

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from html import escape
 from typing import Annotated
 
@@ -15,8 +15,18 @@ from fastapi.responses import HTMLResponse
 
 from ..deps import ManagerDep, SettingsDep, UserDep
 from ..report import PAGE_HEADERS, html_page
-from ..signing import (Exp, LinkError, LinkOut, OptionalUserDep, Sig, Signer, SignerDep, jobs_scope, link_out,
-                       report_scope)
+from ..signing import (
+    Exp,
+    LinkError,
+    LinkOut,
+    OptionalUserDep,
+    Sig,
+    Signer,
+    SignerDep,
+    jobs_scope,
+    link_out,
+    report_scope,
+)
 from .diagnose import diagnosis_report_scope, get_diagnosis
 
 router = APIRouter(tags=["pages"])
@@ -35,7 +45,7 @@ def _ago(s: float) -> str:
 
 def utc(epoch: float, fmt: str = "%Y-%m-%d %H:%M UTC") -> str:
     """The server cannot know the reader's time zone, so its pages say UTC."""
-    return datetime.fromtimestamp(epoch, tz=timezone.utc).strftime(fmt)
+    return datetime.fromtimestamp(epoch, tz=UTC).strftime(fmt)
 
 
 def when(epoch: float | None, now: float) -> str:

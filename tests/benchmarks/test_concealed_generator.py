@@ -35,7 +35,7 @@ def test_generator_does_not_import_diagnose():
     modules = sorted(Path(G.__file__).parent.glob("*.py"))
     assert {m.name for m in modules} >= {"generate.py", "absorb.py", "mechanisms.py", "config.py"}
     for m in modules:
-        imports = "".join(l for l in m.read_text().splitlines() if l.lstrip().startswith(("import", "from")))
+        imports = "".join(ln for ln in m.read_text().splitlines() if ln.lstrip().startswith(("import", "from")))
         assert "diagnose" not in imports, m.name
 
 

@@ -36,7 +36,7 @@ def _lock():
 def _direct_requirements():
     proj = _pyproject()["project"]
     reqs = [Requirement(r) for r in proj["dependencies"]]
-    for extra, items in proj["optional-dependencies"].items():
+    for items in proj["optional-dependencies"].values():
         reqs += [r for r in map(Requirement, items) if canonicalize_name(r.name) != "vfinfer"]
     return reqs
 

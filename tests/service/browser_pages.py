@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 from svc_helpers import TOKENS, ServerThread, auth, done_fe_job, store_diagnosis, wait_done
 

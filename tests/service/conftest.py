@@ -10,10 +10,11 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import httpx  # noqa: E402
 import pytest  # noqa: E402
+from svc_helpers import TOKENS, ServerThread  # noqa: E402
 
 from service.main import create_app  # noqa: E402
 from service.settings import Settings  # noqa: E402
-from svc_helpers import TOKENS, ServerThread  # noqa: E402
+
 
 @pytest.fixture(scope="session")
 def dask_client():

@@ -2,11 +2,10 @@
 from __future__ import annotations
 
 import numpy as np
-
-from worker.jobspec import JobSpec
+from svc_helpers import auth, toy_spec, wait_done
 from toy_model import ToyEvaluator
 
-from svc_helpers import auth, toy_spec, wait_done
+from worker.jobspec import JobSpec
 
 
 def _direct_is(spec_dict):

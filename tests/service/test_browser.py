@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from browser_pages import PAGES, chromium_path, open_pages, pages_service
 from svc_helpers import toy_spec
 

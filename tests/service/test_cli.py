@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
-
 from svc_helpers import TOKENS, toy_spec
+from typer.testing import CliRunner
 
 from service.cli import app
 
@@ -72,10 +71,11 @@ def test_infer_defaults_to_smc_and_prints_what_the_data_determined(tmp_path, mon
     """`vfinfer infer` builds an SMC job unless told otherwise, carries --measure into the job, and after
     the fit prints the identifiability table stored with the posterior (the fit itself is a stand-in
     here: the toy model's importance sampler in this process, reduced by the worker's own code)."""
+    from toy_model import ToyEvaluator
+
     import service.cli as cli
     from vfcore.inference import importance_sample
     from worker.reduce import identifiability_of, posterior_summary
-    from toy_model import ToyEvaluator
     seen = {}
 
     def fake_run_local(spec, out, workers, job_id="local"):
@@ -125,9 +125,10 @@ def test_diagnosis_on_the_service_start_follow_fetch(service, tmp_path, monkeypa
     import json
     import threading
 
-    import vfcore.diagnose.pipeline as P
-    import service.diagnosis as D
     from svc_helpers import done_fe_job
+
+    import service.diagnosis as D
+    import vfcore.diagnose.pipeline as P
 
     jid = done_fe_job(service.settings, owner="carol")
     report = {"verdict": "missing physics: leak", "winner": "leak", "physics": "leak", "rivals": [],

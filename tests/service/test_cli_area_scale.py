@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pydantic import ValidationError
-from typer.testing import CliRunner
-
 from svc_helpers import toy_spec
+from typer.testing import CliRunner
 
 from service.cli import app
 from worker.jobspec import JobSpec
@@ -20,8 +19,9 @@ ARGS = ["--model", "toy", "--duration", "0.35", "--discard", "0.2", "--noise", "
 
 def _scaled_gaw_file(tmp_path):
     """The toy model at Table 3 recorded with areas TRUE_K times too large, plus noise."""
-    from vfvideo.io import write_gaw_csv
     from toy_model import toy_observation
+
+    from vfvideo.io import write_gaw_csv
     a = TRUE_K * np.array(toy_observation()) + 0.3 * np.random.default_rng(3).standard_normal(400)
     return write_gaw_csv(tmp_path / "gaw.csv", np.arange(a.size) / 4000.0, a, 4000.0)
 
@@ -29,10 +29,11 @@ def _scaled_gaw_file(tmp_path):
 @pytest.mark.parametrize("opts, box", [(["--area-scale", "0.5:3"], (0.5, 3.0)), (["--uncalibrated"], (0.25, 4.0))])
 def test_infer_fits_the_area_scale_and_prints_it(tmp_path, monkeypatch, opts, box):
     """The fit is the toy model's importance sampler in this process, reduced by the worker's own code."""
+    from toy_model import ToyEvaluator
+
     import service.cli as cli
     from vfcore.inference import importance_sample
     from worker.reduce import area_scale_of, posterior_summary
-    from toy_model import ToyEvaluator
     seen = {}
 
     def fake_run_local(spec, out, workers, job_id="local"):

@@ -10,9 +10,8 @@ import socket
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
-
 from svc_helpers import toy_spec
+from typer.testing import CliRunner
 
 from service.cli import app
 

@@ -9,9 +9,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
-
 from svc_helpers import TOKENS, toy_spec
+from typer.testing import CliRunner
 
 from service.cli import app
 from service.cli_common import human_duration, human_time
@@ -60,6 +59,7 @@ def test_the_command_lines_choices_are_the_models():
     """The contact laws and elements the options accept are vfcore.config's (spelled twice only to keep vfcore's
     import out of the command line's start), and a value the model lacks is refused."""
     import typer
+
     from service import cli_options
     from vfcore.config import CONTACTS, ELEMENTS
     assert cli_options.CONTACTS == CONTACTS and cli_options.ELEMENTS == ELEMENTS

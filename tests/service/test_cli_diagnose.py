@@ -100,8 +100,8 @@ def test_library_cli_service_and_benchmark_share_one_set_of_defaults(monkeypatch
     import inspect
     from pathlib import Path
 
-    from service.cli_diagnose import diagnose_cmd
     from service.api_models import DiagnoseRequest
+    from service.cli_diagnose import diagnose_cmd
     from vfcore.diagnose import DiagnoseOptions
     from vfcore.diagnose import defaults as D
     o = DiagnoseOptions()
@@ -154,8 +154,9 @@ def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it
                                                                                      monkeypatch):
     """The diagnosis is replaced by one that evaluates 3 parts through the command's map and then
     dies: the store keeps them in OUT/.resume, and the same command run again reads all 3 back."""
-    import vfcore.diagnose.pipeline as P
     from svc_helpers import dying_diagnosis
+
+    import vfcore.diagnose.pipeline as P
     seen = []
     monkeypatch.setattr(P, "diagnose", dying_diagnosis(seen, "killed"))
     out = tmp_path / "out"
@@ -170,7 +171,7 @@ def test_an_interrupted_diagnosis_leaves_its_store_and_the_same_command_reads_it
     assert seen[2] is map                                 # --no-resume: the plain map, no store
 
 
-def _base_posterior(problem, model) -> "object":
+def _base_posterior(problem, model) -> object:
     """A posterior of ``problem``'s recording with predicted GAWs, recorded as simulated with ``model``."""
     from vfcore.inference.posterior import Posterior
     from vfcore.inference.problem import Evaluation
@@ -190,9 +191,9 @@ def test_a_base_fitted_with_another_model_is_refused(tmp_path, leaky_gaw):
     """--base must be the model the diagnosis simulates: a fit at another step than the one given is refused
     with one line naming the option and both values; the same model is taken; a file that does not record its
     model (written before it was recorded) is taken as before."""
+    from service.cli_diagnose import build_problem, load_base
     from vfcore.inference.posterior import Posterior
     from vfcore.inference.problem import model_record
-    from service.cli_diagnose import build_problem, load_base
     problem = build_problem(leaky_gaw, None, "E_body,E_cover", None, "coarse", 1e-4, 0.35, 0.15, 1.0)
     other = problem.config.replace(dt=5e-5, contact="layer")
     _base_posterior(problem, json.loads(json.dumps(other.as_dict()))).to_netcdf(tmp_path / "other.nc")

@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 import yaml
 import zarr
-
 from svc_helpers import TOKENS, auth, listening_port, toy_spec, wait_done
 from toy_model import PLUGIN_ENV
 

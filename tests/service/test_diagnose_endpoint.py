@@ -7,7 +7,6 @@ import time
 
 import numpy as np
 import pytest
-
 from svc_helpers import auth, done_fe_job, dying_diagnosis, toy_spec, wait_done
 
 FPS = 4000.0
@@ -197,9 +196,10 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     """The service stops while a diagnosis runs (its cluster calls then fail): the failure is not
     recorded, the job stays running, and the next start of the service runs the same request
     again; a failure of its own is then recorded (no third start)."""
+    from svc_helpers import ServerThread
+
     import vfcore.diagnose.pipeline as P
     from service.main import create_app
-    from svc_helpers import ServerThread
 
     jid = done_fe_job(settings)
     body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 10, "max_refits": 2,
@@ -284,9 +284,10 @@ def test_diagnoses_kept_beside_the_stores_by_an_earlier_release_become_jobs(sett
     counted, a failed one keeps its error; the files are gone afterwards."""
     import json
 
+    from test_report_diagnose import REPORT
+
     from service.db import JobDB
     from service.manager import JobManager
-    from test_report_diagnose import REPORT
 
     done, stopped, failed = (done_fe_job(settings) for _ in range(3))
     d = settings.stores_dir
@@ -322,9 +323,10 @@ def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch
     DELETE is a 409, another user's is a 404, and a new POST starts afresh."""
     import threading
 
+    from svc_helpers import ServerThread
+
     import vfcore.diagnose.pipeline as P
     from service.main import create_app
-    from svc_helpers import ServerThread
 
     jid = done_fe_job(settings)
     batches = []

@@ -1,4 +1,4 @@
-"""The at-bound warning on real FE fits (docs/inference.md, "The model's reach"): it fires when a recording lies
+"""The at-bound warning on real FE fits (:ref:`inference`, "The model's reach"): it fires when a recording lies
 outside what the model and prior can make, because the fit presses parameters against the box, and it stays
 silent on the demo, whose recording the model made. The rule itself is tested on synthetic posteriors in
 tests/worker/test_edge_warnings.py; here the whole command runs."""
@@ -15,7 +15,7 @@ from vfcore.params import Params
 
 pytestmark = pytest.mark.slow
 
-#: a human-range fold (docs/inference.md, "Prior sets"): f0 near 176 Hz, outside the paper prior's reach
+#: a human-range fold (:ref:`inference-reach-prior-sets`): f0 near 176 Hz, outside the paper prior's reach
 HUMAN = Params(E_body=100.0, E_cover=5000.0, E_lig=15.0, p_sub=1500.0, rho=1050.0, eta=3.0, x0=8.4)
 CHEAP = ["--mesh", "coarse", "--dt", "1e-4", "--duration", "0.35", "--discard", "0.15", "--workers", "1",
          "--seed", "0"]

@@ -8,7 +8,6 @@ import time
 
 import numpy as np
 import pytest
-
 from svc_helpers import TOKENS, auth, toy_spec, wait_done
 
 from worker import store as st
@@ -59,9 +58,10 @@ def test_worker_killed_mid_job_bit_identical(service):
 # A load test (20 jobs through one service): about a minute on 2 cores, so `make test-all` runs it.
 @pytest.mark.slow
 def test_twenty_concurrent_submissions_and_fast_status(service):
+    from toy_model import ToyEvaluator
+
     from vfcore.inference.importance import importance_sample
     from worker.jobspec import JobSpec
-    from toy_model import ToyEvaluator
 
     http_url = service.url
     users = list(TOKENS)

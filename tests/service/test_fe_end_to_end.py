@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from svc_helpers import auth, wait_done
 
 pytest.importorskip("vfcore.forward", reason="FE forward model not available yet")

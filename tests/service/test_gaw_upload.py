@@ -4,8 +4,8 @@ from __future__ import annotations
 import io
 
 import numpy as np
-
 from svc_helpers import auth
+
 from vfvideo.synth import pulse_gaw, render_video
 
 

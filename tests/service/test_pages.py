@@ -9,9 +9,8 @@ import time
 
 import httpx
 import pytest
-from typer.testing import CliRunner
-
 from svc_helpers import TOKENS, ServerThread, auth, toy_spec, wait_done
+from typer.testing import CliRunner
 
 from service.cli import app
 from service.signing import LinkError, Signer, jobs_scope, report_scope

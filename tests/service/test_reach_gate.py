@@ -4,15 +4,13 @@ POST /jobs answers 422 with the numbers (or, with force_reach, accepts the job w
 No FE simulation runs here: the shipped ensemble answers, and builds use a stand-in simulator."""
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
-from typer.testing import CliRunner
-
 from svc_helpers import TOKENS, auth
+from typer.testing import CliRunner
 
 from service.cli import app as cli_app
 

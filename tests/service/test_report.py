@@ -7,15 +7,15 @@ import json
 
 import numpy as np
 import pytest
-
 from svc_helpers import toy_spec
 
 
 @pytest.fixture(scope="module")
 def post():
+    from toy_model import ToyEvaluator
+
     from vfcore.inference.smc import smc
     from worker.jobspec import JobSpec
-    from toy_model import ToyEvaluator
     pb = JobSpec.model_validate(toy_spec(sigma_e=0.5)).to_problem()
     p = smc(ToyEvaluator(pb), pb.prior, n_particles=60, seed=1)
     p.obs_gaw, p.fps = pb.obs_compared, pb.fps

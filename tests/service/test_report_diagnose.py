@@ -9,7 +9,6 @@ import re
 from html.parser import HTMLParser
 
 import pytest
-
 from svc_helpers import auth, done_fe_job
 
 #: A report as ``DiagnoseReport.to_dict()`` after ``jsonable`` writes it (strict JSON: None for non-finite).
@@ -185,8 +184,9 @@ def test_cli_writes_index_html(tmp_path, monkeypatch):
 
 
 def test_service_serves_the_page_to_the_owner(service):
-    from service.report import PAGE_HEADERS
     from svc_helpers import store_diagnosis
+
+    from service.report import PAGE_HEADERS
     jid = done_fe_job(service.settings, owner="alice")
     http = service.http
     url = f"/jobs/{jid}/diagnosis/report"

@@ -7,14 +7,14 @@ import time
 import httpx
 import numpy as np
 import zarr
-
 from svc_helpers import auth, kill_service, start_service, toy_spec, wait_done
 
 
 def test_service_restart_resumes_without_recomputing(tmp_path):
+    from toy_model import ToyEvaluator
+
     from vfcore.inference.importance import importance_sample
     from worker.jobspec import JobSpec
-    from toy_model import ToyEvaluator
 
     data = tmp_path / "data"
     spec = toy_spec(n=600, seed=33, delay=0.01, chunk_size=30)       # 20 chunks of ~0.3 s

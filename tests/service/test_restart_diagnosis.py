@@ -13,7 +13,6 @@ from pathlib import Path
 
 import httpx
 import pytest
-
 from svc_helpers import auth, done_fe_job, kill_service, leaky_fe_spec, start_service
 
 HERE = Path(__file__).resolve().parent

@@ -1,11 +1,9 @@
 """Bad input -> 422 naming the field, nothing written; tokens and ownership."""
 from __future__ import annotations
 
-import copy
 import json
 
 import pytest
-
 from svc_helpers import auth, toy_spec, wait_done
 
 

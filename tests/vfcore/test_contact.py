@@ -1,5 +1,5 @@
 """Contact: the rigid projection's and the compliant layer's laws, and the products built on them
-(impulse per cycle, contact duration, pressure in contact; docs/model.md, "Contact")."""
+(impulse per cycle, contact duration, pressure in contact; :ref:`model-contact`)."""
 import math
 
 import numpy as np
@@ -112,7 +112,7 @@ def test_simulated_contact_products_consistent():
 @pytest.mark.slow
 def test_impulse_converges_in_dt():
     """The contact impulse per cycle changes less between finer steps than the nodal peak pressure
-    (which grows like m v / h); measured in docs/model.md, "Contact"."""
+    (which grows like m v / h); measured in :ref:`model-contact`."""
     imp, pk = [], []
     for dt in (1e-4, 5e-5, 2.5e-5):
         y = simulate(TABLE3, SimConfig(dt=dt, duration=0.35, discard=0.15)).cycles
@@ -199,7 +199,7 @@ def test_layer_contact_is_an_option_of_the_config():
 def test_layer_peak_pressure_converges_in_dt_where_the_projection_does_not():
     """Table 3, medium mesh, the two finest steps of benchmarks/bench_contact.py: with the compliant layer
     the peak nodal pressure, the impulse and the pressure in contact agree within 5 %; with the rigid
-    projection the peak grows like m v / h (docs/model.md, "Contact")."""
+    projection the peak grows like m v / h (:ref:`model-contact`)."""
     def products(contact, dt):
         y = simulate(TABLE3, SimConfig(contact=contact, dt=dt, duration=0.35, discard=0.15)).cycles
         return np.array([y.max_contact_pressure_unconverged.max(), y.contact_impulse.mean(),

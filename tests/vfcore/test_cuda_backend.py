@@ -11,7 +11,6 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -182,7 +181,7 @@ def test_cuda_without_a_gpu_is_one_clear_error():
     with pytest.raises(CudaUnavailable, match=r"device='cuda' cannot run here: .*use device='cpu'") as err:
         resolve_device("cuda")
     assert "\n" not in str(err.value)
-    from vfcore import SimConfig, TABLE3
+    from vfcore import TABLE3, SimConfig
     from vfcore.batch import simulate_many
     with pytest.raises(CudaUnavailable):
         simulate_many(np.array([TABLE3.as_array()]), SimConfig(mesh="coarse", duration=0.001, discard=0.0),
@@ -243,7 +242,7 @@ def _real_gpu() -> bool:
 def test_real_gpu_matches_the_cpu_lockstep_kernel():
     """On a GPU: the medium mesh, prior draws and Table 3 over 100 ms, both contact laws and flow loads; with FMA contraction
     off the GPU's arithmetic is the CPU's, so the GAWs agree to 1e-10 relative (bit for bit expected)."""
-    from vfcore import Params, SimConfig, TABLE3
+    from vfcore import TABLE3, Params, SimConfig
     from vfcore.batch import simulate_many
     lo = np.array([9.0, 250.0, 0.5, 400.0, 950.0, 1.0, 7.4])
     hi = np.array([15.0, 950.0, 3.0, 1800.0, 1200.0, 7.0, 8.4])

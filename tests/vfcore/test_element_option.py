@@ -6,7 +6,7 @@ a divergence-free manufactured solution, an independent numpy assembly), never f
 code's own output.
 """
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -163,7 +163,7 @@ def _S(t, d=0):
             -4 * _PI ** 3 * np.sin(2 * _PI * t)][d]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _locking_error(level: int, nu: float, element: str) -> float:
     """Relative L2 error on the unit square (one-diagonal mesh), u = curl psi, psi = S(x) S(y).
 
@@ -250,7 +250,7 @@ def test_anp_newmark_conserves_energy_undamped():
 
 
 # ---------------------------------------------------------------- Table 3: every shipped mesh oscillates
-@lru_cache(maxsize=None)
+@cache
 def _table3(mesh: str, element: str):
     return simulate(TABLE3, SimConfig(mesh=mesh, element=element))
 

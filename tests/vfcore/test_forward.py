@@ -1,7 +1,7 @@
 """Forward model (vfcore.forward) against physics: energy balance of the integrator,
 self-sustained oscillation at Table 3, contact admissibility, convergence, failure modes."""
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -16,7 +16,7 @@ RANGE_F0 = (60.0, 250.0)
 RANGE_PEAK = (2.0, 30.0)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sim(mesh="medium", dt=5e-5, x0=8.4, keep=False):
     return simulate(TABLE3.replace(x0=x0), SimConfig(mesh=mesh, dt=dt, keep_trajectories=keep))
 

@@ -2,13 +2,11 @@
 
 Both are off by default; off means bit-identical to the default model.
 """
-import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 import scipy.linalg as sla
-import scipy.sparse as sp
 
 from vfcore import TABLE3, SimConfig, simulate
 from vfcore.fem.assemble import membrane_unit
@@ -20,7 +18,7 @@ SHORT = dict(duration=0.12, discard=0.06)
 MODE = (600.0, 0.1, 2e6)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sim(**kw):
     return simulate(TABLE3, SimConfig(**kw))
 
@@ -127,7 +125,7 @@ def test_epithelium_raises_lowest_eigenfrequency_monotonically():
         K = s.matrix(K0 + s.epithelium_values(E, 0.05)[0]).toarray()
         lam = sla.eigh(K, M, eigvals_only=True, subset_by_index=[0, 2])
         f1.append(np.sqrt(lam[0]) / (2 * np.pi))
-    assert abs(f1[0] - 54.9) < 0.5                      # docs/model.md: 54.9 Hz at Table 3
+    assert abs(f1[0] - 54.9) < 0.5                      # :ref:`model`: 54.9 Hz at Table 3
     assert np.all(np.diff(f1) > 0.1), f1
 
 

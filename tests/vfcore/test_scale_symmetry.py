@@ -1,13 +1,13 @@
 """The common-scale symmetry of the model: multiplying E_body, E_cover, E_lig, p_sub, rho and eta by one
 factor c (x0 unchanged) leaves the glottal area waveform unchanged, scales every contact quantity by c
-and the flow rate by sqrt(c) (docs/inference.md, "The common scale"). Each fold-side term of the model
+and the flow rate by sqrt(c) (:ref:`inference-scale-the-common-scale-what-a`). Each fold-side term of the model
 carries one power of mass (stiffness, subglottal and Bernoulli loads, mass, damping) and the air density
 enters the flow velocity only, so c is a change of the unit of mass that lengths and times do not see.
 A GAW likelihood therefore cannot tell theta from c * theta; a measured parameter can."""
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ def scaled(p, c, names=SCALED):
     return p.replace(**{n: getattr(p, n) * c for n in names})
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sim(c: float, contact: str = "projection"):
     r = simulate(scaled(TABLE3, c), CFG.replace(contact=contact))
     assert r.ok, r.message
@@ -76,7 +76,7 @@ def test_scaled_parameters_give_the_same_gaw_and_scaled_products(c):
     np.testing.assert_allclose(r.cycles.mean_flow, math.sqrt(c) * r0.cycles.mean_flow, rtol=1e-6, atol=0)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _observation():
     """The Table 3 waveform's first 300 frames plus N(0, 1 mm^2) noise."""
     y = _sim(1.0).gaw[:300]

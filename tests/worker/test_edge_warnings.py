@@ -6,10 +6,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import toy_model  # noqa: F401  (registers model "toy")
 
 from vfcore.inference import Posterior, Prior
 from vfcore.inference.identify import BOUND_FRACTION, BOUND_MASS_WARN, at_bounds
-import toy_model  # noqa: F401  (registers model "toy")
 from worker.jobspec import JobSpec
 from worker.reduce import MISFIT_RATIO_WARN, edge_warnings, noise_check
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import toy_model  # noqa: F401  (registers model "toy")
+
 from worker.jobspec import JobSpec
 from worker.reduce import runs_warning
 

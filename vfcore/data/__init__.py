@@ -10,7 +10,7 @@ because the discretisation error is larger than the noise (coarse mesh: peak are
 27.1 mm^2, f0 67 vs 64 Hz; medium mesh at dt = 1e-4: rms misfit 0.7-2.8 mm^2 depending on
 the window), which would bias the posterior well away from the truth. The demo is therefore a
 check of the inference machinery with the truth inside the model (only the noise differs from
-what is assumed), stated as such in docs/inference.md.
+what is assumed), stated as such in :ref:`inference`.
 """
 from __future__ import annotations
 
@@ -31,9 +31,9 @@ def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
     import numpy as np
 
     from vfcore.config import SimConfig
-    from vfcore.params import TABLE3
     from vfcore.forward import simulate
     from vfcore.gawio import write_gaw_csv
+    from vfcore.params import TABLE3
 
     d = DEMO_TRUTH
     r = simulate(TABLE3, SimConfig(mesh=d["mesh"], dt=d["dt"], duration=d["duration"], discard=d["discard"],

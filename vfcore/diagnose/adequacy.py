@@ -1,4 +1,4 @@
-"""Does any fit explain the recording? The "no fit" verdict (docs/diagnose.md, "When nothing fits").
+"""Does any fit explain the recording? The "no fit" verdict (:ref:`diagnose-naming-when-nothing-fits`).
 
 A name is an explanation only when the named model then reproduces the recording to within its
 noise. When the best fit the diagnosis made — the base model or any refitted entry — still leaves a
@@ -23,7 +23,7 @@ NO_FIT = "the model does not fit"
 #: Residual RMS over the noise sd above which no fit explains the recording. A fit whose misfit is
 #: ``e`` leaves ``sqrt(sigma^2 + e^2)``; at 2 the misfit is sqrt(3) = 1.7 noise sds, beyond what the
 #: richer-than-catalogue mechanisms of the concealed benchmark leave when the right entry is fitted
-#: (docs/diagnose.md, "When nothing fits": the calibration).
+#: (:ref:`diagnose-naming-when-nothing-fits`: the calibration).
 MAX_RMS_RATIO = 2.0
 #: Two-sided p-value below which a GAW measure is listed as disagreeing.
 P_FLAG = 0.05

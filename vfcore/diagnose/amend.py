@@ -1,5 +1,5 @@
 """Amend a ranking after the checks: the rules that name another winner than the evidence ranking of
-:func:`.rank.rank_extensions` did (docs/diagnose.md, section 3) -- a candidate found on the local
+:func:`.rank.rank_extensions` did (:ref:`diagnose-naming`) -- a candidate found on the local
 comparison, the simpler of two nested entries, the simpler of two explanations the evidence cannot tell
 apart -- and the local check's evidence test. Each returns a new :class:`.rank.RankReport`; the one given
 is left as it was.
@@ -13,7 +13,7 @@ from .rank import RankReport
 
 
 def promote_local(ranking: RankReport, name: str, d_local: float, se_local: float, tau: float) -> RankReport:
-    """``ranking`` with ``name`` found on the *local* comparison (docs/diagnose.md, section 3):
+    """``ranking`` with ``name`` found on the *local* comparison (:ref:`diagnose-naming`):
     a candidate that met every criterion except ``d > k_se * se`` with the between-run error
     ``tau`` in ``se`` is named when it beats the base model refitted in its own material mode
     (:func:`.mode_fits.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
@@ -33,7 +33,7 @@ def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: fl
     fit (:func:`.regularity.sensitivity`; 0 for a regular vibration), in quadrature. On an
     irregular likelihood there is no smooth local mode for the two fits to share, and how far the
     log-likelihood jumps between neighbouring points is an error of their comparison (a concealed
-    leak at high p_sub: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; docs/diagnose.md
+    leak at high p_sub: +1,426 +- 0.8 locally, at a roughness of 81,000 nats; :ref:`diagnose`
     section 4, "Regularity")."""
     se = math.hypot(float(se_refit), float(se_bound), float(roughness))
     ok = math.isfinite(d_local) and math.isfinite(se) and d_local > min_gain and d_local > k_se * se
@@ -43,7 +43,7 @@ def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: fl
 def prefer_nested(ranking: RankReport, simpler: str, richer: str, note: str) -> RankReport:
     """``ranking`` with ``simpler`` named instead of ``richer``: the richer winner's fit sits where
     it reduces to the simpler entry (``Extension.nests``) and the simpler model, refitted in the
-    same material mode, is within the errors of it (docs/diagnose.md, section 3: nested check).
+    same material mode, is within the errors of it (:ref:`diagnose-naming`: nested check).
     The same fit quality with fewer parameters is the better explanation (Occam; the evidence
     would say so too had the simpler model's own SMC found the mode)."""
     return _named(ranking, simpler, note)

@@ -1,5 +1,5 @@
 """The base fit: independent SMC runs of the base model, their between-run error, the escalation when
-they disagree, the base fit's summary and its regularity (docs/diagnose.md section 4, "Base fit")."""
+they disagree, the base fit's summary and its regularity (:ref:`diagnose-pipeline-base-fit`)."""
 from __future__ import annotations
 
 import math
@@ -7,8 +7,9 @@ import time
 
 import numpy as np
 
-from ..inference.runs import SEED_STRIDE
+from ..inference.problem import Problem
 from .material import material_first, material_sentence
+from .seeds import spawn_seed, stage_seed
 from .state import DiagnosisState, Run
 from .summary import best_particles
 
@@ -39,8 +40,8 @@ def between_run_sd(runs) -> float:
 def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: int = 0, map=map,
              chunk_size: int = 40, escalate_tau: float | None = 10.0, escalate_factor: int = 2,
              runs_out: list | None = None, **smc_options):
-    """The base fit of :func:`diagnose`: ``base_runs`` independent SMC runs (seeds ``seed``,
-    ``seed + 7919``, ...), the one with the largest log-evidence kept.
+    """The base fit of :func:`diagnose`: ``base_runs`` independent SMC runs (run ``k`` seeded by
+    the child ``k`` of ``SeedSequence(seed)``, :func:`.seeds.spawn_seed`), the one with the largest log-evidence kept.
 
     When the runs disagree beyond their reported errors (between-run error
     :func:`between_run_sd` > ``escalate_tau`` nats) the sampler is hopping between material
@@ -67,14 +68,14 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
         return smc_many(problem, jobs, map=map, chunk_size=chunk_size, **smc_options)
 
     notes, factor = [], 1
-    runs = made([(n_particles, seed + SEED_STRIDE * k) for k in range(max(1, int(base_runs)))])
+    runs = made([(n_particles, spawn_seed(seed, k)) for k in range(max(1, int(base_runs)))])
     n_sims = sum(int(p.n_simulations) for p in runs)
     tau = between_run_sd(runs)
     if len(runs) > 1:
         notes.append(f"base runs log-evidence: {fmt(runs)}; the largest kept")
     if escalate_tau is not None and len(runs) > 1 and tau > escalate_tau and int(escalate_factor) > 1:
         factor = int(escalate_factor)
-        big = made([(n_particles * factor, seed + SEED_STRIDE * (k + len(runs))) for k in range(max(2, int(base_runs)))])
+        big = made([(n_particles * factor, spawn_seed(seed, k + len(runs))) for k in range(max(2, int(base_runs)))])
         n_sims += sum(int(p.n_simulations) for p in big)
         notes.append(f"base runs disagree (between-run error {tau:.1f} nats > {escalate_tau:g}): "
                      f"{factor}x particles from here on; larger base runs: {fmt(big)}")
@@ -89,7 +90,7 @@ def _fit(run: Run, problem):
     """``base_fit`` of ``problem`` with the run's settings; returns its tuple and the ``(log Z, se)``
     of every run."""
     o, runs = run.options, []
-    out = base_fit(problem, n_particles=o.n_particles, base_runs=o.base_runs, seed=o.seed, map=run.map,
+    out = base_fit(problem, n_particles=o.n_particles, base_runs=o.base_runs, seed=stage_seed(o.seed, "base"), map=run.map,
                    chunk_size=o.chunk_size, escalate_tau=o.escalate_tau, escalate_factor=o.escalate_factor,
                    runs_out=runs, **run.smc)
     return (*out, runs)
@@ -146,7 +147,8 @@ def check_regularity(run: Run, st: DiagnosisState) -> None:
         return
     from . import regularity
     run.track.at("regularity check")
-    sens = regularity.sensitivity(st.problem, best_particles(st.base, 1)[0], seed=run.options.seed)
+    sens = regularity.sensitivity(st.problem, best_particles(st.base, 1)[0],
+                                   seed=stage_seed(run.options.seed, "regularity"))
     st.n_simulations += sens.n_simulations
     st.before["regularity"] = sens.to_dict()
     st.roughness = sens.max_change                         # inf when a perturbed run failed

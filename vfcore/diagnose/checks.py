@@ -1,4 +1,4 @@
-"""The checks made before a winner is named (docs/diagnose.md section 3): the base model re-fitted in
+"""The checks made before a winner is named (:ref:`diagnose-naming`): the base model re-fitted in
 a candidate's material mode (mode check; the gain may be the mode, not the physics), the local
 comparison with that fit when only the between-run error swamps a gain, and the nested check of a
 winner that sits where it reduces to a simpler catalogue entry."""
@@ -6,17 +6,18 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
-from .continuation import SEED_OFFSET, search_base
+from .amend import local_passes, prefer_nested, promote_local
+from .continuation import search_base
 from .extensions import get
 from .fit import null_drops, param_table
 from .mode_fits import base_near
-from .amend import local_passes, prefer_nested, promote_local
 from .rank import RankReport, null_consistent
 from .refits import keep_if_higher
+from .seeds import stage_seed
 from .state import DiagnosisState, Run
 
 __all__ = ["mode_check", "local_check", "nested_check"]
@@ -32,7 +33,7 @@ def mode_check(run: Run, st: DiagnosisState, name: str) -> dict:
     t1 = time.perf_counter()
     run.track.at("mode check", name)
     zb, sb, near = base_near(st.problem, st.refits[name], n_particles=st.refit_n,
-                             seed=o.seed + 65537 + len(st.before.get("mode_checks", {})) + 1, map=run.map,
+                             seed=stage_seed(o.seed, "mode_check", len(st.before.get("mode_checks", {}))), map=run.map,
                              chunk_size=o.chunk_size, **run.smc)
     st.n_simulations += int(near.n_simulations)
     sn = st.summary(near)
@@ -51,7 +52,7 @@ def _continued_mode_check(run: Run, st: DiagnosisState, name: str, found: dict) 
     parameters dropped), with the settings ``name``'s search had, and fitted from there: the base
     gets the search the entry got, so a mode the entry's search found is not named as physics."""
     start = np.array([found["params"][n] for n in st.problem.prior.names], dtype=float)
-    sd = run.options.seed + SEED_OFFSET + 7919 * (len(st.before.get("mode_checks", {})) + 1)
+    sd = stage_seed(run.options.seed, "mode_check_continued", len(st.before.get("mode_checks", {})))
     copts = {**(run.options.continuation_options or {}), "n_design": 0}
     got = search_base(run, st, start[None, :], sd, f"{name} continued", copts)
     if got is not None:
@@ -97,7 +98,7 @@ def nested_check(run: Run, st: DiagnosisState, ranking: RankReport, local, ranke
             continue
         t1 = time.perf_counter()
         run.track.at("nested check", simpler)
-        zb, sb, near = base_near(st.problem, st.refits[w], n_particles=st.refit_n, seed=o.seed + 131071, map=run.map,
+        zb, sb, near = base_near(st.problem, st.refits[w], n_particles=st.refit_n, seed=stage_seed(o.seed, "nested_check"), map=run.map,
                                  chunk_size=o.chunk_size, extension=simpler, integrate=o.integrate, **run.smc)
         st.n_simulations += int(near.n_simulations)
         # zb: a lower bound on the simpler model's evidence

@@ -3,7 +3,7 @@
 recording) and fitted by an SMC started about the optimum (:func:`.search.continued_fit`). The base
 model's fit joins the references as ``"base near continuation"``, so every gain is measured against
 the best base fit found the same way; an entry's replaces its refit when its evidence is higher
-(docs/diagnose.md section 4, "Continuation")."""
+(:ref:`diagnose-search-continuation-search`)."""
 from __future__ import annotations
 
 import math
@@ -15,13 +15,11 @@ from .extensions import get
 from .fit import ExtendedPrior
 from .refits import keep_if_higher
 from .search import continuation_search, continuation_searches, continued_fit, continued_fits
+from .seeds import stage_seed
 from .state import DiagnosisState, Run
 from .summary import best_particles
 
 __all__ = ["search_base", "continue_all"]
-
-#: seed offset of the continuation searches
-SEED_OFFSET = 1048573
 
 
 def search_base(run: Run, st: DiagnosisState, starts, sd: int, label: str, copts: dict):
@@ -64,7 +62,7 @@ def _searched_entries(run: Run, st: DiagnosisState) -> list[str]:
 def continue_all(run: Run, st: DiagnosisState) -> None:
     """The base model, then every searched entry, by continuation (see the module docstring)."""
     copts = dict(run.options.continuation_options or {})
-    sd = run.options.seed + SEED_OFFSET
+    sd = stage_seed(run.options.seed, "continuation", 0)
     entries = _searched_entries(run, st)
     run.track.at("continuation", "base", 0, len(entries))
     got = search_base(run, st, best_particles(st.base, 1), sd, "continuation", copts)
@@ -86,7 +84,7 @@ def continue_all(run: Run, st: DiagnosisState) -> None:
         if fb is not None:
             own = {p.name: (p.null if p.null is not None else 0.5 * (p.lo + p.hi)) for p in get(name).params}
             starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base:]]]))
-        jobs.append((name, starts, sd + 97 * (j + 1)))
+        jobs.append((name, starts, stage_seed(o.seed, "continuation", j + 1)))
     found = continuation_searches(st.problem, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
                                   **copts)
     # then every entry's fit from its optimum, the fits run together (each as alone)
@@ -95,7 +93,7 @@ def continue_all(run: Run, st: DiagnosisState) -> None:
     fits: dict = {}
     if ok:
         run.track.at("continuation", entries[ok[0]] if len(ok) == 1 else "entries", 1, len(entries))
-        fits = dict(zip(ok, continued_fits(st.problem, [(found[j], entries[j], sd + 97 * (j + 1)) for j in ok],
+        fits = dict(zip(ok, continued_fits(st.problem, [(found[j], entries[j], jobs[j][2]) for j in ok],
                                            n_particles=st.refit_n, map=run.map, chunk_size=o.chunk_size,
                                            integrate=o.integrate, **run.smc)))
     for j, (name, fe) in enumerate(zip(entries, found)):

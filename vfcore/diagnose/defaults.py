@@ -1,5 +1,5 @@
 """The recording and model settings of ``vfinfer diagnose`` and of the concealed-effect benchmark
-(docs/diagnose.md section 5): the simulated window and the parameters the base model estimates.
+(:ref:`validation-diagnose`): the simulated window and the parameters the base model estimates.
 
 The diagnosis' own settings (particles, continuation, material first, ...) are
 :class:`vfcore.diagnose.options.DiagnoseOptions`, the one source of their defaults for the library,
@@ -11,5 +11,5 @@ from __future__ import annotations
 DURATION_S = 0.55
 DISCARD_S = 0.25
 #: the base model estimates every combination of the six scaled parameters a GAW determines; rho,
-#: the best known of them in tissue, anchors the common scale (docs/diagnose.md, "Material first")
+#: the best known of them in tissue, anchors the common scale (:ref:`diagnose-naming-material-first`)
 DEFAULT_ESTIMATE = "E_body,E_cover,E_lig,p_sub,eta"

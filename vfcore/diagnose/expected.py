@@ -1,9 +1,9 @@
 """What a diagnosis is expected to cost, announced before it starts (``vfinfer diagnose`` prints it).
 
 A diagnosis ends in one of two ways whose costs differ tenfold, and which one is not known before the
-base fit: it stops at the noise after the base fit (``floor_stop``, docs/diagnose.md section 3), or it
+base fit: it stops at the noise after the base fit (``floor_stop``, :ref:`diagnose-naming`), or it
 reaches the catalogue (refits, rescues, continuation searches, mode checks). The counts below are the
-ranges measured on the held-out suite of seed 12 (docs/diagnose.md section 5, all 19 finished cases,
+ranges measured on the held-out suite of seed 12 (:ref:`validation-diagnose`, all 19 finished cases,
 every setting at its default, 2 workers):
 
 * floor stops, 10 cases: 3,513–14,393 simulations. Two base runs of 40 particles cost 3,500–4,300; a
@@ -131,7 +131,7 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None
         guide = guide + ("a pinned base fit before the freed one",)
     if options.refit_start != d.refit_start:
         # not scaled: refits from the base cost 28 % fewer simulations on the nine catalogue cases of the
-        # seed-12 suite (docs/diagnose.md, "Refits started from the base"), too few to give a range
+        # seed-12 suite (:ref:`validation-diagnose-pipeline-refits-started-from-the-base`), too few to give a range
         guide = guide + (f"refit_start {options.refit_start!r}, not scaled (fewer simulations than these)",)
     return ExpectedCost(floor, cat, minutes(floor, FLOOR_TIME_FACTOR), minutes(cat, CATALOGUE_TIME_FACTOR),
                         float(seconds_per_simulation) if timed else None, int(workers), int(base_fits), guide)

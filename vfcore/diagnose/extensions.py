@@ -16,13 +16,13 @@ Kinds:
   ``NotImplementedError``) so that the ranking can name what a signature would point to
   before it can be fitted; every entry of :data:`CATALOGUE` is implemented.
 
-Sources and prior ranges are in ``docs/diagnose.md``.
+Sources and prior ranges are in ``:ref:`diagnose`.
 """
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -44,7 +44,7 @@ class ExtParam:
     """One extra parameter: uniform prior ``[lo, hi]`` in ``unit``. ``null``: the value at which
     the extension is the base model; ``None`` where the prior holds no such value (a membrane's
     stiffness or a resonance frequency, which act only through a thickness or an impedance that has
-    one). Used by the naming rule to tell a physics gain from a mode-finding gain (docs/diagnose.md,
+    one). Used by the naming rule to tell a physics gain from a mode-finding gain (:ref:`diagnose`,
     section 3)."""
     name: str
     lo: float
@@ -217,7 +217,7 @@ def _leak(base, th, fps, **kw):
     g, f = _gaw_fps(base, fps)
     extra = leak_extra(g, th["leak_mm2"], th["chink_fraction"])
     out = g + extra
-    if hasattr(base, "flow") and hasattr(base, "params") and getattr(base, "flow").size:
+    if hasattr(base, "flow") and hasattr(base, "params") and base.flow.size:
         # SimResult.flow is sampled with SimResult.gaw (one value per frame)
         q = np.asarray(base.flow, dtype=float) + leak_flow(extra, base.params.p_sub - base.config.p_sup)
         return {"gaw": out, "flow": q}

@@ -5,7 +5,7 @@ together with the extension's parameters — sampled jointly, or, for the wavefo
 integrated out of each simulation's likelihood by quadrature (``integrate=True``, the default of
 :func:`fit_extended`; :mod:`.quadrature`) — with the same likelihood (Eq. 15, sigma_e, the same
 compared frames and the same alignment) as the base fit, so the log-evidences of base and
-extended fits are comparable (docs/diagnose.md, "Refits").
+extended fits are comparable (:ref:`validation-diagnose-pipeline-refits-started-from-the-base`).
 
 Extensions act in one of two ways (``Extension.kind``):
 
@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..result import HR_OVERSAMPLE
 from ..inference.prior import Prior
 from ..inference.problem import Evaluation, Problem, score_results
+from ..result import HR_OVERSAMPLE
 from .extensions import SUB_LOG10_Z_OFF, Extension, get
 from .observers import entrain_pair, observe_extended, observer, pair_observer, right_fold_params
 

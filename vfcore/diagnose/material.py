@@ -1,4 +1,4 @@
-"""Wrong material parameters as an explanation of their own (docs/diagnose.md, "Material first").
+"""Wrong material parameters as an explanation of their own (:ref:`diagnose-naming-material-first`).
 
 The GAW determines five combinations of the six scaled parameters (E_body, E_cover, E_lig, p_sub,
 rho, eta; :data:`vfcore.inference.identify.SCALED`): multiplying all six by one factor leaves the
@@ -63,7 +63,7 @@ def freed_problem(problem: Problem, names) -> Problem:
 def judge(pinned_fit: dict, free_fit: dict, *, min_gain: float = 3.0, k_se: float = 3.0,
           min_rms_gain: float = 0.30) -> dict:
     """Whether freeing the pinned parameters explains the mismatch, by the rule that names a
-    catalogue entry (docs/diagnose.md section 3): a log-evidence gain above ``min_gain`` nats and
+    catalogue entry (:ref:`diagnose-naming`): a log-evidence gain above ``min_gain`` nats and
     ``k_se`` standard errors, and a residual RMS at least ``min_rms_gain`` lower. ``pinned_fit`` and
     ``free_fit``: fit summaries (``log_evidence``, ``log_evidence_se``, ``residual_rms``)."""
     d = free_fit["log_evidence"] - pinned_fit["log_evidence"]

@@ -10,8 +10,8 @@ import numpy as np
 
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem
-from ..inference.runs import SEED_STRIDE
 from .fit import fit_extended
+from .seeds import spawn_seed
 
 __all__ = ["base_near", "reference_refit", "reference_refits", "shared_mode_refit"]
 
@@ -59,10 +59,10 @@ def base_near(problem: Problem, post: Posterior, *, n_particles: int, seed: int,
             log_vol += math.log((b - a) / (hi - lo))
         pb = dc.replace(problem, prior=Prior(bounds=box, fixed=dict(prior.fixed)))
         if extension is None:
-            near = smc(pb, n_particles=n_particles, seed=seed + SEED_STRIDE * attempt, map=map, chunk_size=chunk_size,
+            near = smc(pb, n_particles=n_particles, seed=spawn_seed(seed, attempt), map=map, chunk_size=chunk_size,
                        **smc_options)
         else:
-            near = fit_extended(pb, extension, n_particles=n_particles, seed=seed + SEED_STRIDE * attempt, map=map,
+            near = fit_extended(pb, extension, n_particles=n_particles, seed=spawn_seed(seed, attempt), map=map,
                                 chunk_size=chunk_size, integrate=integrate, **smc_options)
         boxes.append(box)
         hits = _box_edge_hits(near, box, prior)

@@ -1,13 +1,13 @@
 """Naming: the refits ranked against the base fit (:mod:`.rank`), with the mode checks, the local
 check, the best-of-all-base-fits rule and the nested check (:mod:`.checks`) run as their triggers
-fire, and the one-standard-error preference last (docs/diagnose.md section 3)."""
+fire, and the one-standard-error preference last (:ref:`diagnose-naming`)."""
 from __future__ import annotations
 
 import dataclasses
 
+from .amend import prefer_parsimonious
 from .checks import local_check, mode_check, nested_check
 from .extensions import get
-from .amend import prefer_parsimonious
 from .rank import RankReport, rank_best_of_base, rank_extensions
 from .state import DiagnosisState, Run
 

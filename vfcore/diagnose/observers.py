@@ -137,7 +137,7 @@ def entrain_pair(left_hr: np.ndarray, right_hr: np.ndarray, fps: float, lag_cycl
     A piecewise-linear warp between opening instants, so the identical fold (ratio 1, lag 0)
     returns ``A_L`` exactly, and a nearly identical one nearly ``A_L``, ends included. The folds'
     coupling through the shared flow, which sets the common f0 in reality, is not modelled
-    (docs/diagnose.md)."""
+    (:ref:`diagnose`)."""
     return pair_observer(left_hr, right_hr, fps)(lag_cycles)
 
 

@@ -3,7 +3,7 @@
 :func:`vfcore.diagnose.diagnose`, ``vfinfer diagnose`` and ``POST /jobs/{id}/diagnose`` all read their
 defaults from :class:`DiagnoseOptions` and their bounds from :data:`BOUNDS`, so the library runs the
 same diagnosis as the command line and the service. The defaults are the settings the
-concealed-effect benchmark measures (``benchmarks/bench_diagnose.py``, docs/diagnose.md section 5):
+concealed-effect benchmark measures (``benchmarks/bench_diagnose.py``, :ref:`validation-diagnose`):
 a benchmark run with other settings than the user's would measure another tool.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ REFIT_STARTS = ("prior", "base", "mixed")
 
 @dataclass(frozen=True)
 class DiagnoseOptions:
-    """Every setting of :func:`vfcore.diagnose.diagnose`; docs/diagnose.md explains each stage.
+    """Every setting of :func:`vfcore.diagnose.diagnose`; :ref:`diagnose` explains each stage.
 
     The defaults are the command line's and the service's (they were the benchmark's settings
     before the library shared them): 40 base particles, 24 refit particles, continuation on for
@@ -66,7 +66,8 @@ class DiagnoseOptions:
         standard errors, a residual RMS at least ``min_rms_gain`` lower, parameters not within
         ``null_sd`` sd of their null value.
     base_runs : int
-        Independent base SMC runs (seeds ``seed``, ``seed + 7919``, ...).
+        Independent base SMC runs, each seeded by its own child of the base stage's ``SeedSequence``
+        (:mod:`vfcore.diagnose.seeds`).
     mode_checks : int
         Before a winner is named the base model is re-fitted around its material mode
         (:func:`.mode_fits.base_near`), at most this many times (0: off).
@@ -89,7 +90,7 @@ class DiagnoseOptions:
         posterior, the forward-level ones from the prior. A refit started from the base is not
         rescued by the same method again. ``"prior"`` stays the default: on nine scored cases the base
         start saved 28 % of the simulations and named one effect fewer right and two more wrong
-        (docs/diagnose.md, "Refits started from the base").
+        (:ref:`validation-diagnose-pipeline-refits-started-from-the-base`).
     escalate_tau : float or None
         When the base runs' between-run error exceeds this (nats), more base runs are made with
         ``escalate_factor`` times the particles, and every later fit uses that factor too
@@ -205,7 +206,7 @@ class DiagnoseOptions:
         if self.candidates is not None:
             object.__setattr__(self, "candidates", tuple(self.candidates))
 
-    def replace(self, **changes) -> "DiagnoseOptions":
+    def replace(self, **changes) -> DiagnoseOptions:
         """A checked copy with ``changes``; an unknown name raises TypeError naming it."""
         known = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(changes) - known)

@@ -1,6 +1,6 @@
 """The whole diagnosis: fit, locate, screen the catalogue, refit the promising extensions, name one.
 
-``diagnose(problem)`` runs its stages in order (docs/diagnose.md, "Pipeline"), each a function of
+``diagnose(problem)`` runs its stages in order (:ref:`diagnose-pipeline`), each a function of
 the run's settings and the state the stages before it left (:mod:`.state`):
 
 1. **Base fit** (:mod:`.baseline`, :func:`.material.material_first`) — the scaled parameters held at
@@ -22,7 +22,7 @@ the same function runs on a laptop and on a cluster.
 """
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem

@@ -1,7 +1,7 @@
 """Progress of a running diagnosis, for the people waiting on it.
 
 A blind diagnosis runs for an hour or more on one core (tens of thousands of forward
-simulations, docs/diagnose.md "Cost"). :func:`vfcore.diagnose.pipeline.diagnose` accepts
+simulations, :ref:`diagnose-cost-cost`). :func:`vfcore.diagnose.pipeline.diagnose` accepts
 ``progress=callback``; the callback receives a dict at each stage and after each batch of
 simulations returns:
 
@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

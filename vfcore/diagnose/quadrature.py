@@ -6,7 +6,7 @@ they cost no simulation, so each draw of the material parameters carries the mar
 
     L(theta) = (1 / V) * integral over the prior box of L(theta, phi) dphi        (uniform prior)
 
-and the SMC only has to explore the material parameters (docs/diagnose.md, "Integrated
+and the SMC only has to explore the material parameters (:ref:`diagnose`, "Integrated
 parameters"). The evidence of the extended model is unchanged by this: it is the same integral,
 done partly by quadrature and partly by the sampler.
 

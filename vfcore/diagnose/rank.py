@@ -279,7 +279,7 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
 def rank_best_of_base(base, candidates: dict, *, base_runs, mode_checks: dict | None = None,
                       base_rms: float | None = None, **kw) -> RankReport:
     """The naming rule of :func:`rank_extensions` against *every* base-model fit, with delta-method
-    errors only: the rule for an irregular base fit on which nothing was named (docs/diagnose.md
+    errors only: the rule for an irregular base fit on which nothing was named (:ref:`diagnose`
     section 3, "Best of all base fits").
 
     When the base runs land far apart (between-run error ``tau`` of hundreds of nats) the shipped

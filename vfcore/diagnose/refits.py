@@ -1,5 +1,5 @@
 """The refits: every chosen entry fitted by SMC with the base model's likelihood (base + extension
-parameters; docs/diagnose.md section 4, "Refit"), each summarised against the base fit, and the rule by
+parameters; :ref:`diagnose-pipeline-refit`), each summarised against the base fit, and the rule by
 which a later fit of an entry (rescue, shared mode, continuation, nested check) replaces its first."""
 from __future__ import annotations
 
@@ -8,11 +8,12 @@ import time
 
 from ..inference.posterior import Posterior
 from ..inference.smc import WHOLE_RUN_OPTIONS
-from .fit import fit_extended, null_drops, param_table
 from .extensions import get
+from .fit import fit_extended, null_drops, param_table
 from .locate import locate
 from .mode_fits import base_reference, referenced
 from .rank import null_consistent, residual_removed
+from .seeds import stage_seed
 from .state import DiagnosisState, Run
 from .summary import predicted_gaws
 from .together import fit_extended_many
@@ -36,7 +37,7 @@ def refit_chosen(run: Run, st: DiagnosisState) -> None:
     o, pb = run.options, st.problem
     g = predicted_gaws(st.base)
     st.base_loc = locate(pb.obs_compared[: g.shape[1]], g, pb.fps)
-    seeds = [o.seed + 101 * (i + 1) for i in range(len(st.chosen))]
+    seeds = [stage_seed(o.seed, "refit", i) for i in range(len(st.chosen))]
     smc = run.smc
     if st.chosen and not set(smc) & set(WHOLE_RUN_OPTIONS):
         t1 = time.perf_counter()

@@ -8,7 +8,7 @@ Steinecke & Herzel 1995, J. Acoust. Soc. Am. 97:1874); then the waveform after t
 depends on the parameters at every scale, the likelihood is a rough random function of them, and
 a sampler's evidence is the luck of the points it happened to simulate. Measured on a concealed
 recording at p_sub 1,714 Pa: the base fit's point gave log-likelihood -2,398; the same point
-with every parameter changed by a relative 1e-9 gave -70,555 (docs/diagnose.md section 4,
+with every parameter changed by a relative 1e-9 gave -70,555 (:ref:`diagnose-pipeline`,
 "Regularity").
 
 :func:`sensitivity` re-simulates a fitted point and the same point with its free parameters
@@ -22,7 +22,7 @@ That check sees chaos, not a likelihood that is smooth at 1e-6 and piecewise con
 vibration whose waveform does not repeat (a torus: the cycle's peaks modulated with a period of
 several cycles) has a phase that no force restores, and each discrete event of the time-stepped
 model (a node closing, opening or passing the separation point one step earlier or later) kicks
-that phase by a finite amount. Measured on a six-parameter calibration twin (docs/inference.md,
+that phase by a finite amount. Measured on a six-parameter calibration twin (:ref:`inference`,
 "Aperiodic vibration"): the likelihood is flat to 0.03 nats over a relative 1.5e-4 and then drops
 by 68 nats, because in one cycle a node reopens for 1.5 ms during the closed phase; the peaks of
 the cycles vary by 4 mm² and do not repeat within 8 cycles. A sampler cannot describe such a
@@ -39,7 +39,7 @@ likelihood with a mean and a spread. Two more measures flag it, both on the same
   gives the step's height.
 
 ``rough`` is set where either exceeds its tolerance (``rough_tol``, ``aperiodic_tol``: 3 nats, the
-gap the 3-run rule of docs/inference.md reads as a difference); ``smooth`` is neither flag.
+gap the 3-run rule of :ref:`inference` reads as a difference); ``smooth`` is neither flag.
 """
 from __future__ import annotations
 

@@ -1,18 +1,19 @@
 """The rescue: a refit that ended far below the base missed the base-like region of its own model
 (every entry is, or comes arbitrarily close to, the base model at its null value), so it is refitted
-near the base's material mode and the new evidence kept when larger (docs/diagnose.md section 4,
+near the base's material mode and the new evidence kept when larger (:ref:`diagnose-pipeline`,
 "Rescue"). How it is refitted is a strategy chosen once (:data:`RESCUES`)."""
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from ..inference.posterior import Posterior
 from .extensions import get
 from .mode_fits import base_near, reference_refit, reference_refits
 from .refits import keep_if_higher, starts_from_base
+from .seeds import stage_seed
 from .state import DiagnosisState, Run
 
 __all__ = ["Rescue", "RESCUES", "rescue_refits"]
@@ -87,7 +88,7 @@ def rescue_refits(run: Run, st: DiagnosisState) -> None:
         z1, s1 = float(st.refits[name].log_evidence), float(st.refits[name].log_evidence_se)
         if math.isfinite(z1) and z1 >= z0 - max(o.min_gain, o.k_se * math.hypot(s0, s1)):
             continue
-        due.append((name, o.seed + 262147 + j, z1, s1, int(st.refits[name].n_simulations)))
+        due.append((name, stage_seed(o.seed, "rescue", j), z1, s1, int(st.refits[name].n_simulations)))
     together = None
     if strategy.refit_many is not None and len(due) > 1:
         t1 = time.perf_counter()

@@ -1,4 +1,4 @@
-"""Screening: which catalogue entries are worth a full refit (docs/diagnose.md section 4, "Screen").
+"""Screening: which catalogue entries are worth a full refit (:ref:`diagnose-pipeline-screen`).
 
 Every implemented extension is tried at a few base-posterior particles: an observation-level one at
 ``screen_obs`` parameter draws each (no new simulation: the operators act on the stored oversampled
@@ -17,6 +17,7 @@ from ..inference.posterior import Posterior
 from ..inference.problem import Problem, aligned_loglik
 from .extensions import get
 from .fit import ExtendedEvaluator, observe_extended
+from .seeds import spawn_seed, stage_seed
 from .state import DiagnosisState, Run
 from .summary import best_particles
 
@@ -51,7 +52,7 @@ def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, s
         lo = np.array([p.lo for p in ext.params])
         hi = np.array([p.hi for p in ext.params])
         if ext.kind == "observation":
-            u = _sobol(len(lo), screen_obs, seed + 17 * k)
+            u = _sobol(len(lo), screen_obs, spawn_seed(seed, k))
             phis = lo + u * (hi - lo)
             best, best_phi = -np.inf, None
             for r in res:
@@ -69,7 +70,7 @@ def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, s
             out[name] = {"score": best - best_base, "best_phi": best_phi, "n_simulations": 0}
         else:
             ev = ExtendedEvaluator(problem, name, integrate=False)
-            u = _sobol(len(lo), screen_fwd, seed + 17 * k)
+            u = _sobol(len(lo), screen_fwd, spawn_seed(seed, k))
             phis = lo + u * (hi - lo)
             rows = np.array([np.concatenate([t, ph]) for t in thetas[:n_theta_fwd] for ph in phis])
             parts = list(map(ev, np.array_split(rows, max(1, min(len(rows), 2)))))
@@ -89,7 +90,7 @@ def screen_catalogue(run: Run, st: DiagnosisState) -> None:
     o, cand = run.options, st.candidates
     t1 = time.perf_counter()
     run.track.at("screening", steps=len(cand))
-    scr = screen(st.problem, st.base, cand, seed=o.seed, map=run.map, **(o.screen_options or {}))
+    scr = screen(st.problem, st.base, cand, seed=stage_seed(o.seed, "screen"), map=run.map, **(o.screen_options or {}))
     st.n_simulations += sum(int(v["n_simulations"]) for v in scr.values())
     scr["_base"]["wall_s"] = time.perf_counter() - t1
     st.screening = scr

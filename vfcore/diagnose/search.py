@@ -1,6 +1,6 @@
 """Window-continuation mode search, and the SMC fit started from its optimum.
 
-Why (docs/diagnose.md section 4, "Continuation search"): on a recording whose vibration drifts
+Why (:ref:`diagnose-search-continuation-search`): on a recording whose vibration drifts
 or is irregular, the waveform log-likelihood over the whole window is a rough function of the
 material parameters: a relative change of 1e-4 in a modulus moves the phase of the late cycles by
 a large fraction of a period. A tempered SMC of a few dozen particles then collapses on the best
@@ -38,7 +38,7 @@ __all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "wi
 
 #: default search: Sobol design points, starts kept from it, first window in cycles, Nelder-Mead
 #: evaluations on window k (``maxfev0 + maxfev_step * k``) and its initial simplex step in unit
-#: coordinates (``max(step0 / step_ratio**k, step_min)``). Why these (docs/diagnose.md section 4,
+#: coordinates (``max(step0 / step_ratio**k, step_min)``). Why these (:ref:`diagnose-pipeline`,
 #: "Continuation search"): on a concealed leak a start reached 0.52 mm^2 (truth 0.48) in 270
 #: simulations with them, and stopped at 1.11 with 30 evaluations and steps halving to 0.005; four
 #: starts, not two, because on a concealed frame-rate error two starts ended at log L -830.6 and
@@ -385,7 +385,7 @@ def continued_fit(problem: Problem, found: SearchResult, extension: str | None =
     model's log-evidence from the mode the search found (the reference mixes in 10 % of the
     prior, as the rescue's does). Returns ``(log Z, se, posterior)``.
 
-    On a concealed leak that the SMC fits from the prior missed (docs/diagnose.md): from the search's
+    On a concealed leak that the SMC fits from the prior missed (:ref:`diagnose`): from the search's
     optimum (residual 0.52 mm^2) this fit reached log Z -459.7 +- 0.4 with residual 0.59 mm^2 and
     the leak's area 2.11 mm^2 (truth 2.105) in 384 simulations; the best SMC refit from the prior
     reached -838."""

@@ -1,5 +1,5 @@
 """The shared mode: every refitted entry gets a second SMC started from the leading refit's material mode,
-so that every entry is compared in the best material mode any of them found (docs/diagnose.md section 4,
+so that every entry is compared in the best material mode any of them found (:ref:`diagnose-pipeline`,
 "Shared mode"; ``DiagnoseOptions.shared_mode``, off by default)."""
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import time
 
 from .mode_fits import shared_mode_refit
 from .refits import keep_if_higher
+from .seeds import stage_seed
 from .state import DiagnosisState, Run
 
 __all__ = ["shared_mode_leader", "refit_from_leader"]
@@ -48,7 +49,7 @@ def refit_from_leader(run: Run, st: DiagnosisState) -> None:
         run.track.at("shared mode", name)
         z1 = float(st.refits[name].log_evidence)
         zb, sb, near = shared_mode_refit(st.problem, lead_post, name, n_particles=st.refit_n,
-                                         seed=o.seed + 524287 + 31 * j, map=run.map, chunk_size=o.chunk_size,
+                                         seed=stage_seed(o.seed, "shared_mode", j), map=run.map, chunk_size=o.chunk_size,
                                          inflate=o.rescue_inflate, integrate=o.integrate, **run.smc)
         st.n_simulations += int(near.n_simulations)
         kept = keep_if_higher(run, st, name, near, zb, t1, record=("shared_mode", {"from": leader}),

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from ..inference.posterior import Posterior
 from ..inference.problem import Problem
@@ -31,7 +31,7 @@ class Run:
     t0: float
 
     @classmethod
-    def start(cls, options: DiagnoseOptions, map: Callable, progress: Callable[[dict], None] | None) -> "Run":
+    def start(cls, options: DiagnoseOptions, map: Callable, progress: Callable[[dict], None] | None) -> Run:
         t0 = time.perf_counter()
         track = ProgressTracker(progress, t0)
         return cls(options=options, map=track.wrap(map), track=track, t0=t0)

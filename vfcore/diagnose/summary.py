@@ -25,7 +25,7 @@ def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float | N
     The p-values' replicated recordings carry the recording's own noise sd, estimated from it
     (:func:`.locate.noise_sd`; ``predictive_noise_sd``), unless ``sigma_e`` is given: the
     likelihood's nominal sigma_e is a scale of the fit, not the camera's noise, and a wrong
-    noise level decides the noise-sensitive measures (docs/diagnose.md section 1)."""
+    noise level decides the noise-sensitive measures (:ref:`diagnose`)."""
     g = predicted_gaws(post)
     y = np.asarray(obs, dtype=float)[: g.shape[1]]
     loc = locate(y, g, fps)

@@ -1,8 +1,8 @@
 """Several extended fits run together: every generation of every fit goes to the map as one batch.
 
-A refit is a tempered SMC of 24–48 particles (docs/diagnose.md, "Refit"). Run one after another, each
+A refit is a tempered SMC of 24–48 particles (:ref:`diagnose-pipeline-refit`). Run one after another, each
 generation reaches the workers as a few rows: on 2 workers, lock-step blocks of about 12 rows, which cost
-0.7–0.9 of the scalar kernel per simulation, against 0.4–0.5 for blocks of 32–64 (docs/model.md,
+0.7–0.9 of the scalar kernel per simulation, against 0.4–0.5 for blocks of 32–64 (:ref:`model`,
 "Speed"); on a cluster, at most one generation's rows are busy at a time. Run together, the rows of every
 fit's pending batch are one batch (:class:`ExtendedPool`): all entries simulate the base model or a
 configuration that differs from it only in per-row fields (``vfcore.batch.PER_SAMPLE_FIELDS``), so the
@@ -15,7 +15,7 @@ the rows simulated beside it (``tests/vfcore/test_batch.py``).
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

@@ -153,7 +153,7 @@ def membrane_unit(mesh: FoldMesh) -> tuple[sp.csr_matrix, ...]:
         k_e = (1 / l_e) [[t t^T, -t t^T], [-t t^T, t t^T]]
 
     so a uniform in-plane stretch eps of the edge gives the axial force E' h eps. The
-    epithelium stiffness is ``E' h * sum_e c_e k_e`` (see docs/model.md, "Model extensions").
+    epithelium stiffness is ``E' h * sum_e c_e k_e`` (see :ref:`model-extensions`).
     """
     s = mesh.surface
     out = []

@@ -2,8 +2,8 @@
 merged row by row). Every batch function of the samplers returns one."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -20,7 +20,7 @@ class Evaluation:
     pressure over the contact patch while in contact (see :class:`vfcore.result.CycleSummary`; these
     converge with the time step and mesh far better than the nodal peaks); ``mean_contact`` /
     ``max_contact`` (k,) Pa, the time-mean and maximum of the nodal peak contact pressure, which grow
-    as the time step shrinks and change with the mesh (docs/model.md, "Contact") and are kept for
+    as the time step shrinks and change with the mesh (:ref:`model-contact`) and are kept for
     comparison with the paper's Table 7 only.
     ``extra`` (k, m) float64: per-draw summaries a likelihood adds (the integrated parameters'
     conditional means and sds of :class:`vfcore.diagnose.fit.ExtendedEvaluator`).
@@ -49,18 +49,18 @@ class Evaluation:
         return int(np.count_nonzero(~self.ok))
 
     @classmethod
-    def from_loglik(cls, loglik) -> "Evaluation":
+    def from_loglik(cls, loglik) -> Evaluation:
         ll = np.asarray(loglik, dtype=float).reshape(-1)
         ll = np.where(np.isnan(ll), -np.inf, ll)
         return cls(loglik=ll, ok=np.isfinite(ll))
 
     @classmethod
-    def coerce(cls, x) -> "Evaluation":
+    def coerce(cls, x) -> Evaluation:
         """An Evaluation from an Evaluation or an array of log-likelihoods."""
         return x if isinstance(x, Evaluation) else cls.from_loglik(x)
 
     @classmethod
-    def concat(cls, parts: Sequence["Evaluation"]) -> "Evaluation":
+    def concat(cls, parts: Sequence[Evaluation]) -> Evaluation:
         parts = [cls.coerce(p) for p in parts]
         if not parts:
             return cls(loglik=np.empty(0), ok=np.empty(0, bool))
@@ -76,12 +76,12 @@ class Evaluation:
             off += len(p)
         return cls(**kw, messages=tuple(msgs))
 
-    def take(self, idx) -> "Evaluation":
+    def take(self, idx) -> Evaluation:
         idx = np.asarray(idx)
         kw = {n: (None if getattr(self, n) is None else getattr(self, n)[idx]) for n in self._ARRAYS}
         return Evaluation(**kw)
 
-    def _combine(self, other: "Evaluation", rows) -> "Evaluation":
+    def _combine(self, other: Evaluation, rows) -> Evaluation:
         """Per array, ``rows(mine, others)``; None where either side lacks the array."""
         kw = {}
         for n in self._ARRAYS:
@@ -89,13 +89,13 @@ class Evaluation:
             kw[n] = None if a is None or b is None else rows(a, b)
         return Evaluation(**kw)
 
-    def where(self, mask, other: "Evaluation") -> "Evaluation":
+    def where(self, mask, other: Evaluation) -> Evaluation:
         """Rows of ``other`` where ``mask`` else rows of ``self`` (same length)."""
         mask = np.asarray(mask, dtype=bool)
         return self._combine(other, lambda a, b: np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
                              .astype(a.dtype, copy=False))
 
-    def scatter(self, idx, other: "Evaluation") -> "Evaluation":
+    def scatter(self, idx, other: Evaluation) -> Evaluation:
         """Copy of self with rows ``idx`` replaced by the rows of ``other``."""
         idx = np.asarray(idx)
 

@@ -1,6 +1,6 @@
 """What the data determine and what the prior does: the identifiability table of a fitted posterior.
 
-The model has an exact symmetry (docs/inference.md, "The common scale: what a GAW cannot determine"):
+The model has an exact symmetry (:ref:`inference-scale-the-common-scale-what-a`):
 multiplying E_body, E_cover, E_lig, p_sub, rho and eta by one factor ``c`` (x0 unchanged) leaves the
 glottal area waveform unchanged, while contact pressures scale by ``c`` and the flow rate by ``sqrt(c)``.
 Every quantity of the fold's equations carries one power of mass (stiffness, load, mass, damping) and
@@ -26,8 +26,8 @@ six, or a measurement (``Problem(measurements=...)``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
@@ -209,7 +209,7 @@ class _LogView:
     cov: np.ndarray
 
     @classmethod
-    def of(cls, names, X: np.ndarray, w: np.ndarray, prior: Prior) -> "_LogView":
+    def of(cls, names, X: np.ndarray, w: np.ndarray, prior: Prior) -> _LogView:
         cols = [i for i, n in enumerate(names) if np.all(X[:, i] > 0)]
         L = np.log(X[:, cols])
         lmom = [uniform_log_moments(prior.lo[i], prior.hi[i]) for i in cols]
@@ -354,7 +354,7 @@ def at_bounds(post, prior: Prior) -> list[dict]:
     Each row: ``name``, ``bound`` ("lower"/"upper"), ``value`` (the bound), ``mass``, ``mean``, ``sd``,
     ``warning`` (plain text). Per parameter, unlike the common-scale check of :func:`identify`, which looks
     along the one direction a GAW cannot see: a fit the model cannot make presses single parameters to
-    their bounds (docs/inference.md, "The model's reach")."""
+    their bounds (:ref:`inference`, "The model's reach")."""
     names = tuple(post.names)
     if names != tuple(prior.names):
         raise ValueError(f"posterior parameters {names} differ from the prior's {prior.names}")

@@ -5,8 +5,8 @@ summary's entry renders the same as a fresh table; :mod:`.identify` re-exports b
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Mapping
 
 from ..strict_json import jsonable
 

@@ -10,7 +10,7 @@ The pieces are pure so a distributed worker can run them chunk by chunk:
 """
 from __future__ import annotations
 
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 

@@ -5,7 +5,7 @@
 * :func:`scaled_gaussian_loglik`, :func:`scaled_marginal_gaussian_loglik`: the recorded area is ``k`` times
   the true area, ``k`` unknown (an uncalibrated video: ``k = (true px/mm / assumed px/mm)^2``), uniform on
   ``[k_lo, k_hi]`` and integrated out analytically; :func:`sample_area_scale` draws ``k`` from its conditional
-  posterior given one draw's segment (docs/inference.md, "Unknown area scale").
+  posterior given one draw's segment (:ref:`inference-scale-unknown-area-scale`).
 
 All in log space; a non-finite residual gives ``-inf``.
 """

@@ -37,8 +37,8 @@ import pickle
 import tempfile
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -207,7 +207,7 @@ class CachedMap:
         return out
 
 
-def account(report: dict, store: "CachedMap | None") -> dict:
+def account(report: dict, store: CachedMap | None) -> dict:
     """Add the resume store's summary to a diagnosis report dict (``report["resume_store"]``) and
     count the earlier attempts' wall time into ``report["wall_s"]`` (this attempt's alone is kept
     as ``resume_store["this_attempt_wall_s"]``). A run without a store is returned unchanged."""

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from ..params import PARAM_UNITS
-from .diagnostics import (degeneracy_warnings, ess as _ess, normalize_log_weights, pareto_k as _pareto_k,
-                          systematic_resample, weighted_quantiles)
+from .diagnostics import degeneracy_warnings, normalize_log_weights, systematic_resample, weighted_quantiles
+from .diagnostics import ess as _ess
+from .diagnostics import pareto_k as _pareto_k
 from .evaluation import Evaluation
 
 QUANTILE_LEVELS = (0.025, 0.05, 0.25, 0.5, 0.75, 0.95, 0.975)
@@ -70,7 +71,7 @@ class Posterior:
     def from_weighted(cls, names, samples, log_weights, *, rng: np.random.Generator, n_resample: int | None = None,
                       log_evidence: float = math.nan, log_evidence_se: float = math.nan,
                       n_simulations: int = 0, n_failed: int = 0, method: str = "importance",
-                      ess_min: float = 100.0, check: bool = True, **kw) -> "Posterior":
+                      ess_min: float = 100.0, check: bool = True, **kw) -> Posterior:
         samples = np.atleast_2d(np.asarray(samples, dtype=float))
         lw = normalize_log_weights(log_weights)
         if samples.shape != (lw.size, len(names)):
@@ -142,7 +143,7 @@ class Posterior:
         """The resampled draws' predicted GAWs as the camera records them, succeeded draws only,
         ``(n_ok, n_frames)`` mm^2: the model's areas, or with an unknown area scale each draw's areas times
         its least-squares ``k = y.A / A.A`` against the recording, clipped to the box (the centre of ``k``'s
-        conditional given the draw, docs/inference.md, "Unknown area scale"), so that residuals and measures
+        conditional given the draw, :ref:`inference-scale-unknown-area-scale`), so that residuals and measures
         compare like with like. ValueError without predictions."""
         rp = self.resampled_predictive()
         if rp is None or rp.gaw is None:
@@ -240,7 +241,7 @@ class Posterior:
         return path
 
     @classmethod
-    def from_inference_data(cls, idata) -> "Posterior":
+    def from_inference_data(cls, idata) -> Posterior:
         ws = idata["weighted_samples"]
         attrs = dict(idata["posterior"].attrs)
         names = tuple(json.loads(attrs["names"]))
@@ -270,7 +271,7 @@ class Posterior:
         return post
 
     @classmethod
-    def from_netcdf(cls, path) -> "Posterior":
+    def from_netcdf(cls, path) -> Posterior:
         import arviz as az
         return cls.from_inference_data(az.from_netcdf(str(path)))
 
@@ -292,7 +293,7 @@ class Posterior:
         return path
 
     @classmethod
-    def from_csv(cls, path) -> "Posterior":
+    def from_csv(cls, path) -> Posterior:
         with open(path, newline="") as fh:
             first = fh.readline()
             if not first.startswith("# "):

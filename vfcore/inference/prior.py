@@ -7,8 +7,8 @@ estimated nor fixed take the measured silicone values of Table 3 (``vfcore.param
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 
@@ -25,7 +25,7 @@ TABLE2_BOUNDS: dict[str, tuple[float, float]] = {
     "x0": (7.4, 8.4),            # mm
 }
 
-#: Priors for human vocal folds (docs/inference.md, "Prior sets"). The 2D section has no longitudinal tension, the
+#: Priors for human vocal folds (:ref:`inference-reach-prior-sets`). The 2D section has no longitudinal tension, the
 #: main control of f0 in a human larynx, so its in-plane moduli are effective ones that stand for it too. Cover:
 #: the lamina propria's transverse Young's modulus, about 1 kPa at low strain and 10-15 times that at high strain
 #: (Alipour & Vigmostad 2012, J Voice 26(6):816.e21), here up to 10 kPa, softer than the body; body: the range
@@ -119,7 +119,7 @@ class Prior:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def default(cls, fixed: Mapping[str, float] | None = None, prior_set: str = "paper") -> "Prior":
+    def default(cls, fixed: Mapping[str, float] | None = None, prior_set: str = "paper") -> Prior:
         """The priors of ``prior_set`` (``PRIOR_SETS``: "paper" = Table 2, "human"); names in ``fixed`` are
         held at the given values instead."""
         if prior_set not in PRIOR_SETS:
@@ -196,7 +196,7 @@ class Prior:
         return {"bounds": {n: [lo, hi] for n, (lo, hi) in self.bounds.items()}, "fixed": dict(self.fixed)}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "Prior":
+    def from_dict(cls, d: Mapping) -> Prior:
         if not isinstance(d, Mapping) or "bounds" not in d:
             raise ValueError("Prior.from_dict needs a mapping with a 'bounds' entry")
         unknown = set(d) - {"bounds", "fixed"}

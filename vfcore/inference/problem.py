@@ -10,18 +10,18 @@ over the ``n_compare`` frames fixed by ``vfcore.observe.alignment_window``. Comp
 log space throughout. A failed simulation has log-likelihood ``-inf``.
 
 ``Problem(noise="marginal")`` (not in the paper): ``sigma_e`` is unknown, log-uniform on
-``sigma_bounds``, and integrated out per draw (:func:`marginal_gaussian_loglik`; docs/inference.md,
+``sigma_bounds``, and integrated out per draw (:func:`marginal_gaussian_loglik`; :ref:`inference`,
 "Unknown noise level").
 
 ``Problem(measurements={"p_sub": (mean, sd)})`` (not in the paper): independent Gaussian
 measurements of model parameters (paper units), each adding
 ``log N(mean | theta_name, sd^2) = -(theta_name - mean)^2 / (2 sd^2) - log(sd sqrt(2 pi))`` to the GAW
 log-likelihood of a draw. A GAW cannot fix the common scale of E_body, E_cover, E_lig, p_sub, rho and
-eta (docs/inference.md, "The common scale"); a measured p_sub (or density) can.
+eta (:ref:`inference-scale-the-common-scale-what-a`); a measured p_sub (or density) can.
 
 ``Problem(area_scale=(k_lo, k_hi))`` (not in the paper): the recording's areas are ``k`` times the true areas
 with ``k`` unknown (an uncalibrated video; ``k = (true px/mm / assumed px/mm)^2``), uniform on ``[k_lo, k_hi]``
-and integrated out per draw in closed form (:mod:`vfcore.inference.likelihood`; docs/inference.md, "Unknown
+and integrated out per draw in closed form (:mod:`vfcore.inference.likelihood`; :ref:`inference`, "Unknown
 area scale"). It costs no extra simulation. ``None`` (default): the areas are calibrated.
 """
 from __future__ import annotations
@@ -35,12 +35,23 @@ from ..config import SimConfig
 from ..measures import estimate_f0
 from ..observe import ALIGNMENTS, LAG_SEARCHES, align, align_many, alignment_window
 from ..params import PARAM_NAMES, PARAM_UNITS, Params
-from .likelihood import (gaussian_loglik, marginal_gaussian_loglik,  # noqa: F401 (re-exported)
-                         sample_area_scale, scaled_gaussian_loglik, scaled_marginal_gaussian_loglik)
 from .evaluation import Evaluation  # noqa: F401 (re-exported)
+from .likelihood import (  # noqa: F401 (re-exported)
+    gaussian_loglik,
+    marginal_gaussian_loglik,
+    sample_area_scale,
+    scaled_gaussian_loglik,
+    scaled_marginal_gaussian_loglik,
+)
 from .prior import Prior
-from .scoring import (ProblemEvaluator, aligned_loglik, contact_means, cycle_means, evaluate,  # noqa: F401
-                      score_results)                                              # (re-exported)
+from .scoring import (  # noqa: F401
+    ProblemEvaluator,
+    aligned_loglik,
+    contact_means,
+    cycle_means,
+    evaluate,
+    score_results,  # (re-exported)
+)
 
 
 # ---------------------------------------------------------------------------- observation
@@ -168,7 +179,7 @@ class Problem:
     added to predictive bands and p-values where a caller asks for it).
     ``measurements``: ``{name: (mean, sd)}`` in paper units, independent Gaussian measurements of
     estimated parameters whose log density is added to each draw's GAW log-likelihood (they anchor
-    the common scale a GAW cannot determine; docs/inference.md).
+    the common scale a GAW cannot determine; :ref:`inference`).
     ``area_scale``: ``(k_lo, k_hi)``, the bounds of the uniform prior of an unknown factor ``k`` between the
     recorded and the true area (uncalibrated px/mm), integrated out; ``None``: calibrated areas (``k = 1``).
     """
@@ -246,7 +257,7 @@ class Problem:
                 "area_scale": None if self.area_scale is None else list(self.area_scale)}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Problem":
+    def from_dict(cls, d: dict) -> Problem:
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
         if unknown:

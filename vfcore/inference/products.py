@@ -56,7 +56,7 @@ def predictive_bands(post: Posterior, level: float = 0.9, sigma_e: float | None 
 def flow_contact_table(post: Posterior) -> list[dict]:
     """Table 6/7 analogue, mean +- sd over the resampled ensemble: mean flow (mL/s), contact impulse
     per cycle (mN s/m) and pressure in contact (Pa), which converge with the time step and mesh, and
-    the paper's mean and maximum of the nodal peak contact pressure (Pa), which do not (docs/model.md,
+    the paper's mean and maximum of the nodal peak contact pressure (Pa), which do not (:ref:`model`,
     "Contact"; labelled so). A quantity the ensemble does not carry is omitted."""
     rp = _require_predictive(post)
     rows = []

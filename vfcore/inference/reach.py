@@ -7,7 +7,7 @@ draw phonates. :func:`check_reach` compares the same measures of a recording wit
 sampling, and says whether the recording lies inside, at the margin of, or outside what the model and prior
 reach, with the numbers and what would help.
 
-Definitions (docs/inference.md, "The model's reach"):
+Definitions (:ref:`inference`, "The model's reach"):
 
 * a draw *phonates* when its simulation succeeds and its GAW (after the discarded transient, at
   ``REACH_FPS``) has at least two cycles, a mean peak-to-peak amplitude of at least
@@ -42,17 +42,38 @@ re-exported here, the one place callers import them from.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 from ..config import SimConfig
 from ..params import PARAM_NAMES
 from .prior import Prior
-from .reach_ensemble import (DEFAULT_N, DEFAULT_SEED, F0_AGREEMENT, MEASURES, PHONATION_MIN_AMPLITUDE, QUANTILES,
-                             REACH_FPS, REACH_VERSION, SUSTAIN_RATIO, ReachEnsemble, build_ensemble, config_hash,
-                             config_key_dict, draw_measures, reach_key)
-from .reach_verdict import (HARD_MEASURES, NEAR_AREA, NEAR_F0, ReachVerdict, check_reach, format_table,
-                            recording_measures)
+from .reach_ensemble import (
+    DEFAULT_N,
+    DEFAULT_SEED,
+    F0_AGREEMENT,
+    MEASURES,
+    PHONATION_MIN_AMPLITUDE,
+    QUANTILES,
+    REACH_FPS,
+    REACH_VERSION,
+    SUSTAIN_RATIO,
+    ReachEnsemble,
+    build_ensemble,
+    config_hash,
+    config_key_dict,
+    draw_measures,
+    reach_key,
+)
+from .reach_verdict import (
+    HARD_MEASURES,
+    NEAR_AREA,
+    NEAR_F0,
+    ReachVerdict,
+    check_reach,
+    format_table,
+    recording_measures,
+)
 
 SHIPPED_DIR = Path(__file__).resolve().parent.parent / "data"
 

@@ -17,9 +17,9 @@ import math
 import os
 import tempfile
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping
 
 import numpy as np
 
@@ -174,7 +174,7 @@ class ReachEnsemble:
         return path
 
     @classmethod
-    def load(cls, path: Path) -> "ReachEnsemble":
+    def load(cls, path: Path) -> ReachEnsemble:
         """Read a CSV written by :meth:`save`; ValueError when it is not one (or of another protocol version)."""
         path = Path(path)
         meta: dict = {}

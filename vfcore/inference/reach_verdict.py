@@ -6,8 +6,8 @@ the unknown area scale) are stated in :mod:`.reach`'s docstring.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 
@@ -213,7 +213,7 @@ def check_reach(rec: Mapping[str, float], ensemble: ReachEnsemble | None, *, exa
 
 
 def format_table(ens: ReachEnsemble) -> str:
-    """Markdown table of an ensemble's reach (docs/inference.md, "The model's reach")."""
+    """Markdown table of an ensemble's reach (:ref:`inference`, "The model's reach")."""
     st = ens.stats()
     lines = ["| measure | unit | 5 % | 50 % | 95 % | min | max |", "|---|---|---|---|---|---|---|"]
     for col, label, unit, fmt in MEASURES:

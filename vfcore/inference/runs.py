@@ -4,14 +4,14 @@ One likelihood-tempered SMC run of a rugged six-parameter likelihood can settle 
 negligible share of the posterior mass, and it cannot tell from inside: its particles agree with each
 other. Independent runs (own seeds) find different basins, and a run that missed the best one says so by
 the best log-likelihood its final particles reach, which then lies well below the others'
-(docs/inference.md, "Independent runs").
+(:ref:`inference-samplers-independent-runs`).
 
 Which runs are pooled (``rule``):
 
 * ``"loglik"`` (default): a run whose best final particle's log-likelihood is more than ``gap`` nats
   (default 3) below the best run's is left out. Runs kept so agreed on it to within 1.4 nats (2.4 where no
   run found the truth's basin), and the others fell 4.4 to 1,458 nats short (20 six-parameter twins, 3 runs each;
-  docs/inference.md);
+  :ref:`inference`);
 * ``"evidence"``: a run whose log evidence is more than ``gap`` nats (default 5) below the best run's is left
   out (the basin it holds would carry at most exp(-gap) of the mass). On the same twins the SMC evidence of
   runs whose best particles agree spread by up to 143 nats (against quoted errors of 0.3-0.5), so this rule
@@ -23,7 +23,7 @@ the runs' Z (each run's estimate is unbiased for Z, so is their mean), with the 
 
 Runs that disagree are a warning as well as a filter: on two fresh sets of six-parameter twins, fits whose runs
 disagreed covered 48 of 108 combinations with their 90 % intervals, fits whose runs agreed and whose likelihood was
-smooth 57 of 66 (docs/inference.md, "Do the runs agree?").
+smooth 57 of 66 (:ref:`validation-inference-calibration-do-the-runs-agree`).
 
 This is the pragmatic remedy of running several chains and discarding the stuck ones; it does not make a
 thin run of one basin wider, it only stops one run's luck from deciding which basin is reported.

@@ -8,7 +8,7 @@ and fields, so this module sits above the problem without importing it.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -120,7 +120,6 @@ def score_results(results, problem, observe: Callable | None = None) -> Evaluati
     from vfcore.result import HR_OVERSAMPLE
     k = len(results)
     max_lag, n_cmp = problem.window
-    obs = problem.obs_compared
     loglik = np.full(k, -np.inf)
     ok = np.zeros(k, dtype=bool)
     gaw = np.full((k, n_cmp), np.nan, dtype=np.float32)

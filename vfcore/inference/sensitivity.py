@@ -9,14 +9,15 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Callable, Mapping
 
 import numpy as np
 
 from ..config import MESHES, SimConfig
 from ..params import PARAM_UNITS
-from .diagnostics import ess as _ess, normalize_log_weights
+from .diagnostics import ess as _ess
+from .diagnostics import normalize_log_weights
 from .posterior import Posterior
 from .problem import Problem
 

@@ -42,18 +42,18 @@ is deterministic for a seed and independent of how batches were evaluated.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from .diagnostics import systematic_resample
 from .importance import map_evaluate, resolve_target
-from .moves import COORDS, check_moves, delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
+from .moves import check_moves, delayed_log_acceptance, log_acceptance, moves_for, walk_cholesky
 from .posterior import Posterior
 from .prior import Prior
 from .problem import Evaluation, Problem, model_record
 from .smc_posterior import posterior_of
-from .tempering import next_temperature, reweight
+from .tempering import reweight
 
 _INIT, _RESAMPLE, _MOVE, _ACCEPT, _FINAL, _GROUP = 0, 1, 2, 3, 4, 5
 
@@ -459,7 +459,7 @@ def smc_many(target, jobs, prior: Prior | None = None, *, map: Callable = map, c
              **options) -> list[Posterior]:
     """Several runs of :func:`smc` on one target (``jobs``: ``(n_particles, seed)`` each), run together
     (:func:`run_together`): at each round the pending batch of every unfinished run goes to ``map`` as one
-    batch, so a worker's lock-step blocks are wider (docs/model.md, "Speed") and a cluster has every run's
+    batch, so a worker's lock-step blocks are wider (:ref:`validation-model-speed`) and a cluster has every run's
     rows at once. Each posterior equals ``smc(target, prior, n_particles, seed, ...)`` alone, bit for bit.
     ``on_done(i, posterior)`` as run ``i`` finishes. ``options`` are the sampler's
     (:class:`SMCSampler`); a cheaper ``screen`` target and pooled ``runs`` are :func:`smc`'s only."""

@@ -1,7 +1,7 @@
 """Exact moves along the model's common-scale symmetry, at no simulation cost.
 
 Multiplying E_body, E_cover, E_lig, p_sub, rho and eta by one factor ``c`` leaves the simulated glottal
-area waveform unchanged (docs/inference.md, "The common scale"; tests/vfcore/test_scale_symmetry.py), so
+area waveform unchanged (:ref:`inference-scale-the-common-scale-what-a`; tests/vfcore/test_scale_symmetry.py), so
 when all six are estimated the GAW's log-likelihood is constant along every ray ``theta -> c theta``
 through the origin of those six coordinates. A random walk has to crawl along that ridge, and the
 posterior along it is only the prior's box (and whatever measurement anchors the scale). Both can be
@@ -26,8 +26,8 @@ contact impulse by ``c``, the flow rate by ``sqrt(c)``, because the Bernoulli ve
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 

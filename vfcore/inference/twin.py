@@ -9,8 +9,8 @@ are redrawn: the inference presupposes a recording of an oscillating fold.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -1,7 +1,7 @@
 """M5-like three-layer vocal-fold section and its gmsh triangulation.
 
 Coordinates in mm: x medial-lateral (x = 0 the fixed lateral wall, x grows towards the
-midline), z inferior-superior (z = 0 the fixed flat base). Profile (docs/model.md):
+midline), z inferior-superior (z = 0 the fixed flat base). Profile (:ref:`model`):
 
 * flat base from (0, 0) to (b, 0), fixed;
 * inferior surface rising at 50 degrees from (b, 0);

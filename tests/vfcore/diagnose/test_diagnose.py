@@ -7,8 +7,18 @@ import numpy as np
 import pytest
 
 from vfcore import measures as M
-from vfcore.diagnose import (CATALOGUE, NO_FINDING, PHASES, get, locate, measure_pvalues, phase_labels,
-                             predictive_measures, rank_extensions, residual_removed)
+from vfcore.diagnose import (
+    CATALOGUE,
+    NO_FINDING,
+    PHASES,
+    get,
+    locate,
+    measure_pvalues,
+    phase_labels,
+    predictive_measures,
+    rank_extensions,
+    residual_removed,
+)
 from vfcore.diagnose import extensions as X
 
 FPS = 4000.0
@@ -501,17 +511,17 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
     """Base runs whose log-evidences differ beyond their errors trigger more particles; agreeing
     runs do not. A fake sampler: evidence depends on the seed at 40 particles (mode hopping) and
     is stable at 80."""
-    from types import SimpleNamespace
-
     import sys
+    from types import SimpleNamespace
 
     from vfcore.diagnose.baseline import base_fit
     smc_mod = sys.modules["vfcore.inference.smc"]       # the package re-exports the function under the same name
     calls = []
 
-    def fake_smc(problem, n_particles, seed, **kw):
+    def fake_smc(problem, n_particles, seed, **kw):          # runs told apart by their order, not their seeds
+        k = len(calls)
         calls.append((n_particles, seed))
-        z = (-100.0 - 500.0 * (seed % 2)) if n_particles == 40 else -90.0 - 0.1 * (seed % 3)
+        z = (-100.0 - 500.0 * (k % 2)) if n_particles == 40 else -90.0 - 0.1 * (k % 3)
         return SimpleNamespace(log_evidence=z, log_evidence_se=1.0, n_simulations=10 * n_particles)
 
     def together(fake):                                   # runs made together: each as alone (test_smc_many)
@@ -519,7 +529,7 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
 
     monkeypatch.setattr(smc_mod, "smc", fake_smc)
     monkeypatch.setattr(smc_mod, "smc_many", together(fake_smc))
-    base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)   # seeds 0, 7919
+    base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)
     assert factor == 2 and [c[0] for c in calls] == [40, 40, 80, 80]
     assert len({c[1] for c in calls}) == 4                        # every run its own seed
     assert base.log_evidence > -91 and tau < 1.0 and n == 10 * (40 + 40 + 80 + 80)
@@ -527,8 +537,9 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
 
     calls.clear()
     def agreeing(problem, n_particles, seed, **kw):
+        k = len(calls)
         calls.append(seed)
-        return SimpleNamespace(log_evidence=-100.0 + 0.5 * (seed % 2), log_evidence_se=1.0, n_simulations=5)
+        return SimpleNamespace(log_evidence=-100.0 + 0.5 * (k % 2), log_evidence_se=1.0, n_simulations=5)
     monkeypatch.setattr(smc_mod, "smc", agreeing)
     monkeypatch.setattr(smc_mod, "smc_many", together(agreeing))
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)
@@ -621,9 +632,9 @@ def test_confusable_entries_are_always_rivals():
 def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred():
     """The asymmetry entry nests the scale entry: at zero phase difference its observation is
     A (1 + lr_amp) / 2 exactly; prefer_nested names the simpler entry with a note."""
+    from vfcore.diagnose.amend import prefer_nested
     from vfcore.diagnose.extensions import get
     from vfcore.diagnose.fit import observe_extended
-    from vfcore.diagnose.amend import prefer_nested
     assert get("asymmetry").nests == (("scale", ("lr_phase",)),)
     t = np.arange(6000) / 20000.0
     y = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0)

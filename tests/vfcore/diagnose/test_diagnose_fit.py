@@ -272,7 +272,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     import dataclasses as dc
     import math
 
-    from vfcore.diagnose import baseline, fit, pipeline
+    from vfcore.diagnose import fit, pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(5)
     run = simulate(TABLE3, dc.replace(CFG, sep_ratio=1.1))
@@ -323,7 +323,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     threshold, a verdict decided by the last bits of the arithmetic; the box is therefore re-centred
     until the posterior is off its edges, and both rescues recover the truth.
     With ``rescue_observation=False`` the failed refit stays and nothing is named."""
-    from vfcore.diagnose import baseline, fit, pipeline
+    from vfcore.diagnose import fit, pipeline
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)

@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from vfcore.diagnose.expected import (CATALOGUE_SIMULATIONS, CATALOGUE_TIME_FACTOR, FLOOR_SIMULATIONS,
-                                      FLOOR_TIME_FACTOR, expected_cost)
+from vfcore.diagnose.expected import (
+    CATALOGUE_SIMULATIONS,
+    CATALOGUE_TIME_FACTOR,
+    FLOOR_SIMULATIONS,
+    FLOOR_TIME_FACTOR,
+    expected_cost,
+)
 from vfcore.diagnose.options import DiagnoseOptions
 
 

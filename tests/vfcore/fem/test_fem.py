@@ -184,8 +184,8 @@ def _manufactured_error(level: int, nu: float) -> tuple[float, float]:
     f = asm(load, basis)
     D = basis.get_dofs().all()
     uh = np.zeros(basis.N)
-    I = basis.complement_dofs(D)
-    uh[I] = spla.spsolve(sp.csc_matrix(K[I][:, I]), f[I])
+    free = basis.complement_dofs(D)
+    uh[free] = spla.spsolve(sp.csc_matrix(K[free][:, free]), f[free])
 
     @Functional
     def err2(w):

@@ -1,5 +1,5 @@
 """Unknown area scale (uncalibrated px/mm): k integrated out of the likelihood in closed form
-(vfcore.inference.likelihood; docs/inference.md, "Unknown area scale")."""
+(vfcore.inference.likelihood; :ref:`inference-scale-unknown-area-scale`)."""
 from __future__ import annotations
 
 import math
@@ -9,8 +9,13 @@ import pytest
 from scipy.integrate import quad
 
 from vfcore.inference import Prior
-from vfcore.inference.likelihood import (gaussian_loglik, marginal_gaussian_loglik, sample_area_scale,
-                                         scaled_gaussian_loglik, scaled_marginal_gaussian_loglik)
+from vfcore.inference.likelihood import (
+    gaussian_loglik,
+    marginal_gaussian_loglik,
+    sample_area_scale,
+    scaled_gaussian_loglik,
+    scaled_marginal_gaussian_loglik,
+)
 from vfcore.inference.problem import Problem, validate_area_scale
 
 FPS = 4000.0
@@ -132,7 +137,8 @@ def test_an_uncalibrated_recording_is_not_outside_for_its_area_only_for_its_f0(m
     from pathlib import Path
     monkeypatch.setenv("VFINFER_CACHE_DIR", str(tmp_path / "cache"))
     sys.path.insert(0, str(Path(__file__).parent))
-    from test_reach import rec_at, synthetic     # the hand-made ensemble of the reach tests
+    from test_reach import rec_at, synthetic  # the hand-made ensemble of the reach tests
+
     from vfcore.inference import reach as rc
     ens = synthetic()
     big = rec_at(ens, max_area_mm2=200.0)
@@ -159,8 +165,8 @@ def test_an_fe_twin_recorded_at_area_scale_1p7_recovers_k_and_the_parameters():
     parameters sit 1.6 sd from the mean, along their correlation); coverage is a property of many twins."""
     from vfcore.config import SimConfig
     from vfcore.inference import make_twin, smc
-    from vfcore.params import PARAM_NAMES, TABLE3
     from vfcore.inference.problem import evaluate
+    from vfcore.params import PARAM_NAMES, TABLE3
     free = ("E_body", "E_cover")
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in free})
     cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.45, discard=0.25)

@@ -5,8 +5,15 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from vfcore.inference import (DegenerateEnsembleWarning, ess, log_evidence_is, normalize_log_weights, pareto_k,
-                              systematic_resample, weighted_quantiles)
+from vfcore.inference import (
+    DegenerateEnsembleWarning,
+    ess,
+    log_evidence_is,
+    normalize_log_weights,
+    pareto_k,
+    systematic_resample,
+    weighted_quantiles,
+)
 from vfcore.inference.diagnostics import degeneracy_warnings
 
 

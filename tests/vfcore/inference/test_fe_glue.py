@@ -1,18 +1,31 @@
 """evaluate / Problem / products / export on a cheap analytic stand-in for the FE model."""
 import math
-import warnings
 
 import numpy as np
 import pytest
+from inf_helpers import FakeSimulator
 from scipy import stats
 
 from vfcore.config import SimConfig
-from vfcore.inference import (DegenerateEnsembleWarning, Evaluation, Posterior, Prior, Problem, ProblemEvaluator, compare, evaluate,
-                              ensemble_size_study, flow_contact_table, gaussian_loglik, importance_sample,
-                              numerics_study, plot_marginals, plot_predictive, predictive_bands, smc)
-from vfcore.params import TABLE3
-
-from inf_helpers import FakeSimulator
+from vfcore.inference import (
+    DegenerateEnsembleWarning,
+    Evaluation,
+    Posterior,
+    Prior,
+    Problem,
+    ProblemEvaluator,
+    compare,
+    ensemble_size_study,
+    evaluate,
+    flow_contact_table,
+    gaussian_loglik,
+    importance_sample,
+    numerics_study,
+    plot_marginals,
+    plot_predictive,
+    predictive_bands,
+    smc,
+)
 
 
 @pytest.fixture(scope="module")

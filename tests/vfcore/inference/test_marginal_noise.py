@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from toy_model import ToyEvaluator, toy_observation
 
 from vfcore.config import SimConfig
 from vfcore.inference import Prior, importance_sample
 from vfcore.inference.problem import Problem, gaussian_loglik, marginal_gaussian_loglik
-from toy_model import ToyEvaluator, toy_observation
 
 
 def _numeric(sim, obs, lo, hi, m=2_000_001):

@@ -7,15 +7,14 @@ import pickle
 
 import numpy as np
 import pytest
+from inf_helpers import FakeSimulator
 from scipy import stats
+from toy_model import ToyEvaluator, toy_observation
 
 from vfcore.config import SimConfig
 from vfcore.inference import Prior, Problem, ProblemEvaluator, evaluate, importance_sample
 from vfcore.inference.problem import aligned_loglik, validate_measurements
 from vfcore.params import TABLE3
-from toy_model import ToyEvaluator, toy_observation
-
-from inf_helpers import FakeSimulator
 
 FIXED = {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}
 CFG = SimConfig(duration=0.35, discard=0.2)

@@ -129,7 +129,10 @@ def test_the_attempt_record_is_rewritten_at_most_every_few_seconds_and_after_eac
 
     from vfcore.inference import memo
     monkeypatch.setattr(memo, "NOTE_EVERY_S", 3600.0)
-    records = lambda store: [json.loads(f.read_text()) for f in (store.root / "attempts").glob("*.json")]
+
+    def records(store):
+        return [json.loads(f.read_text()) for f in (store.root / "attempts").glob("*.json")]
+
     with pytest.raises(Killed):                      # killed inside a call: nothing noted since the start
         dying = CachedMap(dies_after(3), tmp_path)
         dying(_Square(), _parts())

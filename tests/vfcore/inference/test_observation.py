@@ -1,10 +1,9 @@
 import numpy as np
 import pytest
+from inf_helpers import synthetic_gaw
 
 from vfcore.config import SimConfig
 from vfcore.inference import Prior, Problem, importance_sample, validate_observation
-
-from inf_helpers import synthetic_gaw
 
 
 class Counting:

@@ -1,4 +1,4 @@
-"""Named prior sets: the paper's Table 2 and human tissue (docs/inference.md, "Prior sets")."""
+"""Named prior sets: the paper's Table 2 and human tissue (:ref:`inference-reach-prior-sets`)."""
 import numpy as np
 import pytest
 
@@ -35,7 +35,7 @@ def test_job_spec_carries_the_prior_set():
 
 def test_the_human_set_reaches_human_f0_where_the_papers_cannot():
     """Mid-box human tissue phonates in the human range on the paper's M5 section; the paper's Table 3 silicone
-    values phonate at 64-67 Hz (docs/model.md)."""
+    values phonate at 64-67 Hz (:ref:`model`)."""
     cfg = SimConfig(mesh="coarse", duration=0.25, discard=0.1)
     human = Params(E_body=100.0, E_cover=5000.0, E_lig=15.0, p_sub=1500.0, rho=1050.0, eta=3.0, x0=8.4)
     r = simulate(human, cfg)
@@ -51,7 +51,7 @@ def test_a_human_range_twin_is_recovered_with_the_human_prior_set():
     simulation. A recording as long as the simulation (34 cycles, lags up to 1.5 periods) makes the likelihood
     rugged: the simulated GAW changes in steps as p_sub varies (flat over 2.5 Pa, then a phase drift that grows
     over the cycles), the steps cost 1-7 nats, and the posterior reflects which steps were sampled (p_sub
-    2.2 sd from the truth); docs/inference.md, "Prior sets"."""
+    2.2 sd from the truth); :ref:`inference-reach-prior-sets`."""
     truth = Params(E_body=100.0, E_cover=5000.0, E_lig=15.0, p_sub=1500.0, rho=1050.0, eta=3.0, x0=8.4)
     cfg = SimConfig(mesh="coarse", dt=5e-5, duration=0.3, discard=0.1)
     r = simulate(truth, cfg)

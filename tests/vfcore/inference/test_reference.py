@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from linear_gaussian import LinearGaussianToy
 from scipy import stats
 
 from vfcore.inference import Prior, smc
 from vfcore.inference.reference import GaussianReference, reference_from_posterior
-from linear_gaussian import LinearGaussianToy
 
 
 @pytest.fixture(scope="module")

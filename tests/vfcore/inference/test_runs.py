@@ -4,10 +4,10 @@ import math
 
 import numpy as np
 import pytest
+from linear_gaussian import LinearGaussianToy
 from scipy.special import logsumexp
 
 from vfcore.inference import Evaluation, Posterior, Prior, pool_runs, run_seeds, smc
-from linear_gaussian import LinearGaussianToy
 
 
 def _run(center, log_z, n, seed, peak=None):

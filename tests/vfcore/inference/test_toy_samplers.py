@@ -9,10 +9,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
+from linear_gaussian import LinearGaussianToy
 from scipy import stats
 
 from vfcore.inference import Prior, SMCSampler, draw_prior, importance_sample, reduce_importance, smc
-from linear_gaussian import LinearGaussianToy
 
 Z = 4.0  # standard errors allowed (two-sided p ~ 6e-5 per comparison)
 

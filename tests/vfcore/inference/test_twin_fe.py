@@ -9,7 +9,7 @@ Why not p_sub: with p_sub estimated (seed 7 draws p_sub = 474 Pa, just above pho
 the log-likelihood along p_sub is rugged at the +-15 scale (frame-level chaos near onset,
 it persists with a 0.45 s transient discarded), SMC settles on the spikes around 500 Pa and
 the truth ends 2.5-2.9 posterior sd away with 60-120 particles. That is a property of the
-model near onset (docs/inference.md), not of the sampler; the full benchmark estimates p_sub.
+model near onset (:ref:`inference`), not of the sampler; the full benchmark estimates p_sub.
 """
 from concurrent.futures import ProcessPoolExecutor
 

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from vfcore.mesh import load_mesh
 from vfcore.mesh import geometry as geo
+from vfcore.mesh import load_mesh
 
 TARGETS = {"coarse": 172, "medium": 205, "fine": 263}
 
