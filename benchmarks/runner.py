@@ -54,6 +54,10 @@ BENCHMARKS = {
                            "~1 h", "validation-inference"),
     "smoothness": Benchmark("bench_smoothness.py", "smoothness of the six-parameter log-likelihood", "~30 min",
                             "validation-inference-roughness"),
+    "flow-rules": Benchmark("bench_flow_rules.py", "the paper's flow load against the continuous one: Table 3 on "
+                            "three meshes and ms per simulation", "~3 min", "validation-continuous-model"),
+    "rough-flag": Benchmark("bench_rough_flag.py", "how often the rough flag fires at the twins' truths and over "
+                            "prior draws, per flow rule", "~15 min", "validation-continuous-model"),
     "regularity": Benchmark("bench_regularity.py", "where the fold's vibration is irregular over the prior",
                             "~30 min", "validation-inference-roughness"),
     "probe": Benchmark("bench_probe.py", "how well the timed probe predicts a run's cost", "~10 min",
