@@ -441,137 +441,6 @@ def projection_impulse(indptr, mval, d, vd, ad, h, gamma):
     return md * (vd + h * (1.0 - gamma) * ad)
 
 
-# The per-sample phases of a step, shared by integrate_ws (scalar, CUDA) and the lock-step kernel. Inlined in
-# numba's IR (inline='always'): the lock-step kernel calls them per sample and step on freshly built views and
-# argument tuples; as calls they cost it 12-16 % (block 16, medium mesh), inlined a few per cent.
-@njit(cache=True, inline='always')
-def sample_start(mod):
-    """Carry of one sample between steps, at t_0: (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet):
-    the inlet pressure (Pa) and the last two flows (m^3/s) of the subglottal coupling, the trajectory frames
-    written, and the settled-response window (largest speed m/s, width range m, the previous window's speed and
-    quietness)."""
-    return (float(mod.p_sub), 0.0, 0.0, 0, 0.0, -np.inf, np.inf, np.inf, False)
-
-
-@njit(cache=True, inline='always')
-def sample_loads(pat, mod, p_in, u, ws) -> None:
-    """Surface positions of the state ``u`` (n,) and their flow load at inlet pressure ``p_in``: ws.fx, ws.fz (m,)."""
-    sdx, sdz, sX, sZ = pat.sdx, pat.sdz, pat.sX, pat.sZ
-    xs, zs, gap = ws.xs, ws.zs, ws.gap
-    for j in range(sdx.size):
-        if sdx[j] >= 0:
-            xs[j] = sX[j] + u[sdx[j]]
-            zs[j] = sZ[j] + u[sdz[j]]
-        else:
-            xs[j] = sX[j]
-            zs[j] = sZ[j]
-        gap[j] = mod.x_mid - xs[j]
-    surface_loads(xs, zs, sX, sZ, gap, p_in, mod.p_sup, mod.sep_ratio, mod.closed_tol, mod.g_reg, ws.fx, ws.fz,
-                  ws.pres, mod.flow)
-
-
-@njit(cache=True, inline='always')
-def sample_contact(stp, pat, mod, cpl, G, u, ws):
-    """Midline contact on the unconstrained u_{n+1} in ``ws.r`` (corrected in place; ``u`` (n,) is u_n): the
-    compliant layer or the rigid midline. Writes ws.lam, ws.active; returns the active-set iterations, -1 if it
-    did not settle."""
-    if cpl.layer:
-        return contact_layer_ws(ws.r, u, stp.h, 1.0 - stp.af, pat.sdx, pat.sX, mod.x_mid, G, cpl.kc, cpl.cc, ws.lam,
-                                ws.active, 50, ws.u0, ws.S, ws.rhs, ws.idx, ws.keff, ws.bb)
-    return contact_correct_ws(ws.r, pat.sdx, pat.sX, mod.x_mid, G, ws.lam, ws.active, 50, ws.u0, ws.S, ws.rhs, ws.idx)
-
-
-@njit(cache=True, inline='always')
-def sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry):
-    """What follows the state update of step k for one sample: the inelastic projection (rigid midline), the
-    step's outputs, the subglottal resonators and the trajectory frame. ``mval`` (nnz,) the sample's mass
-    values; ``carry`` from :func:`sample_start`. Returns the new carry."""
-    p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet = carry
-    sdx, sX = pat.sdx, pat.sX
-    u, v, a = st.u, st.v, st.a
-    active, lam, proj, lam_out = ws.active, ws.lam, out.proj, out.lam
-    layer, x_mid = cpl.layer, mod.x_mid
-    m = sdx.size
-    # inelastic impact: a node held at the midline keeps no normal velocity or
-    # acceleration (the trapezoidal rule would otherwise bounce it back every step)
-    rec = proj.shape[0] > 0
-    for j in range(m):
-        if active[j] and not layer:
-            d = sdx[j]
-            if rec:
-                proj[k - 1, j] = projection_impulse(pat.indptr, mval, d, v[d], a[d], stp.h, stp.gamma)
-            v[d] = 0.0
-            a[d] = 0.0
-    gmin = 1e300
-    for j in range(m):
-        xj = sX[j] + (u[sdx[j]] if sdx[j] >= 0 else 0.0)
-        g = x_mid - xj
-        if g < gmin:
-            gmin = g
-        lam_out[k - 1, j] = -lam[j] * lam_scale
-    out.width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
-    out.gsep[k - 1] = mod.sep_ratio * gmin if gmin > mod.closed_tol else 0.0
-    if cpl.sub_coef.shape[0] > 0:
-        dpq = p_in - mod.p_sup
-        q = cpl.flow_coef * out.gsep[k - 1] * math.sqrt(dpq) if dpq > 0.0 else 0.0
-        p_in = mod.p_sub - subglottal_step(cpl.sub_coef, ws.sub_p1, ws.sub_p2, q, q2)
-        q2 = q1
-        q1 = q
-        out.p_in[k - 1] = p_in
-    traj_u, traj_v = out.traj_u, out.traj_v
-    if out.traj_every > 0 and k % out.traj_every == 0 and ntr < traj_u.shape[0]:
-        for i in range(u.size):
-            traj_u[ntr, i] = u[i]
-            traj_v[ntr, i] = v[i]
-        ntr += 1
-    return (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
-
-
-@njit(cache=True, inline='always')
-def sample_window(k, n_steps, stop, cpl, st, out, vm, carry):
-    """Settled-response bookkeeping of step k for one sample, ``vm`` its largest nodal speed (m/s) after the step.
-    Returns (settled, new carry); once settled, every per-step output of the remaining steps repeats step k's
-    and the trajectories the last state, and ``out.stop[0] = k``."""
-    p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet = carry
-    if vm > win_v:
-        win_v = vm
-    wk = out.width[k - 1]
-    if wk > win_hi:
-        win_hi = wk
-    if wk < win_lo:
-        win_lo = wk
-    if k % stop.window == 0:
-        quiet = win_hi - win_lo <= stop.width and win_v <= stop.vel and win_v <= prev_v
-        if quiet and prev_quiet:
-            out.stop[0] = k
-            width, gsep, lam, proj, p_io = out.width, out.gsep, out.lam, out.proj, out.p_in
-            rec = proj.shape[0] > 0
-            nmod = cpl.sub_coef.shape[0]
-            m = lam.shape[1]
-            for kk in range(k, n_steps):
-                width[kk] = width[k - 1]
-                gsep[kk] = gsep[k - 1]
-                for j in range(m):
-                    lam[kk, j] = lam[k - 1, j]
-                    if rec:
-                        proj[kk, j] = proj[k - 1, j]
-                if nmod > 0:
-                    p_io[kk] = p_io[k - 1]
-            if out.traj_every > 0:
-                u, v, traj_u, traj_v = st.u, st.v, out.traj_u, out.traj_v
-                for t in range(ntr, traj_u.shape[0]):
-                    for i in range(u.size):
-                        traj_u[t, i] = u[i]
-                        traj_v[t, i] = v[i]
-            return True, (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
-        prev_quiet = quiet
-        prev_v = win_v
-        win_v = 0.0
-        win_hi = -np.inf
-        win_lo = np.inf
-    return False, (p_in, q1, q2, ntr, win_v, win_hi, win_lo, prev_v, prev_quiet)
-
-
 @njit(cache=True)
 def integrate(stp, pat, mod, mat, st, out):
     """:func:`integrate_coupled` without the model extensions (no subglottal resonators: the inlet pressure is
@@ -634,28 +503,47 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
 
     It allocates nothing and assigns no slices, so numba's CUDA target compiles it as a device function:
     :mod:`vfcore.solver._cuda_kernels` runs it once per GPU thread on the sample's columns of interleaved
-    ``[entry, sample]`` arrays, the same arithmetic as the scalar kernel. The per-sample phases of a step
-    (:func:`sample_loads`, :func:`sample_contact`, :func:`sample_record`, :func:`sample_window`) are those
-    the lock-step kernel runs; the linear algebra between them is written here for one sample.
+    ``[entry, sample]`` arrays, the same arithmetic as the scalar kernel.
     """
-    n = st.u.size
-    m = pat.sdx.size
-    h, gamma = stp.h, stp.gamma
-    c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, stp.am, stp.af, stp.beta, gamma)
-    indptr, indices, sdx, sdz = pat.indptr, pat.indices, pat.sdx, pat.sdz
-    kval, mval, dval = mat.kval, mat.mval, mat.dval
-    u, v, a = st.u, st.v, st.a
-    y1, y2, r, fx, fz, active, sub_p1, sub_p2 = ws.y1, ws.y2, ws.r, ws.fx, ws.fz, ws.active, ws.sub_p1, ws.sub_p2
-    Lp, Lj, Lx = pat.Lp, pat.Lj, mat.Lx
-    blowup = mod.blowup
-    for i in range(cpl.sub_coef.shape[0]):
+    n_steps, h, am, af, beta, gamma = stp
+    indptr, indices, Lp, Lj, sdx, sdz, sX, sZ = pat
+    p_sub, p_sup, sep_ratio, x_mid, closed_tol, g_reg, flow, blowup = mod
+    sub_coef, flow_coef, layer, kc, cc = cpl
+    stop_window, stop_width, stop_vel = stop
+    kval, mval, dval, Lx, G = mat
+    u, v, a = st
+    width, gsep_out, lam_out, proj_out, p_in_out, traj_every, traj_u, traj_v, stop_out = out
+    (y1, y2, r, ws_u0, xs, zs, gap, fx, fz, pres, lam, active, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb, sub_p1,
+     sub_p2) = ws
+    n = u.size
+    m = sdx.size
+    c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, am, af, beta, gamma)
+    wl = 1.0 - af
+    ntr = 0
+    nmod = sub_coef.shape[0]
+    for i in range(nmod):
         sub_p1[i] = 0.0
         sub_p2[i] = 0.0
     for j in range(m):
         active[j] = False
-    carry = sample_start(mod)
-    for k in range(1, stp.n_steps + 1):
-        sample_loads(pat, mod, carry[0], u, ws)
+    q1 = 0.0
+    q2 = 0.0
+    p_in = p_sub
+    win_v = 0.0
+    win_hi = -np.inf
+    win_lo = np.inf
+    prev_v = np.inf
+    prev_quiet = False
+    for k in range(1, n_steps + 1):
+        for j in range(m):
+            if sdx[j] >= 0:
+                xs[j] = sX[j] + u[sdx[j]]
+                zs[j] = sZ[j] + u[sdz[j]]
+            else:
+                xs[j] = sX[j]
+                zs[j] = sZ[j]
+            gap[j] = x_mid - xs[j]
+        surface_loads(xs, zs, sX, sZ, gap, p_in, p_sup, sep_ratio, closed_tol, g_reg, fx, fz, pres, flow)
         for i in range(n):
             y1[i] = m_v * v[i] + m_a * a[i]
             y2[i] = d_v * v[i] + d_a * a[i]
@@ -672,7 +560,12 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
         chol_solve(Lp, Lj, Lx, r)
         for i in range(n):
             r[i] += u[i]          # r is now u_{n+1} before contact
-        if sample_contact(stp, pat, mod, cpl, mat.G, u, ws) < 0:
+        if layer:
+            settled = contact_layer_ws(r, u, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, 50, ws_u0, ws_S, ws_rhs,
+                                       ws_idx, ws_keff, ws_bb)
+        else:
+            settled = contact_correct_ws(r, sdx, sX, x_mid, G, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx)
+        if settled < 0:
             return -k          # contact active set did not settle: a failure, never silent penetration
         bad = False
         for i in range(n):
@@ -685,13 +578,70 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
                 bad = True
         if bad:
             return k
-        carry = sample_record(k, stp, pat, mod, cpl, mval, st, out, ws, lam_scale, carry)
-        if stop.window > 0:
+        # inelastic impact: a node held at the midline keeps no normal velocity or
+        # acceleration (the trapezoidal rule would otherwise bounce it back every step)
+        rec = proj_out.shape[0] > 0
+        for j in range(m):
+            if active[j] and not layer:
+                if rec:
+                    proj_out[k - 1, j] = projection_impulse(indptr, mval, sdx[j], v[sdx[j]], a[sdx[j]], h, gamma)
+                v[sdx[j]] = 0.0
+                a[sdx[j]] = 0.0
+        gmin = 1e300
+        for j in range(m):
+            xj = sX[j] + (u[sdx[j]] if sdx[j] >= 0 else 0.0)
+            g = x_mid - xj
+            if g < gmin:
+                gmin = g
+            lam_out[k - 1, j] = -lam[j] * lam_scale
+        width[k - 1] = 2.0 * (gmin if gmin > 0.0 else 0.0)
+        gsep_out[k - 1] = sep_ratio * gmin if gmin > closed_tol else 0.0
+        if nmod > 0:
+            dpq = p_in - p_sup
+            q = flow_coef * gsep_out[k - 1] * math.sqrt(dpq) if dpq > 0.0 else 0.0
+            p_in = p_sub - subglottal_step(sub_coef, sub_p1, sub_p2, q, q2)
+            q2 = q1
+            q1 = q
+            p_in_out[k - 1] = p_in
+        if traj_every > 0 and k % traj_every == 0 and ntr < traj_u.shape[0]:
+            for i in range(n):
+                traj_u[ntr, i] = u[i]
+                traj_v[ntr, i] = v[i]
+            ntr += 1
+        if stop_window > 0:
             vm = 0.0
             for i in range(n):
                 av = abs(v[i])
                 vm = av if av > vm else vm
-            settled, carry = sample_window(k, stp.n_steps, stop, cpl, st, out, vm, carry)
-            if settled:
-                return 0
+            if vm > win_v:
+                win_v = vm
+            wk = width[k - 1]
+            if wk > win_hi:
+                win_hi = wk
+            if wk < win_lo:
+                win_lo = wk
+            if k % stop_window == 0:
+                quiet = win_hi - win_lo <= stop_width and win_v <= stop_vel and win_v <= prev_v
+                if quiet and prev_quiet:
+                    stop_out[0] = k
+                    for kk in range(k, n_steps):
+                        width[kk] = width[k - 1]
+                        gsep_out[kk] = gsep_out[k - 1]
+                        for j in range(m):
+                            lam_out[kk, j] = lam_out[k - 1, j]
+                            if rec:
+                                proj_out[kk, j] = proj_out[k - 1, j]
+                        if nmod > 0:
+                            p_in_out[kk] = p_in_out[k - 1]
+                    if traj_every > 0:
+                        for t in range(ntr, traj_u.shape[0]):
+                            for i in range(n):
+                                traj_u[t, i] = u[i]
+                                traj_v[t, i] = v[i]
+                    return 0
+                prev_quiet = quiet
+                prev_v = win_v
+                win_v = 0.0
+                win_hi = -np.inf
+                win_lo = np.inf
     return 0
