@@ -71,6 +71,9 @@ def config_key_dict(config: SimConfig) -> dict:
     if d["contact"] == "projection":
         # the layer options do not enter the physics of the rigid projection: its key leaves them out
         del d["contact"], d["contact_layer_mm"]
+    if d.get("flow") == "paper":
+        # the ensembles made before the flow load was a setting are the paper's rule: its key leaves it out
+        del d["flow"]
     return d
 
 

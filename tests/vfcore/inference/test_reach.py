@@ -223,3 +223,14 @@ def test_shipped_ensembles_cover_the_default_configurations(monkeypatch):
         st = ens.stats()
         v = rc.check_reach({c: st[c]["q50"] for c, *_ in rc.MEASURES}, ens)
         assert v.verdict in ("inside", "marginal")
+
+
+def test_the_flow_rule_keys_the_ensemble_and_the_paper_rule_keeps_the_shipped_keys():
+    """Ensembles made before the flow load was a setting are the paper's rule: its key leaves ``flow`` out, so a
+    shipped ensemble still matches; the continuous load gets an ensemble of its own."""
+    from vfcore.config import SimConfig
+    from vfcore.inference.reach_ensemble import config_key_dict, reach_key
+    prior = Prior.default()
+    paper, cont = SimConfig(flow="paper"), SimConfig(flow="continuous")
+    assert "flow" not in config_key_dict(paper) and config_key_dict(cont)["flow"] == "continuous"
+    assert reach_key(paper, prior) != reach_key(cont, prior)
