@@ -42,9 +42,9 @@ class SimConfig:
     keep_trajectories : also return nodal displacements at the camera rate.
     closure_gap_mm : small-gap regularisation of the flow load, mm (0 = the paper's hard switch
         between open-glottis Bernoulli and closed-glottis pressures; default 0.02). Below this minimum half
-        gap the two distributions are blended smoothly; see docs/model.md.
+        gap the two distributions are blended smoothly; see :ref:`model-closure-regularisation-a-deliberate-deviation`.
 
-    Model extensions (off by default; docs/model.md, "Model extensions"):
+    Model extensions (off by default; :ref:`model-extensions`):
 
     epithelium_E_kpa : Young's modulus of a thin epithelium membrane along the free surface, kPa
         (0 = off). Each free-surface edge of reference length l_e becomes a 2-node bar of axial
@@ -57,15 +57,15 @@ class SimConfig:
         zeta in (0, 1], Z_peak > 0 Pa s/m^3. The glottal inlet pressure is p_sub - sum_k p_k with
         p_k'' + 2 zeta w p_k' + w^2 p_k = 2 zeta w Z_peak dQ/dt (w = 2 pi f_hz). () = off.
     element : displacement element, one of ``ELEMENTS``: "p1" (the paper's linear triangle) or
-        "anp" (P1 with nodally averaged volumetric part, locking-free as nu -> 1/2; docs/model.md,
+        "anp" (P1 with nodally averaged volumetric part, locking-free as nu -> 1/2; :ref:`model-numerics-locking-and-mesh-convergence`,
         "Locking and mesh convergence").
-    contact : midline contact law, one of ``CONTACTS`` (docs/model.md, "Contact"): "projection" (the
+    contact : midline contact law, one of ``CONTACTS`` (:ref:`model-contact`): "projection" (the
         paper's rigid midline: exact multipliers and an inelastic impact, whose peak pressures depend on
         the time step and the mesh) or "layer" (a compliant Kelvin-Voigt contact layer of thickness
         ``contact_layer_mm`` with the cover's modulus E_cover and viscosity eta: pressure
         E_cover * overlap / h + eta * overlap rate / h, no adhesion).
     contact_layer_mm : thickness h of the contact layer, mm, in (0, 1) (used by ``contact="layer"``).
-    flow : the flow load, one of ``FLOWS`` (docs/model.md, "The continuous flow load"): "continuous" (separation
+    flow : the flow load, one of ``FLOWS`` (:ref:`continuous-model`): "continuous" (separation
         at the interpolated crossing of ``sep_ratio * g_min``, closure at the interpolated zero of the gap, the
         pressure integrated over each edge, near-closure suction and upstream pockets faded over
         ``closure_gap_mm``: the load is a continuous function of the surface) or "paper" (the paper's node-wise
@@ -73,8 +73,9 @@ class SimConfig:
         lumped by halves onto the edges; with ``closure_gap_mm > 0`` blended into the closed distribution near
         closure).
     early_stop : stop a simulation whose response has settled (no oscillation to come) and repeat its
-        last state to the end, instead of integrating the rest (docs/model.md, "Stopping settled
-        simulations"): the GAW differs by less than the stop tolerances, the cost drops.
+        last state to the end, instead of integrating the rest
+        (:ref:`model-numerics-stopping-settled-simulations`): the GAW differs by less than the stop tolerances,
+        the cost drops.
     """
 
     mesh: str = "medium"

@@ -3,7 +3,7 @@
 factorisation, contact law), and the assembly of a :class:`SimResult` from the per-step arrays.
 
 Both time loops call exactly these functions, which is what keeps a lock-step row bit-identical to a
-scalar simulation. Hadwin et al. (2019), Sections 3 and 4.1; docs/model.md.
+scalar simulation. Hadwin et al. (2019), Sections 3 and 4.1; :ref:`model`.
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def flow_code(config: SimConfig) -> int:
     return FLOW_PAPER if config.flow == "paper" else FLOW_CONTINUOUS
 MIN_CYCLE_AMPLITUDE = 0.05  # mm^2
 BLOWUP = 1e-2           # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
-# Settled-response stop (SimConfig.early_stop; docs/model.md, "Stopping settled simulations"): windows of
+# Settled-response stop (SimConfig.early_stop; :ref:`model-numerics-stopping-settled-simulations`): windows of
 # 50 ms (longer than any period the model produces), quiet when the width moved by at most 10 nm
 # (1.7e-4 mm^2 of area) and no node moved faster than 1 mm/s (a phonating fold: ~0.1-0.5 m/s), nor faster
 # than in the window before.
@@ -66,7 +66,7 @@ def contact_law(p: Params, config: SimConfig, system: System) -> tuple[np.ndarra
     A layer of thickness h with the cover's modulus and viscosity, compressed by the overlap d of a
     node with the midline, pushes back with the pressure E_cover d / h + eta d' / h (uniaxial
     Kelvin-Voigt); the node carries it over its edge share. Both scale with the material parameters,
-    so the model's exact common-scale symmetry (docs/inference.md, "The common scale") is kept.
+    so the model's exact common-scale symmetry (:ref:`inference`, "The common scale") is kept.
     Zeros for the rigid ``contact="projection"`` (then unused).
     """
     m = system.sdx.size

@@ -17,7 +17,7 @@ Their sampling spread is estimated the way Wood's method needs it without repeat
 vector: each record is cut into ``n_blocks`` blocks, the statistics of each block give a block-to-block variance,
 and the variance of the whole-window statistic is taken as that over ``n_blocks`` (a block bootstrap; blocks of a
 few cycles each, so that cycle-to-cycle variation and measurement noise both enter). The observation's and the
-simulation's variances add. docs/model.md, "Aperiodic dynamics and the likelihood".
+simulation's variances add. :ref:`validation-continuous-model`.
 """
 from __future__ import annotations
 

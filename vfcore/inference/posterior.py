@@ -37,7 +37,7 @@ class Posterior:
     ess, pareto_k : diagnostics of the weights (for SMC: of the last reweighting step).
     log_evidence, log_evidence_se : ``log p(y)`` and its Monte Carlo standard error.
     n_simulations, n_failed : forward simulations run / failed.
-    predictive : per-draw model outputs (aligned GAW, flow, contact) for the rows
+    predictive : per-draw model outputs (aligned GAW, flow rate, contact) for the rows
         ``predictive_index`` of ``samples`` (None when the likelihood is not the FE model).
     area_scale : ``(k_lo, k_hi)`` of the problem's unknown area scale (``Problem.area_scale``), or None:
         the recording's areas are ``k`` times the model's (:meth:`recorded_gaws`).

@@ -25,7 +25,7 @@ the midline), and the lumping by halves stays the paper's:
   downstream of the narrowest node the factor is ``w_c``, the paper's blend weight.
 
 ``w(s) = s^2 (3 - 2 s)`` on [0, 1]. When the glottis is open wider than ``g_reg`` with one narrowest node and no
-narrowing behind the separation, every weight is 0 or 1 and the load equals the paper's to rounding. docs/model.md, "The continuous flow load".
+narrowing behind the separation, every weight is 0 or 1 and the load equals the paper's to rounding. :ref:`continuous-model`.
 """
 from __future__ import annotations
 

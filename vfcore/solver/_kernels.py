@@ -95,7 +95,7 @@ def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_
     below ``g_reg`` the open-glottis Bernoulli pressures are blended into the closed-glottis
     distribution (p_sub upstream of the minimum, p_sup downstream) with the weight
     ``w = s^2 (3 - 2 s)``, ``s = gmin / g_reg``, so the load is continuous through closure
-    (see docs/model.md, "Closure regularisation").
+    (see :ref:`model-closure-regularisation-a-deliberate-deviation`).
 
     xs, zs : (m,) current surface node coordinates (inferior -> superior), m.
     nxs, nzs : (m,) coordinates whose edges give the load directions (the reference
@@ -457,7 +457,7 @@ def integrate_coupled(stp, pat, mod, cpl, stop, mat, st, out):
     Arguments: the groups of :mod:`._args` (``stp`` Stepper, ``pat`` Pattern, ``mod`` Model, ``cpl`` Coupling,
     ``stop`` Stop, ``mat`` Matrices, ``st`` State, ``out`` Outputs), shapes as given there.
 
-    Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see docs/model.md). The flow
+    Incremental form: K_eff du = F - K u_n + M y1 + D y2 (see :ref:`model`). The flow
     load F is evaluated on the configuration at t_n. State u, v, a (n,) in the solver's
     dof ordering is advanced in place. Per step k (1..n_steps) writes out.width[k-1]
     (2 x min half gap, m), out.gsep[k-1] (half gap at separation, m; 0 when closed)
@@ -478,14 +478,14 @@ def integrate_coupled(stp, pat, mod, cpl, stop, mat, st, out):
 
     ``cpl.layer`` False: the paper's rigid midline (exact multipliers, then the inelastic projection);
     True: the compliant contact layer of :func:`contact_layer_ws` with per-node spring ``kc`` (m,), N/m^2,
-    and dashpot ``cc`` (m,), N s/m^2; no projection (``out.proj`` stays zero). docs/model.md, "Contact".
+    and dashpot ``cc`` (m,), N s/m^2; no projection (``out.proj`` stays zero). :ref:`model-contact`.
 
     Settled-response stop (``stop.window`` steps, 0 = off): the steps are cut into windows of
     ``stop.window``; a window is quiet when the glottal width varied by at most ``stop.width`` (m) over it,
     the largest nodal speed in it is at most ``stop.vel`` (m/s) and no larger than in the window before.
     After two quiet windows in a row the response has settled: the run stops, every per-step output of
     the remaining steps repeats the last step's (trajectories the last state), and ``out.stop[0]`` gets
-    the step (0 = ran to the end). docs/model.md, "Stopping settled simulations".
+    the step (0 = ran to the end). :ref:`model-numerics-stopping-settled-simulations`.
     """
     n = st.u.size
     m = pat.sdx.size
