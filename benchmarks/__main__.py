@@ -1,4 +1,5 @@
 """``python -m benchmarks NAME [ARGS...] [--table PATH]``: see :mod:`benchmarks.runner`."""
+
 import sys
 
 from benchmarks.runner import main

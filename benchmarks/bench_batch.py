@@ -4,6 +4,7 @@ fewer than ``MIN_LOCKSTEP`` rows to the scalar kernel). Prints medians of --reps
 
     OMP_NUM_THREADS=1 python benchmarks/bench_batch.py [--n 16] [--reps 3] [--mesh medium] [--dt 5e-5]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,11 +38,11 @@ def main() -> None:
     cfg = SimConfig(mesh=args.mesh, dt=args.dt)
     ps = [Params.from_array(r) for r in P]
     simulate(P[0], cfg)
-    _simulate_block(ps[:2], [cfg] * 2)       # compile / load caches
+    _simulate_block(ps[:2], [cfg] * 2)  # compile / load caches
 
     def lockstep(block: int) -> None:
         for s in range(0, len(ps), block):
-            _simulate_block(ps[s:s + block], [cfg] * len(ps[s:s + block]))
+            _simulate_block(ps[s : s + block], [cfg] * len(ps[s : s + block]))
 
     def per_sim(fn) -> float:
         ts = []
@@ -57,8 +58,10 @@ def main() -> None:
     for block in (1, 2, 3, 4, 6, 8, 16):
         t = per_sim(lambda: lockstep(block))
         print(f"lock-step block {block:2d}   : {t:8.1f} ms  ({t / scalar:.2f}x scalar)")
-    print(f"simulate_many, block 32 (blocks under {MIN_LOCKSTEP} rows scalar): "
-          f"{per_sim(lambda: simulate_many(P, cfg)):8.1f} ms")
+    print(
+        f"simulate_many, block 32 (blocks under {MIN_LOCKSTEP} rows scalar): "
+        f"{per_sim(lambda: simulate_many(P, cfg)):8.1f} ms"
+    )
 
 
 if __name__ == "__main__":

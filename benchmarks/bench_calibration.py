@@ -28,6 +28,7 @@ of an earlier run that lack it.
         --particles 100 --workers 2 --dt 5e-5 --contact layer --runs 3 --out DIR    # 3 runs pooled a twin
     ... --resume --out DIR           # after an interruption: keeps DIR's finished twins, runs the others
 """
+
 from __future__ import annotations
 
 import argparse
@@ -73,13 +74,26 @@ def regularity_flag(problem, theta, seed: int) -> dict:
     ``rough`` where a relative 1e-4 move's second difference exceeds 3 nats or the waveform does not repeat within
     4 cycles; ``smooth`` is neither. A check that cannot run sets both flags (the tool then vouches for nothing)."""
     from vfcore.diagnose.regularity import sensitivity
+
     try:
         s = sensitivity(problem, theta, seed=seed)
     except RuntimeError:
-        return {"irregular": True, "rough": True, "smooth": False, "regularity_max_change": None,
-                "max_second_difference": None, "aperiodicity": None}
-    return {"irregular": s.irregular, "rough": s.rough, "smooth": s.smooth, "regularity_max_change": s.max_change,
-            "max_second_difference": s.max_second_difference, "aperiodicity": s.aperiodicity}
+        return {
+            "irregular": True,
+            "rough": True,
+            "smooth": False,
+            "regularity_max_change": None,
+            "max_second_difference": None,
+            "aperiodicity": None,
+        }
+    return {
+        "irregular": s.irregular,
+        "rough": s.rough,
+        "smooth": s.smooth,
+        "regularity_max_change": s.max_change,
+        "max_second_difference": s.max_second_difference,
+        "aperiodicity": s.aperiodicity,
+    }
 
 
 def main(argv=None) -> int:
@@ -98,23 +112,47 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--chunk", type=int, default=16)
-    ap.add_argument("--prior-set", choices=("paper", "human"), default="paper",
-                    help="default bounds: the paper's Table 2 or the human set (docs/inference.md, 'Prior sets')")
-    ap.add_argument("--symmetry", choices=("auto", "off"), default="auto",
-                    help="auto: log-ratio walk and exact scale moves when all six scaled parameters are free")
+    ap.add_argument(
+        "--prior-set",
+        choices=("paper", "human"),
+        default="paper",
+        help="default bounds: the paper's Table 2 or the human set (docs/inference.md, 'Prior sets')",
+    )
+    ap.add_argument(
+        "--symmetry",
+        choices=("auto", "off"),
+        default="auto",
+        help="auto: log-ratio walk and exact scale moves when all six scaled parameters are free",
+    )
     ap.add_argument("--contact", default="projection", help="midline contact law (SimConfig.contact)")
-    ap.add_argument("--max-moves", type=int, default=None,
-                    help="SMC: most Metropolis moves per generation (the sampler's default when omitted)")
-    ap.add_argument("--runs", type=int, default=1,
-                    help="SMC: independent runs per twin, pooled (vfcore.inference.runs) by --run-rule; the "
-                         "combinations covered under every rule are recorded too")
-    ap.add_argument("--run-rule", choices=tuple(RUN_RULES), default="loglik",
-                    help="which runs are pooled (vfcore.inference.runs.RUN_RULES)")
-    ap.add_argument("--resume", action="store_true",
-                    help="keep the twins of --out's calibration_partial.json and run only the others")
+    ap.add_argument(
+        "--max-moves",
+        type=int,
+        default=None,
+        help="SMC: most Metropolis moves per generation (the sampler's default when omitted)",
+    )
+    ap.add_argument(
+        "--runs",
+        type=int,
+        default=1,
+        help="SMC: independent runs per twin, pooled (vfcore.inference.runs) by --run-rule; the "
+        "combinations covered under every rule are recorded too",
+    )
+    ap.add_argument(
+        "--run-rule",
+        choices=tuple(RUN_RULES),
+        default="loglik",
+        help="which runs are pooled (vfcore.inference.runs.RUN_RULES)",
+    )
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the twins of --out's calibration_partial.json and run only the others",
+    )
     ap.add_argument("--init-factor", type=int, default=1, help="SMC: first population = factor x particles")
-    ap.add_argument("--ids", default=None,
-                    help="comma-separated twin indices to run (0-based; twin i uses seed --seed + i)")
+    ap.add_argument(
+        "--ids", default=None, help="comma-separated twin indices to run (0-based; twin i uses seed --seed + i)"
+    )
     ap.add_argument("--out", default="bench_calibration_out")
     a = ap.parse_args(argv)
 
@@ -129,6 +167,7 @@ def main(argv=None) -> int:
     pool = None
     if a.workers > 1:
         import multiprocessing as mp
+
         pool = mp.get_context("spawn").Pool(a.workers)
     mapper = pool.imap if pool is not None else map
     combos = scale_invariant_combinations(prior.names)
@@ -144,9 +183,14 @@ def main(argv=None) -> int:
     try:
         ids = [int(t) for t in a.ids.split(",")] if a.ids else range(a.datasets)
         for r in rows:
-            if "rough" not in r:        # a row of an earlier version of this benchmark: add the product's check
-                r.update(regularity_flag(make_twin(prior, cfg, seed=a.seed + r["dataset"], sigma_e=a.sigma_e,
-                                                   n_obs=a.n_obs).problem, np.array(r["mean"]), a.seed + r["dataset"]))
+            if "rough" not in r:  # a row of an earlier version of this benchmark: add the product's check
+                r.update(
+                    regularity_flag(
+                        make_twin(prior, cfg, seed=a.seed + r["dataset"], sigma_e=a.sigma_e, n_obs=a.n_obs).problem,
+                        np.array(r["mean"]),
+                        a.seed + r["dataset"],
+                    )
+                )
         for i in ids:
             if any(r["dataset"] == i for r in rows):
                 continue
@@ -156,20 +200,29 @@ def main(argv=None) -> int:
                 warnings.simplefilter("ignore")
                 if a.sampler == "smc":
                     # the runs one by one, so that every pooling rule can be scored on the same runs
-                    runs = [smc(tw.problem, n_particles=a.particles, seed=s, map=mapper, chunk_size=a.chunk,
-                                symmetry="auto" if a.symmetry == "auto" else None, init_factor=a.init_factor,
-                                **({"max_moves": a.max_moves} if a.max_moves else {}))
-                            for s in run_seeds(a.seed + i, a.runs)]
+                    runs = [
+                        smc(
+                            tw.problem,
+                            n_particles=a.particles,
+                            seed=s,
+                            map=mapper,
+                            chunk_size=a.chunk,
+                            symmetry="auto" if a.symmetry == "auto" else None,
+                            init_factor=a.init_factor,
+                            **({"max_moves": a.max_moves} if a.max_moves else {}),
+                        )
+                        for s in run_seeds(a.seed + i, a.runs)
+                    ]
                     pooled = {r: pool_runs(runs, seed=a.seed + i, rule=r) for r in RUN_RULES} if a.runs > 1 else {}
                     post = pooled[a.run_rule] if pooled else runs[0]
                 else:
                     pooled = {}
-                    post = importance_sample(tw.problem, n=a.draws, seed=a.seed + i, map=mapper,
-                                             chunk_size=a.chunk * 4)
+                    post = importance_sample(tw.problem, n=a.draws, seed=a.seed + i, map=mapper, chunk_size=a.chunk * 4)
             wall = time.perf_counter() - t0
             # did the sampler find the truth's basin? (a twin's truth scores near the mode; a posterior far
             # below it is a mode-finding failure, not an honest posterior)
             from vfcore.inference import evaluate
+
             ll_truth = float(evaluate(tw.truth[None, :], tw.problem).loglik[0])
             pred = getattr(post, "predictive", None)
             ll_best = float(np.max(pred.loglik)) if pred is not None else float("nan")
@@ -181,41 +234,63 @@ def main(argv=None) -> int:
 
             def combo_cover(p):
                 # the pooled runs are equally weighted particles of equal-sized runs: plain quantiles
-                lc = np.log(p.samples) @ combo_w.T              # (n_draws, n_combos)
+                lc = np.log(p.samples) @ combo_w.T  # (n_draws, n_combos)
                 lo_, hi_ = np.quantile(lc, q, axis=0), np.quantile(lc, 1.0 - q, axis=0)
                 return (lo_ <= c_true) & (c_true <= hi_), (lc.mean(axis=0) - c_true) / lc.std(axis=0)
+
             c_cover, c_z = combo_cover(post)
             by_rule = {r: combo_cover(p)[0].tolist() for r, p in pooled.items()}
             per_run = [combo_cover(p)[0].tolist() for p in runs] if pooled else []
-            rows.append({"dataset": i, "truth": tw.truth.tolist(), "mean": post.mean.tolist(), "sd": post.sd.tolist(),
-                         "covered": cover.tolist(), "z": z.tolist(),
-                         "combo_covered": c_cover.tolist(), "combo_z": c_z.tolist(),
-                         "n_simulations": post.n_simulations, "n_failed": post.n_failed, "loglik_truth": ll_truth,
-                         "loglik_best": ll_best, "ess": post.ess, "wall_s": wall, "warnings": post.warnings,
-                         "runs": post.info.get("runs"), "combo_covered_by_rule": by_rule,
-                         "combo_covered_per_run": per_run,
-                         **regularity_flag(tw.problem, post.mean, a.seed + i)})
-            print(f"[{i:2d}] covered {int(cover.sum())}/{cover.size}  |z|max={np.max(np.abs(z)):.2f}  "
-                  f"sims={post.n_simulations} failed={post.n_failed} ESS={post.ess:.0f} {wall:.1f} s  "
-                  f"loglik truth {ll_truth:.1f} best {ll_best:.1f}"
-                  + (f"  combinations {int(c_cover.sum())}/{c_cover.size}" if combos else ""), flush=True)
+            rows.append(
+                {
+                    "dataset": i,
+                    "truth": tw.truth.tolist(),
+                    "mean": post.mean.tolist(),
+                    "sd": post.sd.tolist(),
+                    "covered": cover.tolist(),
+                    "z": z.tolist(),
+                    "combo_covered": c_cover.tolist(),
+                    "combo_z": c_z.tolist(),
+                    "n_simulations": post.n_simulations,
+                    "n_failed": post.n_failed,
+                    "loglik_truth": ll_truth,
+                    "loglik_best": ll_best,
+                    "ess": post.ess,
+                    "wall_s": wall,
+                    "warnings": post.warnings,
+                    "runs": post.info.get("runs"),
+                    "combo_covered_by_rule": by_rule,
+                    "combo_covered_per_run": per_run,
+                    **regularity_flag(tw.problem, post.mean, a.seed + i),
+                }
+            )
+            print(
+                f"[{i:2d}] covered {int(cover.sum())}/{cover.size}  |z|max={np.max(np.abs(z)):.2f}  "
+                f"sims={post.n_simulations} failed={post.n_failed} ESS={post.ess:.0f} {wall:.1f} s  "
+                f"loglik truth {ll_truth:.1f} best {ll_best:.1f}"
+                + (f"  combinations {int(c_cover.sum())}/{c_cover.size}" if combos else ""),
+                flush=True,
+            )
             # the rows so far, so an interrupted run keeps what it measured
-            partial.write_text(json.dumps({"names": list(prior.names),
-                                                                      "combinations": combo_names, "rows": rows}))
+            partial.write_text(json.dumps({"names": list(prior.names), "combinations": combo_names, "rows": rows}))
     finally:
         if pool is not None:
             pool.close()
             pool.join()
     cov = np.array([r["covered"] for r in rows])
     zs = np.array([r["z"] for r in rows])
-    print(f"\n## {int(100 * a.level)}% credible-interval coverage over {len(rows)} twin data sets "
-          f"({a.sampler}, mesh={a.mesh}, dt={a.dt:g}, sigma_e={a.sigma_e})")
+    print(
+        f"\n## {int(100 * a.level)}% credible-interval coverage over {len(rows)} twin data sets "
+        f"({a.sampler}, mesh={a.mesh}, dt={a.dt:g}, sigma_e={a.sigma_e})"
+    )
     print(f"{'param':<8} {'covered':>8} {'rate':>6} {'95% CI':>15} {'mean z':>7} {'sd z':>6}")
     for j, n in enumerate(prior.names):
         k = int(cov[:, j].sum())
         lo, hi = clopper_pearson(k, cov.shape[0])
-        print(f"{n:<8} {k:>4}/{cov.shape[0]:<3} {k / cov.shape[0]:6.2f} [{lo:.2f}, {hi:.2f}]  "
-              f"{zs[:, j].mean():+7.2f} {zs[:, j].std(ddof=1):6.2f}")
+        print(
+            f"{n:<8} {k:>4}/{cov.shape[0]:<3} {k / cov.shape[0]:6.2f} [{lo:.2f}, {hi:.2f}]  "
+            f"{zs[:, j].mean():+7.2f} {zs[:, j].std(ddof=1):6.2f}"
+        )
     if combos:
         ccov = np.array([r["combo_covered"] for r in rows])
         czs = np.array([r["combo_z"] for r in rows])
@@ -224,22 +299,30 @@ def main(argv=None) -> int:
             k = int(ccov[:, j].sum())
             lo, hi = clopper_pearson(k, ccov.shape[0])
             # median |z|: a collapsed run has a zero spread and an unbounded z
-            print(f"{name:<20} {k:>4}/{ccov.shape[0]:<3} {k / ccov.shape[0]:6.2f} [{lo:.2f}, {hi:.2f}]  "
-                  f"median |z| {np.median(np.abs(czs[:, j])):.2f}")
+            print(
+                f"{name:<20} {k:>4}/{ccov.shape[0]:<3} {k / ccov.shape[0]:6.2f} [{lo:.2f}, {hi:.2f}]  "
+                f"median |z| {np.median(np.abs(czs[:, j])):.2f}"
+            )
         # split by what the fit itself says, never by the truth: the job's regularity check, and with several runs
         # whether they agree (no run left out by the pooling rule: runs that settle on different best
         # log-likelihoods show that the sampler missed a basin at least once)
-        flag = np.array([not r["smooth"] for r in rows])          # every row has it: --resume adds it first
+        flag = np.array([not r["smooth"] for r in rows])  # every row has it: --resume adds it first
         splits = [("fits checked smooth", ~flag), ("fits flagged rough", flag)]
         if any(r.get("runs") for r in rows):
             agree = np.array([bool(r.get("runs")) and all(x["kept"] for x in r["runs"]) for r in rows])
-            splits += [("runs agree", agree), ("runs disagree", ~agree),
-                       ("smooth, runs agree", agree & ~flag), ("rough or disagree", ~(agree & ~flag))]
+            splits += [
+                ("runs agree", agree),
+                ("runs disagree", ~agree),
+                ("smooth, runs agree", agree & ~flag),
+                ("rough or disagree", ~(agree & ~flag)),
+            ]
         for label, sel in splits:
             k, n = int(ccov[sel].sum()), int(ccov[sel].size)
             lo, hi = clopper_pearson(k, n) if n else (math.nan, math.nan)
-            print(f"{label:<24} {int(sel.sum()):>2} twins: combinations {k}/{n}"
-                  + (f" {k / n:.2f} [{lo:.2f}, {hi:.2f}]" if n else ""))
+            print(
+                f"{label:<24} {int(sel.sum()):>2} twins: combinations {k}/{n}"
+                + (f" {k / n:.2f} [{lo:.2f}, {hi:.2f}]" if n else "")
+            )
     pooled_cov = {"parameters": (int(cov.sum()), cov.size)}
     if combos:
         pooled_cov["combinations"] = (int(ccov.sum()), ccov.size)
@@ -255,15 +338,26 @@ def main(argv=None) -> int:
             tail = "(no verdict: the common scale is the prior's)" if what == "parameters" else ""
         print(f"pooled {what:<12} {k:>4}/{n:<3} {k / n:6.2f} [{lo:.2f}, {hi:.2f}]  {tail}")
     gap = np.array([r["loglik_truth"] - r["loglik_best"] for r in rows])
-    print(f"truth above the best particle by > 10 nats (the sampler missed the truth's basin): "
-          f"{int(np.sum(gap > 10))} of {len(rows)}")
+    print(
+        f"truth above the best particle by > 10 nats (the sampler missed the truth's basin): "
+        f"{int(np.sum(gap > 10))} of {len(rows)}"
+    )
     sims = [r["n_simulations"] for r in rows]
-    print(f"simulations per data set: mean {np.mean(sims):.0f} (min {min(sims)}, max {max(sims)}); "
-          f"total wall {time.perf_counter() - t_all:.0f} s with {a.workers} workers")
-    (out / "calibration.json").write_text(json.dumps({"names": list(prior.names), "combinations": combo_names,
-                                                      "rows": rows,
-                                                      **{f"pooled_{w}_coverage": k / n
-                                                         for w, (k, n) in pooled_cov.items()}}, indent=1))
+    print(
+        f"simulations per data set: mean {np.mean(sims):.0f} (min {min(sims)}, max {max(sims)}); "
+        f"total wall {time.perf_counter() - t_all:.0f} s with {a.workers} workers"
+    )
+    (out / "calibration.json").write_text(
+        json.dumps(
+            {
+                "names": list(prior.names),
+                "combinations": combo_names,
+                "rows": rows,
+                **{f"pooled_{w}_coverage": k / n for w, (k, n) in pooled_cov.items()},
+            },
+            indent=1,
+        )
+    )
     return 0
 
 

@@ -10,6 +10,7 @@ refinements (ratio 2): p = log2(|q1 - q2| / |q2 - q3|), 'n/a' when the differenc
 "rel. diff." = |q(finest) - q(second finest)| / |q(finest)|.
 Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_contact.py [--draws]
 """
+
 from __future__ import annotations
 
 import math
@@ -24,9 +25,16 @@ from vfcore import TABLE3, Params, SimConfig, simulate  # noqa: E402
 from vfcore.solver.system import get_system  # noqa: E402
 
 DURATION, DISCARD = 0.35, 0.15
-COLS = (("f0 (Hz)", "{:.2f}"), ("peak (mm2)", "{:.2f}"), ("CQ", "{:.3f}"), ("max contact (Pa)", "{:.0f}"),
-        ("mean cycle max (Pa)", "{:.0f}"), ("impulse (mN s/m)", "{:.4f}"), ("p in contact (Pa)", "{:.1f}"),
-        ("duration (ms)", "{:.3f}"))
+COLS = (
+    ("f0 (Hz)", "{:.2f}"),
+    ("peak (mm2)", "{:.2f}"),
+    ("CQ", "{:.3f}"),
+    ("max contact (Pa)", "{:.0f}"),
+    ("mean cycle max (Pa)", "{:.0f}"),
+    ("impulse (mN s/m)", "{:.4f}"),
+    ("p in contact (Pa)", "{:.1f}"),
+    ("duration (ms)", "{:.3f}"),
+)
 
 
 #: prior draws that close (see the protocol above), paper units in PARAM_NAMES order
@@ -44,9 +52,16 @@ def quantities(cfg: SimConfig, p: Params = TABLE3) -> list[float]:
     y = r.cycles if r.ok else None
     if y is None or y.period.size == 0:
         return [math.nan] * len(COLS)
-    return [r.f0, y.peak_area.mean(), y.closed_quotient.mean(), y.max_contact_pressure_unconverged.max(),
-            y.max_contact_pressure_unconverged.mean(), 1e3 * y.contact_impulse.mean(),
-            y.contact_pressure_in_contact.mean(), 1e3 * y.contact_duration.mean()]
+    return [
+        r.f0,
+        y.peak_area.mean(),
+        y.closed_quotient.mean(),
+        y.max_contact_pressure_unconverged.max(),
+        y.max_contact_pressure_unconverged.mean(),
+        1e3 * y.contact_impulse.mean(),
+        y.contact_pressure_in_contact.mean(),
+        1e3 * y.contact_duration.mean(),
+    ]
 
 
 def orders(q: list[float]) -> str:
@@ -70,8 +85,10 @@ def table(labels: list[str], rows: list[list[float]], head: str, with_orders: bo
 
 
 def dt_table(p: Params, name: str, contact: str, element: str) -> None:
-    rows = [quantities(SimConfig(dt=dt, duration=DURATION, discard=DISCARD, element=element, contact=contact), p)
-            for dt in DTS]
+    rows = [
+        quantities(SimConfig(dt=dt, duration=DURATION, discard=DISCARD, element=element, contact=contact), p)
+        for dt in DTS
+    ]
     table([f"{dt:.3g}" for dt in DTS], rows, f"{name}: dt (s), medium, {element}, {contact}", True)
 
 
@@ -81,16 +98,21 @@ def mesh_table(p: Params, name: str, contact: str, dt: float = 5e-5) -> None:
         for mesh in MESHES:
             n_tri = get_system(mesh, 0.4995, element).mesh.n_triangles
             labels.append(f"{mesh} ({n_tri}) {element}")
-            rows.append(quantities(SimConfig(mesh=mesh, element=element, dt=dt, duration=DURATION, discard=DISCARD,
-                                             contact=contact), p))
-    print(f"{name}, {contact}: meshes at dt {dt:g} (not nested; 'rel. diff.' compares the last two rows: "
-          "xfine and xxfine anp)")
+            rows.append(
+                quantities(
+                    SimConfig(mesh=mesh, element=element, dt=dt, duration=DURATION, discard=DISCARD, contact=contact), p
+                )
+            )
+    print(
+        f"{name}, {contact}: meshes at dt {dt:g} (not nested; 'rel. diff.' compares the last two rows: "
+        "xfine and xxfine anp)"
+    )
     table(labels, rows, "mesh (triangles) element", False)
 
 
 def main(draws: bool) -> None:
     print(__doc__.split("Usage")[0])
-    simulate(TABLE3, SimConfig(duration=0.01, discard=0.0))     # JIT warm-up
+    simulate(TABLE3, SimConfig(duration=0.01, discard=0.0))  # JIT warm-up
     for contact in ("projection", "layer"):
         for element in ("p1", "anp"):
             dt_table(TABLE3, "Table 3", contact, element)

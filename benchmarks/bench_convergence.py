@@ -4,6 +4,7 @@ Observed order from three successive refinements (ratio 2 in dt):
 p = log2(|q1 - q2| / |q2 - q3|); 'n/a' when the differences do not shrink.
 Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_convergence.py
 """
+
 from __future__ import annotations
 
 import math
@@ -31,7 +32,7 @@ def _row(label, r):
 
 
 def main() -> None:
-    simulate(TABLE3, SimConfig(duration=0.01, discard=0.0))     # JIT warm-up
+    simulate(TABLE3, SimConfig(duration=0.01, discard=0.0))  # JIT warm-up
     print("Time step (medium mesh, Table 3, 550 ms, last 300 ms kept)")
     print(f"{'dt (s)':>10s} {'f0 (Hz)':>9s} {'peak (mm2)':>11s} {'cv peak':>8s} {'min (mm2)':>9s}")
     dts = [1e-4, 5e-5, 2.5e-5, 1.25e-5]
@@ -49,7 +50,9 @@ def main() -> None:
     print("  observed orders:", ", ".join(f"{math.log2(d[i] / d[i + 1]):.2f}" for i in range(len(d) - 1)))
     print()
     print("Mesh (dt 5e-5, Table 3)")
-    print(f"{'mesh':>8s} {'tri':>5s} {'dofs':>5s} {'f0 (Hz)':>9s} {'peak (mm2)':>11s} {'cv peak':>8s} {'min (mm2)':>9s}")
+    print(
+        f"{'mesh':>8s} {'tri':>5s} {'dofs':>5s} {'f0 (Hz)':>9s} {'peak (mm2)':>11s} {'cv peak':>8s} {'min (mm2)':>9s}"
+    )
     mrows = []
     for m in ("coarse", "medium", "fine"):
         s = get_system(m, 0.4995)

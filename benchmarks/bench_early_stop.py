@@ -13,6 +13,7 @@ particles and seed 1: simulations, wall time, and the largest change of a poster
 of the posterior sd.
 Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_early_stop.py [n_draws]
 """
+
 from __future__ import annotations
 
 import os
@@ -38,7 +39,7 @@ def main(n: int) -> None:
     base = ens.sim_config().replace(fps=2000.0)
     twin = simulate(TABLE3, base)
     problem = Problem(obs_gaw=twin.gaw, fps=twin.fps, prior=ens.prior_obj(), sigma_e=1.0, config=base)
-    simulate_many(rows[:2], base, block=2)                      # JIT warm-up
+    simulate_many(rows[:2], base, block=2)  # JIT warm-up
     simulate_many(rows[:2], base.replace(early_stop=True), block=2)
     out = {}
     for flag in (False, True):
@@ -62,15 +63,19 @@ def main(n: int) -> None:
     print(f"| phonate (full run) | {int(phon_full.sum())} |")
     print(f"| stopped early | {int(stopped.sum())} ({stopped.mean():.1%}) |")
     if when:
-        print(f"| stop time, median (5-95 %) | {np.median(when) * 1e3:.0f} ms "
-              f"({np.percentile(when, 5) * 1e3:.0f}-{np.percentile(when, 95) * 1e3:.0f}) |")
+        print(
+            f"| stop time, median (5-95 %) | {np.median(when) * 1e3:.0f} ms "
+            f"({np.percentile(when, 5) * 1e3:.0f}-{np.percentile(when, 95) * 1e3:.0f}) |"
+        )
     print(f"| simulated time skipped | {skipped / (n * base.duration):.1%} of {n * base.duration:.0f} s |")
     print(f"| wall time, off / on | {t_full:.1f} s / {t_cut:.1f} s ({t_full / t_cut:.2f}x) |")
     print(f"| stopped draws that phonate in the full run | {int((stopped & phon_full).sum())} |")
     print(f"| phonation verdicts changed | {int((phon_full != phon_cut).sum())} |")
     print(f"| largest GAW change of a stopped draw | {dg:.2e} mm^2 |")
-    print(f"| largest log-likelihood change (twin at Table 3) | {dll.max():.2e} nats "
-          f"(over {fin.sum()} draws with finite log-likelihood) |")
+    print(
+        f"| largest log-likelihood change (twin at Table 3) | {dll.max():.2e} nats "
+        f"(over {fin.sum()} draws with finite log-likelihood) |"
+    )
     print()
     free = ("E_body", "E_cover", "p_sub")
     prior = Prior({k: TABLE2_BOUNDS[k] for k in free}, {k: v for k, v in TABLE3.as_dict().items() if k not in free})

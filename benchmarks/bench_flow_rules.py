@@ -9,6 +9,7 @@ the box of ``bench_batch.py``) simulated by the lock-step kernel in blocks of ``
 
     OMP_NUM_THREADS=1 python benchmarks/bench_flow_rules.py [--meshes coarse,medium,fine] [--dt 5e-5]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,7 +31,10 @@ HI = np.array([15.0, 950.0, 3.0, 1800.0, 1200.0, 7.0, 8.4])
 
 def table3(meshes, dt) -> None:
     from vfcore import TABLE3, SimConfig, simulate
-    print("| mesh | flow | contact | f0 (Hz) | peak (mm²) | trough (mm²) | closed quotient | contact impulse (mN s/m) |")
+
+    print(
+        "| mesh | flow | contact | f0 (Hz) | peak (mm²) | trough (mm²) | closed quotient | contact impulse (mN s/m) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for mesh in meshes:
         for flow, contact in RULES:
@@ -42,18 +46,22 @@ def table3(meshes, dt) -> None:
                 continue
             cq = np.nanmean(r.cycles.closed_quotient) if r.cycles.closed_quotient.size else float("nan")
             imp = np.nanmean(r.cycles.contact_impulse) * 1e3 if r.cycles.contact_impulse.size else float("nan")
-            print(f"| {mesh} | {flow} | {contact} | {r.f0:.2f} | {np.max(r.gaw):.2f} | {np.min(r.gaw):.2f} | "
-                  f"{cq:.2f} | {imp:.3f} |", flush=True)
+            print(
+                f"| {mesh} | {flow} | {contact} | {r.f0:.2f} | {np.max(r.gaw):.2f} | {np.min(r.gaw):.2f} | "
+                f"{cq:.2f} | {imp:.3f} |",
+                flush=True,
+            )
 
 
 def cost(mesh, dt, n, block, reps) -> None:
     from vfcore import Params, SimConfig
     from vfcore.batch import simulate_many
+
     rng = np.random.default_rng(3)
     rows = np.array([Params.from_array(r).as_array() for r in LO + (HI - LO) * rng.random((n, 7))])
     best = {rule: np.inf for rule in RULES}
     cfgs = {rule: SimConfig(mesh=mesh, dt=dt, flow=rule[0], contact=rule[1], early_stop=False) for rule in RULES}
-    for rule in RULES:                       # compile outside the timing
+    for rule in RULES:  # compile outside the timing
         simulate_many(rows[:block], cfgs[rule].replace(duration=0.01, discard=0.0), block=block)
     for _ in range(reps):
         for rule in RULES:

@@ -8,6 +8,7 @@ several block sizes; and simulations per second on all cores (one lock-step work
 
 Usage: OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_forward.py [--runs 5] [--blocks 8,16,32]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -72,7 +73,7 @@ def main() -> None:
     p = TABLE3
     system = get_system(cfg.mesh, cfg.nu)
     n_steps = int(round(cfg.duration / cfg.dt))
-    simulate(p, cfg)                                   # JIT warm-up (numba cache)
+    simulate(p, cfg)  # JIT warm-up (numba cache)
     total, setup = [], []
     for _ in range(args.runs):
         t0 = time.perf_counter()
@@ -99,8 +100,10 @@ def main() -> None:
     us_step = med(total) / n_steps * 1e6
     flops_prod = 2 * 3 * nnz
     flops_solve = 2 * 2 * nl
-    print(f"mesh {cfg.mesh}: n = {n} free dofs, CSR nnz {nnz}, Cholesky factor nnz {nl} "
-          f"(minimum-degree order), surface nodes {m}; {n_steps} steps")
+    print(
+        f"mesh {cfg.mesh}: n = {n} free dofs, CSR nnz {nnz}, Cholesky factor nnz {nl} "
+        f"(minimum-degree order), surface nodes {m}; {n_steps} steps"
+    )
     print(f"{'scalar simulate()':46s} value")
     for k, v in [
         ("simulate() 550 ms, dt 5e-5 (median ms)", f"{med(total) * 1e3:.1f}"),
@@ -110,8 +113,10 @@ def main() -> None:
         ("  two triangular solves, ms / 11k steps", f"{t_solve * 1e3:.1f}"),
         ("  rest (loads, contact, update), ms", f"{(med(total) - med(setup) - t_prod - t_solve) * 1e3:.1f}"),
         ("  flops per step (products + solves)", f"{flops_prod + flops_solve}"),
-        ("  GFLOP/s products / solves", f"{flops_prod * n_steps / t_prod / 1e9:.2f} / "
-                                        f"{flops_solve * n_steps / t_solve / 1e9:.2f}"),
+        (
+            "  GFLOP/s products / solves",
+            f"{flops_prod * n_steps / t_prod / 1e9:.2f} / {flops_solve * n_steps / t_solve / 1e9:.2f}",
+        ),
         ("  working set per sample (KiB)", f"{(3 * nnz * 8 + nnz * 8 + nl * 16 + n * m * 8 + 6 * n * 8) / 1024:.0f}"),
     ]:
         print(f"{k:46s} {v}")
@@ -132,18 +137,22 @@ def main() -> None:
         t0 = time.perf_counter()
         _solves_many(n_steps, system.Lp, system.Lj, Lxb, rb)
         ts_solve = (time.perf_counter() - t0) / B
-        print(f"  block {B:3d}: {med(ts) * 1e3:6.1f} ms per simulation "
-              f"(of which triangular solves {ts_solve * 1e3:5.1f} ms); {1 / med(ts):5.1f} sims/s per core")
+        print(
+            f"  block {B:3d}: {med(ts) * 1e3:6.1f} ms per simulation "
+            f"(of which triangular solves {ts_solve * 1e3:5.1f} ms); {1 / med(ts):5.1f} sims/s per core"
+        )
     ncpu = os.cpu_count() or 1
     P = _rows(args.batch)
     B = max(blocks)
-    simulate_batch(P[: 2 * ncpu], cfg, n_workers=ncpu, block=2)      # warm the workers' JIT cache
+    simulate_batch(P[: 2 * ncpu], cfg, n_workers=ncpu, block=2)  # warm the workers' JIT cache
     t0 = time.perf_counter()
     res_p = simulate_batch(P, cfg, n_workers=ncpu, block=B)
     t1 = time.perf_counter()
     assert all(x.ok for x in res_p)
-    print(f"all cores: {args.batch} simulations on {ncpu} worker processes, block {B}: "
-          f"{args.batch / (t1 - t0):.1f} sims/s (incl. process start-up)")
+    print(
+        f"all cores: {args.batch} simulations on {ncpu} worker processes, block {B}: "
+        f"{args.batch / (t1 - t0):.1f} sims/s (incl. process start-up)"
+    )
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ Sizes whose predicted time would overrun ``--budget-s`` are skipped with a line 
 GPU part is skipped with the reason. ``--quick``: coarse mesh, 40 ms, small sizes (a check of this script,
 e.g. with NUMBA_ENABLE_CUDASIM=1).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,7 +39,7 @@ from vfcore import TABLE3, SimConfig  # noqa: E402
 from vfcore.batch import prepare_block, simulate_group_cuda, simulate_many  # noqa: E402
 from vfcore.params import Params  # noqa: E402
 
-LO = np.array([9.0, 250.0, 0.5, 400.0, 950.0, 1.0, 7.4])        # paper priors, paper units
+LO = np.array([9.0, 250.0, 0.5, 400.0, 950.0, 1.0, 7.4])  # paper priors, paper units
 HI = np.array([15.0, 950.0, 3.0, 1800.0, 1200.0, 7.0, 8.4])
 CPU_BLOCK = 32
 #: H100 SXM HBM3 bandwidth, B/s, where the device's attributes cannot be read
@@ -53,7 +54,8 @@ def _cpu_chunk(rows: np.ndarray, cfg: SimConfig):
 def cpu_baseline(P: np.ndarray, cfg: SimConfig, workers: int):
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
-    chunks = [P[i:i + CPU_BLOCK] for i in range(0, len(P), CPU_BLOCK)]
+
+    chunks = [P[i : i + CPU_BLOCK] for i in range(0, len(P), CPU_BLOCK)]
     # spawn: the children never inherit a CUDA context
     with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as ex:
         list(ex.map(_cpu_chunk, [P[:2]] * workers, [cfg.replace(duration=cfg.dt * 4, discard=0.0)] * workers))
@@ -76,6 +78,7 @@ def bytes_per_step(system) -> tuple[int, int]:
 def bandwidth() -> tuple[float, str]:
     try:
         from numba import cuda
+
         dev = cuda.get_current_device()
         clock_khz = dev.MEMORY_CLOCK_RATE
         bus_bits = dev.GLOBAL_MEMORY_BUS_WIDTH
@@ -105,26 +108,33 @@ def main() -> None:
     P = LO + (HI - LO) * np.random.default_rng(0).random((n_draw, 7))
     P = np.array([Params.from_array(r).as_array() for r in P])
     n_steps = int(round(cfg.duration / cfg.dt))
-    print(f"== GPU ensemble backend: mesh {cfg.mesh}, dt {cfg.dt:g} s, {cfg.duration * 1e3:g} ms ({n_steps} steps), "
-          f"contact {cfg.contact}, early_stop {cfg.early_stop} ==")
+    print(
+        f"== GPU ensemble backend: mesh {cfg.mesh}, dt {cfg.dt:g} s, {cfg.duration * 1e3:g} ms ({n_steps} steps), "
+        f"contact {cfg.contact}, early_stop {cfg.early_stop} =="
+    )
 
     # CPU lock-step on every core first: the pool's children are spawned before this process touches CUDA
-    simulate_many(P[:2], cfg.replace(duration=cfg.dt * 4, discard=0.0), block=2)   # compile / load the caches once
-    cpu, t_cpu = cpu_baseline(P[:args.cpu_n], cfg, args.workers)
+    simulate_many(P[:2], cfg.replace(duration=cfg.dt * 4, discard=0.0), block=2)  # compile / load the caches once
+    cpu, t_cpu = cpu_baseline(P[: args.cpu_n], cfg, args.workers)
     rate_cpu = args.cpu_n / t_cpu
-    print(f"CPU lock-step, {args.workers} processes, block {CPU_BLOCK}: {args.cpu_n} simulations in {t_cpu:.1f} s "
-          f"= {rate_cpu:.1f} simulations/s ({sum(r[0] for r in cpu)} ok)")
+    print(
+        f"CPU lock-step, {args.workers} processes, block {CPU_BLOCK}: {args.cpu_n} simulations in {t_cpu:.1f} s "
+        f"= {rate_cpu:.1f} simulations/s ({sum(r[0] for r in cpu)} ok)"
+    )
 
     from vfcore.gpu import cuda_status, integrate_cuda, is_simulator, max_launch
     from vfcore.solver.system import get_system
+
     system = get_system(cfg.mesh, cfg.nu, cfg.element)
     lo_b, hi_b = bytes_per_step(system)
     ok, what = cuda_status()
     if not ok:
         print(f"GPU: skipped: {what}")
-        print(f"bytes per step and sample: {lo_b / 1e3:.0f} kB (matrix and factor values) to {hi_b / 1e3:.0f} kB "
-              f"(with the vectors); at {H100_BANDWIDTH / 1e12:.2f} TB/s the memory-bound limit is "
-              f"{H100_BANDWIDTH / (hi_b * n_steps):.0f}-{H100_BANDWIDTH / (lo_b * n_steps):.0f} simulations/s")
+        print(
+            f"bytes per step and sample: {lo_b / 1e3:.0f} kB (matrix and factor values) to {hi_b / 1e3:.0f} kB "
+            f"(with the vectors); at {H100_BANDWIDTH / 1e12:.2f} TB/s the memory-bound limit is "
+            f"{H100_BANDWIDTH / (hi_b * n_steps):.0f}-{H100_BANDWIDTH / (lo_b * n_steps):.0f} simulations/s"
+        )
         return
     print(f"GPU: {what}")
 
@@ -135,14 +145,16 @@ def main() -> None:
     # agreement, end to end on the CPU's draws
     tim: dict = {}
     t = time.perf_counter()
-    gpu = simulate_group_cuda([Params.from_array(r) for r in P[:args.cpu_n]], [cfg] * args.cpu_n, timings=tim)
+    gpu = simulate_group_cuda([Params.from_array(r) for r in P[: args.cpu_n]], [cfg] * args.cpu_n, timings=tim)
     t_agree = time.perf_counter() - t
     same_ok = sum(a[0] == b.ok for a, b in zip(cpu, gpu))
     both = [(a[2], b.gaw) for a, b in zip(cpu, gpu) if a[0] and b.ok]
     dmax = max((float(np.max(np.abs(x - y))) for x, y in both), default=0.0)
     ident = sum(np.array_equal(x, y) for x, y in both)
-    print(f"agreement on {args.cpu_n} draws: same ok flag {same_ok}/{args.cpu_n}, max |dGAW| {dmax:.3g} mm^2, "
-          f"bit-identical GAW {ident}/{len(both)} (GPU end to end {args.cpu_n / t_agree:.1f} simulations/s)")
+    print(
+        f"agreement on {args.cpu_n} draws: same ok flag {same_ok}/{args.cpu_n}, max |dGAW| {dmax:.3g} mm^2, "
+        f"bit-identical GAW {ident}/{len(both)} (GPU end to end {args.cpu_n / t_agree:.1f} simulations/s)"
+    )
 
     # the integration alone
     d = min(args.distinct, len(P))
@@ -153,26 +165,32 @@ def main() -> None:
     projection = cfg.contact != "layer"
     cap_dev = max_launch(system, n_steps, nmod, blk.n_traj, projection, host=False)
     cap_host = max_launch(system, n_steps, nmod, blk.n_traj, projection)
-    print(f"set-up on the CPU: {setup_each * 1e3:.2f} ms per draw (one core); one launch holds at most {cap_dev} "
-          f"samples (GPU memory), {cap_host} when the outputs come back (host memory)")
+    print(
+        f"set-up on the CPU: {setup_each * 1e3:.2f} ms per draw (one core); one launch holds at most {cap_dev} "
+        f"samples (GPU memory), {cap_host} when the outputs come back (host memory)"
+    )
     rate = None
     used = 0
     for size in sizes:
         left = args.budget_s - (time.perf_counter() - t_start)
         if rate is not None and size / rate > 0.5 * left:
-            print(f"integration, {size} simulations: skipped (predicted {size / rate:.0f} s, {left:.0f} s of the "
-                  f"budget left)")
+            print(
+                f"integration, {size} simulations: skipped (predicted {size / rate:.0f} s, {left:.0f} s of the "
+                f"budget left)"
+            )
             continue
         sel = np.arange(size) % d
         tk: dict = {}
         t = time.perf_counter()
         for lo in range(0, size, cap_dev):
-            integrate_cuda(blk, sel[lo:lo + cap_dev], tk, fetch=False)
+            integrate_cuda(blk, sel[lo : lo + cap_dev], tk, fetch=False)
         dt = time.perf_counter() - t
         rate = size / tk["kernel_s"]
         used = max(used, tk["device_bytes"])
-        print(f"integration, {size} simulations ({-(-size // cap_dev)} launches, {min(size, d)} distinct draws): "
-              f"{rate:.0f} simulations/s on the GPU, {size / dt:.0f} with the uploads")
+        print(
+            f"integration, {size} simulations ({-(-size // cap_dev)} launches, {min(size, d)} distinct draws): "
+            f"{rate:.0f} simulations/s on the GPU, {size / dt:.0f} with the uploads"
+        )
 
     for size in e2e_sizes:
         left = args.budget_s - (time.perf_counter() - t_start)
@@ -192,12 +210,14 @@ def main() -> None:
     left = args.budget_s - (time.perf_counter() - t_start)
     per = t_agree / args.cpu_n
     if args.is_n * per * 1.5 > left:
-        print(f"importance sampling, n={args.is_n}: skipped (predicted {args.is_n * per * 1.5:.0f} s, {left:.0f} s "
-              "left)")
+        print(
+            f"importance sampling, n={args.is_n}: skipped (predicted {args.is_n * per * 1.5:.0f} s, {left:.0f} s left)"
+        )
     else:
         from vfcore.inference import Prior, Problem
         from vfcore.inference.device_eval import DeviceEvaluator
         from vfcore.inference.importance import draw_prior, map_evaluate, reduce_importance
+
         is_cfg = cfg.replace(duration=0.12, discard=0.02) if args.quick else cfg
         truth = simulate_many(np.array([TABLE3.as_array()]), is_cfg)[0]
         # a recording two thirds as long as the kept simulation, so every draw can be aligned to it
@@ -211,14 +231,16 @@ def main() -> None:
         t_ev = time.perf_counter() - t
         try:
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore")          # a small ensemble is degenerate; its cost is the point
+                warnings.simplefilter("ignore")  # a small ensemble is degenerate; its cost is the point
                 reduce_importance(th, ev, prior.names, 0, obs_gaw=pb.obs_compared, fps=pb.fps)
             red = f"reduction {time.perf_counter() - t - t_ev:.1f} s"
         except ImportError as exc:
             red = f"reduction not run ({exc})"
         t_red = time.perf_counter() - t - t_ev
-        line = (f"importance sampling, n={args.is_n}, {prior.ndim} parameters: {t_ev + t_red:.1f} s end to end "
-                f"(evaluation {t_ev:.1f} s, {red}; {int(ev.ok.sum())} ok)")
+        line = (
+            f"importance sampling, n={args.is_n}, {prior.ndim} parameters: {t_ev + t_red:.1f} s end to end "
+            f"(evaluation {t_ev:.1f} s, {red}; {int(ev.ok.sum())} ok)"
+        )
         if args.is_n < 50_000:
             line += f"; n=50,000 extrapolated (evaluation linear in n): {t_ev * 50_000 / args.is_n + t_red:.0f} s"
         print(line)
@@ -226,9 +248,11 @@ def main() -> None:
 
     bw, how = bandwidth()
     print(f"GPU memory of the largest launch: {used / 2**30:.2f} GiB")
-    print(f"bytes per step and sample: {lo_b / 1e3:.0f} kB (matrix and factor values) to {hi_b / 1e3:.0f} kB (with "
-          f"the vectors); memory-bound limit at {bw / 1e12:.2f} TB/s ({how}): "
-          f"{bw / (hi_b * n_steps):.0f}-{bw / (lo_b * n_steps):.0f} simulations/s")
+    print(
+        f"bytes per step and sample: {lo_b / 1e3:.0f} kB (matrix and factor values) to {hi_b / 1e3:.0f} kB (with "
+        f"the vectors); memory-bound limit at {bw / 1e12:.2f} TB/s ({how}): "
+        f"{bw / (hi_b * n_steps):.0f}-{bw / (lo_b * n_steps):.0f} simulations/s"
+    )
     if is_simulator():
         print("(numba's CUDA simulator: GPU figures are CPU timings of the simulator, not a GPU's)")
     print(f"total {time.perf_counter() - t_start:.0f} s")

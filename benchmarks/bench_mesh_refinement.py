@@ -24,6 +24,7 @@ again at dt 2.5e-5 s. ``--epithelium E_KPA,H_MM`` adds the epithelium membrane (
     python benchmarks/bench_mesh_refinement.py --points "Table 3,C,D" --meshes coarse,medium,fine,xfine,xxfine \
         --flow continuous
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,6 +53,7 @@ def register_built(folder: Path, names) -> None:
     import vfcore.config as config
     import vfcore.mesh as mesh
     from vfcore.mesh.geometry import build_mesh
+
     for name in SHIPPED:
         shutil.copy(mesh.DATA / f"{name}.npz", folder / f"{name}.npz")
     for name in names:
@@ -62,26 +64,58 @@ def register_built(folder: Path, names) -> None:
     config.MESHES = SHIPPED + tuple(names)
 
 
-def row(p, mesh: str, element: str, dt: float, sep_ratio: float | None = None,
-        epithelium: tuple[float, float] | None = None, flow: str = "paper") -> list:
+def row(
+    p,
+    mesh: str,
+    element: str,
+    dt: float,
+    sep_ratio: float | None = None,
+    epithelium: tuple[float, float] | None = None,
+    flow: str = "paper",
+) -> list:
     from vfcore import SimConfig, simulate
     from vfcore.mesh import load_mesh
+
     t0 = time.perf_counter()
     extra = {} if sep_ratio is None else {"sep_ratio": sep_ratio}
     if epithelium is not None:
         extra.update(epithelium_E_kpa=epithelium[0], epithelium_h_mm=epithelium[1])
-    r = simulate(p, SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", flow=flow,
-                                **extra))
+    r = simulate(
+        p,
+        SimConfig(mesh=mesh, dt=dt, duration=0.35, discard=0.15, element=element, contact="layer", flow=flow, **extra),
+    )
     if not r.ok:
-        return [mesh, load_mesh(mesh).n_triangles, element, dt, math.nan, math.nan, math.nan, math.nan, math.nan,
-                math.nan, time.perf_counter() - t0]
+        return [
+            mesh,
+            load_mesh(mesh).n_triangles,
+            element,
+            dt,
+            math.nan,
+            math.nan,
+            math.nan,
+            math.nan,
+            math.nan,
+            math.nan,
+            time.perf_counter() - t0,
+        ]
     y = r.cycles
     closed = y is not None and y.period.size > 0
     cq = float(y.closed_quotient.mean()) if closed else 0.0
     imp = 1e3 * float(y.contact_impulse.mean()) if closed else 0.0
     pic = float(y.contact_pressure_in_contact.mean()) if closed else 0.0
-    return [mesh, load_mesh(mesh).n_triangles, element, dt, r.f0, float(r.gaw.min()), float(r.gaw.max()), cq, imp,
-            pic, time.perf_counter() - t0]
+    return [
+        mesh,
+        load_mesh(mesh).n_triangles,
+        element,
+        dt,
+        r.f0,
+        float(r.gaw.min()),
+        float(r.gaw.max()),
+        cq,
+        imp,
+        pic,
+        time.perf_counter() - t0,
+    ]
 
 
 def main(argv=None) -> int:
@@ -91,27 +125,45 @@ def main(argv=None) -> int:
     ap.add_argument("--dt-check", action="store_true")
     ap.add_argument("--flow", default="paper", help="SimConfig.flow: the paper's node-wise load or the continuous one")
     ap.add_argument("--meshes", default=",".join(SHIPPED + ("x3fine",)))
-    ap.add_argument("--sep-ratio", type=float, default=None,
-                    help="flow separation at this multiple of the narrowest gap (default: SimConfig.sep_ratio's)")
-    ap.add_argument("--epithelium", default=None, metavar="E_KPA,H_MM",
-                    help="add the epithelium membrane (SimConfig.epithelium_E_kpa, epithelium_h_mm; default none)")
+    ap.add_argument(
+        "--sep-ratio",
+        type=float,
+        default=None,
+        help="flow separation at this multiple of the narrowest gap (default: SimConfig.sep_ratio's)",
+    )
+    ap.add_argument(
+        "--epithelium",
+        default=None,
+        metavar="E_KPA,H_MM",
+        help="add the epithelium membrane (SimConfig.epithelium_E_kpa, epithelium_h_mm; default none)",
+    )
     a = ap.parse_args(argv)
     epi = None if a.epithelium is None else tuple(float(v) for v in a.epithelium.split(","))
     if epi is not None and len(epi) != 2:
         ap.error(f"--epithelium takes E_KPA,H_MM, got {a.epithelium!r}")
     np.seterr(all="ignore")
     from vfcore import TABLE3
-    points = {"Table 3": TABLE3, "A": replace(TABLE3, E_cover=850.0, p_sub=800.0),
-              "B": replace(TABLE3, E_cover=950.0, p_sub=1000.0),
-              "C": replace(TABLE3, E_cover=500.0, p_sub=1200.0), "D": replace(TABLE3, E_cover=700.0, p_sub=1400.0)}
+
+    points = {
+        "Table 3": TABLE3,
+        "A": replace(TABLE3, E_cover=850.0, p_sub=800.0),
+        "B": replace(TABLE3, E_cover=950.0, p_sub=1000.0),
+        "C": replace(TABLE3, E_cover=500.0, p_sub=1200.0),
+        "D": replace(TABLE3, E_cover=700.0, p_sub=1400.0),
+    }
     with tempfile.TemporaryDirectory() as tmp:
         meshes = [m.strip() for m in a.meshes.split(",")]
         register_built(Path(tmp), [m for m in BUILT if m in meshes or (a.dt_check and m == "x3fine")])
         from vfcore import SimConfig
-        print(f"flow {a.flow}, sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}, epithelium "
-              + ("none" if epi is None else f"{epi[0]:g} kPa, {epi[1]:g} mm"))
-        print("| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
-              "impulse (mN s/m) | p in contact (Pa) | wall (s) |")
+
+        print(
+            f"flow {a.flow}, sep_ratio {SimConfig().sep_ratio if a.sep_ratio is None else a.sep_ratio:g}, epithelium "
+            + ("none" if epi is None else f"{epi[0]:g} kPa, {epi[1]:g} mm")
+        )
+        print(
+            "| point | mesh (triangles) | element | dt (s) | f0 (Hz) | min area (mm2) | max area (mm2) | CQ | "
+            "impulse (mN s/m) | p in contact (Pa) | wall (s) |"
+        )
         print("|---|---|---|---|---|---|---|---|---|---|---|")
         for name in a.points.split(","):
             p = points[name.strip()]
@@ -121,8 +173,11 @@ def main(argv=None) -> int:
                     runs += [("xxfine", 2.5e-5), ("x3fine", 2.5e-5)]
                 for mesh, dt in runs:
                     m, n, el, h, f0, lo, hi, cq, imp, pic, wall = row(p, mesh, element, dt, a.sep_ratio, epi, a.flow)
-                    print(f"| {name} | {m} ({n}) | {el} | {h:g} | {f0:.2f} | {lo:.2f} | {hi:.2f} | {cq:.3f} | "
-                          f"{imp:.3f} | {pic:.1f} | {wall:.0f} |", flush=True)
+                    print(
+                        f"| {name} | {m} ({n}) | {el} | {h:g} | {f0:.2f} | {lo:.2f} | {hi:.2f} | {cq:.3f} | "
+                        f"{imp:.3f} | {pic:.1f} | {wall:.0f} |",
+                        flush=True,
+                    )
     return 0
 
 

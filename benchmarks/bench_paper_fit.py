@@ -11,6 +11,7 @@ first, so neither timing pays for compilation).
 
     python benchmarks/bench_paper_fit.py [--out runs/paper_fit] [--src PATH] [--workers 2]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,6 +34,7 @@ def write_twin(path: Path, seed: int) -> None:
     from vfcore.inference.prior import Prior
     from vfcore.inference.twin import make_twin
     from vfvideo.io import write_gaw_csv
+
     prior = Prior.default({"x0": TABLE3.x0})
     cfg = SimConfig(mesh="medium", dt=5e-5)
     twin = make_twin(prior, cfg, seed=seed, truth=[getattr(TABLE3, n) for n in prior.names])
@@ -41,10 +43,28 @@ def write_twin(path: Path, seed: int) -> None:
 
 
 def infer(src: Path, gaw: Path, out: Path, particles: int, workers: int) -> float:
-    env = {**os.environ, "PYTHONPATH": str(src), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-           "NUMBA_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-    argv = [sys.executable, "-c", "import sys; from service.cli import main; sys.argv[0] = 'vfinfer'; main()",
-            "infer", str(gaw), *FIT, "--particles", str(particles), "--workers", str(workers), "--out", str(out)]
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(src),
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "NUMBA_NUM_THREADS": "1",
+        "MPLBACKEND": "Agg",
+    }
+    argv = [
+        sys.executable,
+        "-c",
+        "import sys; from service.cli import main; sys.argv[0] = 'vfinfer'; main()",
+        "infer",
+        str(gaw),
+        *FIT,
+        "--particles",
+        str(particles),
+        "--workers",
+        str(workers),
+        "--out",
+        str(out),
+    ]
     t0 = time.perf_counter()
     subprocess.run(argv, env=env, check=True, cwd=out.parent, stdout=subprocess.DEVNULL)
     return time.perf_counter() - t0
@@ -67,8 +87,10 @@ def main() -> None:
     wall = infer(src, gaw, out / "fit", 100, a.workers)
     t = json.loads((out / "fit" / "timings.json").read_text())
     digest = hashlib.sha256((out / "fit" / "samples.csv").read_bytes()).hexdigest()[:16]
-    print(f"source {src}\nwall {wall:.1f} s (simulating {t['simulate_s']:.1f} s, reducing {t['reduce_s']:.1f} s), "
-          f"{t['n_simulations']} simulations on {a.workers} workers; samples.csv sha256 {digest}")
+    print(
+        f"source {src}\nwall {wall:.1f} s (simulating {t['simulate_s']:.1f} s, reducing {t['reduce_s']:.1f} s), "
+        f"{t['n_simulations']} simulations on {a.workers} workers; samples.csv sha256 {digest}"
+    )
 
 
 if __name__ == "__main__":

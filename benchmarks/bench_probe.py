@@ -12,6 +12,7 @@ drifts by up to 1.8x between minutes, which the interleaving keeps out of the ra
 
     OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python benchmarks/bench_probe.py
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,8 +29,10 @@ from vfcore.config import SimConfig  # noqa: E402
 from vfcore.inference import Prior  # noqa: E402
 from vfcore.inference.importance import draw_prior  # noqa: E402
 
-MODELS = {"coarse, dt 1e-4 s": SimConfig(mesh="coarse", dt=1e-4, duration=0.55, discard=0.25, fps=2000.0),
-          "medium, dt 5e-5 s": SimConfig(mesh="medium", dt=5e-5, duration=0.55, discard=0.25, fps=4000.0)}
+MODELS = {
+    "coarse, dt 1e-4 s": SimConfig(mesh="coarse", dt=1e-4, duration=0.55, discard=0.25, fps=2000.0),
+    "medium, dt 5e-5 s": SimConfig(mesh="medium", dt=5e-5, duration=0.55, discard=0.25, fps=4000.0),
+}
 
 
 def main(argv=None) -> int:
@@ -45,7 +48,7 @@ def main(argv=None) -> int:
     for name, cfg in MODELS.items():
         simulate_many(rows[:1], cfg.replace(duration=cfg.dt * 4, discard=0.0), block=1)
         whole, probed = [], {p: [] for p in ["old", *probes]}
-        for _ in range(a.reps):                 # interleaved: the machine's drift falls on both alike
+        for _ in range(a.reps):  # interleaved: the machine's drift falls on both alike
             t = time.perf_counter()
             simulate_many(rows, cfg, block=32)
             whole.append((time.perf_counter() - t) / len(rows))
@@ -55,8 +58,10 @@ def main(argv=None) -> int:
         for key, ps in probed.items():
             r = np.array(ps) / np.array(whole)
             label = "8 rows, 0.05 s" if key == "old" else f"{key[0]} rows, {key[1]:g} s"
-            print(f"{name:<20} {label:<16} {np.median(ps) * 1e3:9.1f} {np.median(whole) * 1e3:9.1f} "
-                  f"{np.median(r):10.2f} ({r.min():.2f}-{r.max():.2f})")
+            print(
+                f"{name:<20} {label:<16} {np.median(ps) * 1e3:9.1f} {np.median(whole) * 1e3:9.1f} "
+                f"{np.median(r):10.2f} ({r.min():.2f}-{r.max():.2f})"
+            )
     return 0
 
 

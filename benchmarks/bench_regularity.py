@@ -14,6 +14,7 @@ of the paper's Table 2 box (x0 at Table 3), as the six-parameter calibrations do
     python benchmarks/bench_regularity.py --n 64 --seed 7
     python benchmarks/bench_regularity.py --n 64 --seed 7 --six --dt 5e-5 --contact layer
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,8 +30,8 @@ import numpy as np  # noqa: E402
 
 from benchmarks.concealed.generate import BASE_CONFIG, public_fixed  # noqa: E402
 
-FIXED = public_fixed()       # the concealed suites' fixed parameters
-CFG = BASE_CONFIG            # and their forward model: coarse mesh, dt 1e-4, 0.55 s with 0.25 s discarded
+FIXED = public_fixed()  # the concealed suites' fixed parameters
+CFG = BASE_CONFIG  # and their forward model: coarse mesh, dt 1e-4, 0.55 s with 0.25 s discarded
 BANDS = ((400.0, 800.0), (800.0, 1200.0), (1200.0, 1500.0), (1500.0, 1800.0))
 
 
@@ -39,11 +40,12 @@ def recording(theta, prior, cfg, *, sigma: float, seed: int, n: int = 500, fps: 
     noise of sd ``sigma`` (``seed``); ``None`` when the simulation fails."""
     from vfcore.forward import simulate
     from vfcore.result import HR_OVERSAMPLE
+
     r = simulate(prior.to_params(theta), cfg)
     if not r.ok:
         return None
     step = int(round(cfg.fps * HR_OVERSAMPLE / fps))
-    y = np.asarray(r.gaw_hr[::step][5:5 + n], float)
+    y = np.asarray(r.gaw_hr[::step][5 : 5 + n], float)
     return y + sigma * np.random.default_rng(seed).standard_normal(y.size)
 
 
@@ -66,6 +68,7 @@ def main(argv=None) -> int:
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
     from vfcore.params import TABLE3
+
     prior = Prior.default(fixed={"x0": TABLE3.x0} if a.six else FIXED)
     model = {k: v for k, v in (("dt", a.dt), ("contact", a.contact)) if v is not None}
     cfg = dc.replace(CFG, duration=a.duration, discard=a.discard, **model)
@@ -86,20 +89,27 @@ def main(argv=None) -> int:
             continue
         s = sensitivity(pb, t, seed=i)
         rows.append((t, s))
-        print(f"{i:3d} {np.round(t, 1)} roughness {s.max_change:.3g} nats, second difference "
-              f"{s.max_second_difference:.3g}, aperiodicity {s.aperiodicity:.3g}"
-              f"{'  IRREGULAR' if s.irregular else ''}{'  ROUGH' if s.rough else ''}", flush=True)
+        print(
+            f"{i:3d} {np.round(t, 1)} roughness {s.max_change:.3g} nats, second difference "
+            f"{s.max_second_difference:.3g}, aperiodicity {s.aperiodicity:.3g}"
+            f"{'  IRREGULAR' if s.irregular else ''}{'  ROUGH' if s.rough else ''}",
+            flush=True,
+        )
     names = prior.names
     p = np.array([t[names.index("p_sub")] for t, _ in rows])
     irr = np.array([s.irregular for _, s in rows], dtype=bool)
     rough = np.array([s.rough for _, s in rows], dtype=bool)
-    print(f"\n{a.n} draws: {failed} failed, {still} did not oscillate, {len(rows)} oscillated, "
-          f"{int(irr.sum())} irregular, {int(rough.sum())} rough, {int((irr | rough).sum())} either "
-          f"({time.perf_counter() - t0:.0f} s)")
+    print(
+        f"\n{a.n} draws: {failed} failed, {still} did not oscillate, {len(rows)} oscillated, "
+        f"{int(irr.sum())} irregular, {int(rough.sum())} rough, {int((irr | rough).sum())} either "
+        f"({time.perf_counter() - t0:.0f} s)"
+    )
     for lo, hi in BANDS:
         m = (p >= lo) & (p < hi)
-        print(f"  p_sub {lo:6.0f}-{hi:6.0f} Pa: {int(irr[m].sum())} irregular, {int(rough[m].sum())} rough, "
-              f"{int((irr | rough)[m].sum())} either, of {int(m.sum())}")
+        print(
+            f"  p_sub {lo:6.0f}-{hi:6.0f} Pa: {int(irr[m].sum())} irregular, {int(rough[m].sum())} rough, "
+            f"{int((irr | rough)[m].sum())} either, of {int(m.sum())}"
+        )
     return 0
 
 

@@ -8,6 +8,7 @@ simulation, and checks that the read-back log-likelihoods and GAWs equal the sim
 
     python benchmarks/bench_resume_store.py [--draws 40] [--chunk 20]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,12 +39,16 @@ def main(argv=None) -> int:
     cfg = SimConfig(mesh="coarse", dt=1e-4, duration=DURATION_S, discard=DISCARD_S)
     run = simulate(TABLE3, cfg)
     y = np.asarray(run.gaw_hr[::HR_OVERSAMPLE][:400])
-    pb = Problem(y, 2000.0, Prior.default(fixed={k: v for k, v in TABLE3.as_dict().items()
-                                                 if k not in ("E_body", "E_cover", "p_sub")}),
-                 config=cfg, sigma_e=1.0)
+    pb = Problem(
+        y,
+        2000.0,
+        Prior.default(fixed={k: v for k, v in TABLE3.as_dict().items() if k not in ("E_body", "E_cover", "p_sub")}),
+        config=cfg,
+        sigma_e=1.0,
+    )
     fn = batch_function(pb)
     thetas = draw_prior(pb.prior, a.draws, seed=11)
-    map_evaluate(fn, thetas[:2], chunk_size=a.chunk)            # compile and warm the kernels
+    map_evaluate(fn, thetas[:2], chunk_size=a.chunk)  # compile and warm the kernels
 
     def timed(m):
         t0 = time.perf_counter()
@@ -60,14 +65,20 @@ def main(argv=None) -> int:
         size = sum(p.stat().st_size for p in root.rglob("*.pkl"))
     finally:
         shutil.rmtree(root, ignore_errors=True)
-    same = all(np.array_equal(getattr(plain, n), getattr(x, n), equal_nan=True)
-               for x in (written, read) for n in ("loglik", "gaw") if getattr(plain, n) is not None)
+    same = all(
+        np.array_equal(getattr(plain, n), getattr(x, n), equal_nan=True)
+        for x in (written, read)
+        for n in ("loglik", "gaw")
+        if getattr(plain, n) is not None
+    )
     parts = cold.misses
     print(f"{a.draws} draws in {parts} parts of <= {a.chunk}; compared GAW {y.size} frames")
     print(f"builtin map          {ms_plain:8.2f} ms per simulation")
-    print(f"store, simulated     {ms_cold:8.2f} ms per simulation "
-          f"(overhead {(ms_cold - ms_plain) * a.draws / parts:+.1f} ms per part, "
-          f"{100 * (ms_cold / ms_plain - 1):+.1f} %)")
+    print(
+        f"store, simulated     {ms_cold:8.2f} ms per simulation "
+        f"(overhead {(ms_cold - ms_plain) * a.draws / parts:+.1f} ms per part, "
+        f"{100 * (ms_cold / ms_plain - 1):+.1f} %)"
+    )
     print(f"store, read back     {ms_warm:8.3f} ms per simulation ({warm.hits} parts read, {warm.misses} simulated)")
     print(f"store size           {size / a.draws / 1024:8.1f} KiB per simulation")
     print(f"read back == simulated (loglik, GAW): {same}")

@@ -11,6 +11,7 @@ the prior draws (those that do not phonate are counted apart).
 
     OMP_NUM_THREADS=1 python benchmarks/bench_rough_flag.py [--mesh coarse] [--dt 5e-5] [--draws 64]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,6 +31,7 @@ RULES = (("paper", "projection"), ("continuous", "layer"))
 def flags(prior, cfg, truths=None, seeds=()):
     from vfcore.diagnose.regularity import sensitivity
     from vfcore.inference import make_twin
+
     out, silent = [], 0
     items = [(s, None) for s in seeds] + [(4000 + k, t) for k, t in enumerate(truths if truths is not None else [])]
     for seed, truth in items:
@@ -64,11 +66,14 @@ def main(argv=None) -> int:
     from vfcore.config import SimConfig
     from vfcore.inference import Prior
     from vfcore.params import TABLE3
+
     prior = Prior.default(fixed={"x0": TABLE3.as_dict()["x0"]})
     draws = prior.sample(a.draws, np.random.default_rng(4))
     print(f"{a.mesh} mesh, dt {a.dt:g}: the rough flag of vfcore.diagnose.regularity.sensitivity")
-    print("| rule, truths | flagged rough | largest second difference unflagged (nats) | largest aperiodicity "
-          "unflagged (nats) | not phonating |")
+    print(
+        "| rule, truths | flagged rough | largest second difference unflagged (nats) | largest aperiodicity "
+        "unflagged (nats) | not phonating |"
+    )
     print("|---|---|---|---|---|")
     for flow, contact in RULES:
         cfg = SimConfig(mesh=a.mesh, dt=a.dt, flow=flow, contact=contact)

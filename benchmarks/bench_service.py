@@ -14,6 +14,7 @@ assertion flakes on a loaded machine; the test keeps a load-independent bound).
 (draw, evaluate in chunks, reduce in the driver; no store, no HTTP).  "service" = POST /jobs,
 poll GET /jobs/{id} every 50 ms until done, GET the posterior.  Prints figures; asserts nothing.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -56,24 +57,35 @@ def main() -> None:
         spec_d = toy_spec(n=a.n, seed=1, delay=a.delay)
     else:
         from vfcore.data import demo_spec_dict  # noqa: F401  (shipped demo observation)
+
         spec_d = demo_spec_dict(n=a.n)
     spec = JobSpec.model_validate(spec_d)
     problem = spec.to_problem()
     cs = chunk_size_for(spec)
     print(f"model={a.model} n={a.n} chunk_size={cs} workers={a.workers}x1 thread")
-    with LocalCluster(n_workers=a.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
-            Client(cl) as client, tempfile.TemporaryDirectory() as tmp:
+    with (
+        LocalCluster(n_workers=a.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl,
+        Client(cl) as client,
+        tempfile.TemporaryDirectory() as tmp,
+    ):
+
         def dask_map(fn, items):
             return client.gather(client.map(fn, list(items), pure=False))
 
         settings = Settings(data_dir=Path(tmp), users=TOKENS, allow_toy_model=True)
-        app = create_app(settings, client=client)   # its lifespan warms the workers (imports, JIT)
+        app = create_app(settings, client=client)  # its lifespan warms the workers (imports, JIT)
         direct_t, svc_t = [], []
         with ServerThread(app) as srv, httpx.Client(base_url=srv.url, timeout=60) as http:
             for rep in range(a.repeat):
                 t0 = time.perf_counter()
-                post = importance_sample(evaluator_for(spec, problem), problem.prior, spec.n_simulations, spec.seed,
-                                         map=dask_map, chunk_size=cs)
+                post = importance_sample(
+                    evaluator_for(spec, problem),
+                    problem.prior,
+                    spec.n_simulations,
+                    spec.seed,
+                    map=dask_map,
+                    chunk_size=cs,
+                )
                 direct_t.append(time.perf_counter() - t0)
                 t0 = time.perf_counter()
                 jid = http.post("/jobs", json=spec_d, headers=auth("alice")).json()["id"]
@@ -83,12 +95,16 @@ def main() -> None:
                 svc_t.append(time.perf_counter() - t0)
                 st = http.get(f"/jobs/{jid}", headers=auth("alice")).json()
                 same = np.allclose([r["mean"] for r in summ["table"]], post.mean, rtol=0, atol=0)
-                print(f"rep {rep}: direct {direct_t[-1]:.2f} s   service {svc_t[-1]:.2f} s "
-                      f"(simulate {st['stats']['simulate_s']:.2f} s, reduce+figures {st['stats']['reduce_s']:.2f} s)"
-                      f"   overhead {100 * (svc_t[-1] / direct_t[-1] - 1):+.1f} %   same posterior: {same}")
+                print(
+                    f"rep {rep}: direct {direct_t[-1]:.2f} s   service {svc_t[-1]:.2f} s "
+                    f"(simulate {st['stats']['simulate_s']:.2f} s, reduce+figures {st['stats']['reduce_s']:.2f} s)"
+                    f"   overhead {100 * (svc_t[-1] / direct_t[-1] - 1):+.1f} %   same posterior: {same}"
+                )
     d, s = min(direct_t), min(svc_t)
-    print(f"best of {a.repeat}: direct {d:.2f} s, service {s:.2f} s -> overhead {100 * (s / d - 1):+.1f} % "
-          f"({a.n} simulations, {a.n / s:.0f} sims/s through the service)")
+    print(
+        f"best of {a.repeat}: direct {d:.2f} s, service {s:.2f} s -> overhead {100 * (s / d - 1):+.1f} % "
+        f"({a.n} simulations, {a.n / s:.0f} sims/s through the service)"
+    )
 
 
 def status_load(workers: int, n_jobs: int = 20, target_ms: float = 250.0) -> None:
@@ -102,10 +118,14 @@ def status_load(workers: int, n_jobs: int = 20, target_ms: float = 250.0) -> Non
 
     from service.main import create_app
     from service.settings import Settings
+
     users = list(TOKENS)
     specs = [toy_spec(n=240, seed=100 + i, delay=0.004) for i in range(n_jobs)]
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
-            Client(cl) as client, tempfile.TemporaryDirectory() as tmp:
+    with (
+        LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl,
+        Client(cl) as client,
+        tempfile.TemporaryDirectory() as tmp,
+    ):
         app = create_app(Settings(data_dir=Path(tmp), users=TOKENS, allow_toy_model=True), client=client)
         with ServerThread(app) as srv, httpx.Client(base_url=srv.url, timeout=60) as http:
             ids: list = [None] * n_jobs
@@ -113,6 +133,7 @@ def status_load(workers: int, n_jobs: int = 20, target_ms: float = 250.0) -> Non
             def submit(i):
                 with httpx.Client(base_url=srv.url, timeout=60) as h:
                     ids[i] = h.post("/jobs", json=specs[i], headers=auth(users[i % 3])).json()["id"]
+
             t_start = time.time()
             threads = [threading.Thread(target=submit, args=(i,)) for i in range(n_jobs)]
             for t in threads:
@@ -129,9 +150,11 @@ def status_load(workers: int, n_jobs: int = 20, target_ms: float = 250.0) -> Non
             wall = time.time() - t_start
     ms = np.array(lat) * 1e3
     p50, p95 = np.percentile(ms, [50, 95])
-    print(f"{n_jobs} jobs x 240 sims on {workers} workers: wall {wall:.1f} s, states {sorted(set(states))}; "
-          f"{ms.size} status reads while busy: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {ms.max():.1f} ms; "
-          f"target p95 < {target_ms:g} ms: {'met' if p95 < target_ms else 'NOT met'}")
+    print(
+        f"{n_jobs} jobs x 240 sims on {workers} workers: wall {wall:.1f} s, states {sorted(set(states))}; "
+        f"{ms.size} status reads while busy: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {ms.max():.1f} ms; "
+        f"target p95 < {target_ms:g} ms: {'met' if p95 < target_ms else 'NOT met'}"
+    )
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ turn and the total turns.
 :mod:`vfcore.inference.cycle_stats` (the twin's observation against the last 400 frames of the simulated GAW)
 instead of the aligned frame-by-frame one.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-TURN_TOL = 0.5     # nats: smaller differences are treated as flat
+TURN_TOL = 0.5  # nats: smaller differences are treated as flat
 
 
 def turns(loglik: np.ndarray, tol: float = TURN_TOL) -> int:
@@ -55,8 +56,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--contact", default="projection", help="SimConfig.contact")
     ap.add_argument("--flow", default="paper", help="SimConfig.flow")
-    ap.add_argument("--likelihood", default="frames", choices=("frames", "stats"),
-                    help="the aligned frame-by-frame likelihood, or the summary-statistics one")
+    ap.add_argument(
+        "--likelihood",
+        default="frames",
+        choices=("frames", "stats"),
+        help="the aligned frame-by-frame likelihood, or the summary-statistics one",
+    )
     ap.add_argument("--dt", type=float, default=1e-4)
     ap.add_argument("--rho-inf", type=float, default=1.0, help="SimConfig.rho_inf (1 = the paper's Newmark rule)")
     ap.add_argument("--mesh", default="coarse")
@@ -70,11 +75,12 @@ def main(argv=None) -> int:
     from vfcore.inference import Prior, evaluate, make_twin
     from vfcore.params import TABLE3
 
-    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=0.55, contact=a.contact, flow=a.flow,
-                    rho_inf=a.rho_inf)
+    cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=0.55, contact=a.contact, flow=a.flow, rho_inf=a.rho_inf)
     prior = Prior.default(fixed={"x0": TABLE3.as_dict()["x0"]})
     ts = np.linspace(-a.span, a.span, a.points)
-    print(f"flow={a.flow} contact={a.contact} dt={a.dt:g} rho_inf={a.rho_inf:g} mesh={a.mesh} likelihood={a.likelihood}: {a.points} points over ±{a.span} in log-ratio")
+    print(
+        f"flow={a.flow} contact={a.contact} dt={a.dt:g} rho_inf={a.rho_inf:g} mesh={a.mesh} likelihood={a.likelihood}: {a.points} points over ±{a.span} in log-ratio"
+    )
     print("| twin | p_sub (Pa) | turns | largest step (nats) | range (nats) |")
     print("|---|---|---|---|---|")
     counts = []
@@ -87,6 +93,7 @@ def main(argv=None) -> int:
             if a.likelihood == "stats":
                 from vfcore.forward import simulate_batch
                 from vfcore.inference.cycle_stats import CycleStatsLikelihood
+
                 lik = CycleStatsLikelihood(tw.problem.obs_gaw, cfg.fps, sigma_e=1.0)
                 rs = simulate_batch(np.array([prior.to_params(t).as_array() for t in th]), cfg)
                 ll = np.array([lik(r.gaw) if r.ok else -np.inf for r in rs])
@@ -99,8 +106,10 @@ def main(argv=None) -> int:
         p_sub = tw.truth[list(prior.names).index("p_sub")]
         print(f"| {i} | {p_sub:.0f} | {k} | {step:.1f} | {rng:.1f} |", flush=True)
     counts = np.array(counts)
-    print(f"\nflow={a.flow} contact={a.contact} dt={a.dt:g} rho_inf={a.rho_inf:g} mesh={a.mesh} likelihood={a.likelihood}: {int(np.sum(counts <= 1))} of {counts.size} twins smooth "
-          f"(at most one turn); {int(counts.sum())} turns in all")
+    print(
+        f"\nflow={a.flow} contact={a.contact} dt={a.dt:g} rho_inf={a.rho_inf:g} mesh={a.mesh} likelihood={a.likelihood}: {int(np.sum(counts <= 1))} of {counts.size} twins smooth "
+        f"(at most one turn); {int(counts.sum())} turns in all"
+    )
     return 0
 
 

@@ -10,6 +10,7 @@ assumption whose consequences the reach check spells out (:ref:`validation-video
 Prints the extraction, the reach verdicts at 4000 and the chosen fps (calibrated and not), the `vfinfer infer`
 command and its output, and a closing statement of what the fit does and does not establish.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,15 +32,36 @@ NOMINAL_PX_PER_MM = 24.4
 #: the configuration of the shipped human-set reach ensemble, so that the check is exact
 REACH_CONFIG = dict(mesh="coarse", dt=5e-5, duration=0.55, discard=0.25)
 #: the fit's: the same mesh and step, 0.1 s simulated after a 0.1 s transient (the clip lasts 47 frames)
-FIT_OPTIONS = ["--prior-set", "human", "--uncalibrated", "--noise", "marginal", "--mesh", "coarse", "--dt", "5e-5",
-               "--duration", "0.2", "--discard", "0.1", "--fix", "E_lig=15", "--fix", "rho=1050", "--fix", "eta=3",
-               "--fix", "x0=8.4"]
+FIT_OPTIONS = [
+    "--prior-set",
+    "human",
+    "--uncalibrated",
+    "--noise",
+    "marginal",
+    "--mesh",
+    "coarse",
+    "--dt",
+    "5e-5",
+    "--duration",
+    "0.2",
+    "--discard",
+    "0.1",
+    "--fix",
+    "E_lig=15",
+    "--fix",
+    "rho=1050",
+    "--fix",
+    "eta=3",
+    "--fix",
+    "x0=8.4",
+]
 UNCALIBRATED = (0.25, 4.0)
 
 
 def extract(clip: Path, fps: float):
     """The GAW of the clip at an assumed frame rate (``vfvideo.extract_gaw``, nominal px/mm)."""
     from vfvideo import extract_gaw
+
     return extract_gaw(clip, fps=fps, px_per_mm=NOMINAL_PX_PER_MM, fmax=1000.0)
 
 
@@ -51,20 +73,41 @@ def reach_verdicts(area, fps_values) -> list[dict]:
     from vfcore.inference.prior import Prior
     from vfcore.inference.reach import reach_for
     from vfcore.measures import estimate_f0
+
     cfg, prior = SimConfig(**REACH_CONFIG), Prior.default(prior_set="human")
     out = []
     for fps in fps_values:
         for scale in (None, UNCALIBRATED):
             v = reach_for(area, fps, cfg, prior, area_scale=scale)
-            out.append({"fps": fps, "f0_hz": float(estimate_f0(area, fps, fmax=1000.0)), "area_scale": scale,
-                        "verdict": v.verdict, "message": v.message})
+            out.append(
+                {
+                    "fps": fps,
+                    "f0_hz": float(estimate_f0(area, fps, fmax=1000.0)),
+                    "area_scale": scale,
+                    "verdict": v.verdict,
+                    "message": v.message,
+                }
+            )
     return out
 
 
 def fit(csv: Path, out: Path, particles: int, workers: int) -> tuple[dict, str, float, list[str]]:
     """``vfinfer infer`` on the extracted GAW; (posterior summary, its printed output, wall s, the command)."""
-    cmd = [str(Path(sys.executable).with_name("vfinfer")), "infer", str(csv), *FIT_OPTIONS, "--particles",
-           str(particles), "--workers", str(workers), "--seed", "0", "--out", str(out), "--overwrite"]
+    cmd = [
+        str(Path(sys.executable).with_name("vfinfer")),
+        "infer",
+        str(csv),
+        *FIT_OPTIONS,
+        "--particles",
+        str(particles),
+        "--workers",
+        str(workers),
+        "--seed",
+        "0",
+        "--out",
+        str(out),
+        "--overwrite",
+    ]
     t0 = time.time()
     r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "COLUMNS": "160"})
     wall = time.time() - t0
@@ -89,9 +132,11 @@ def main(argv=None) -> int:
         return 2
     ex = extract(a.clip, a.fps)
     n = ex.area.size
-    print(f"video -> GAW: {n} frames; at {a.fps:g} fps {1e3 * n / a.fps:.1f} ms, f0 {ex.f0:.1f} Hz, "
-          f"{ex.measures['n_cycles']} cycles; peak area {ex.area.max():.3g} mm^2 at the nominal "
-          f"{NOMINAL_PX_PER_MM:g} px/mm; flagged frames {int((~ex.ok).sum())}")
+    print(
+        f"video -> GAW: {n} frames; at {a.fps:g} fps {1e3 * n / a.fps:.1f} ms, f0 {ex.f0:.1f} Hz, "
+        f"{ex.measures['n_cycles']} cycles; peak area {ex.area.max():.3g} mm^2 at the nominal "
+        f"{NOMINAL_PX_PER_MM:g} px/mm; flagged frames {int((~ex.ok).sum())}"
+    )
     print("reach of the human prior set (coarse mesh, dt 5e-5 s; shipped ensemble):")
     for v in reach_verdicts(ex.area, sorted({4000.0, a.fps})):
         cal = "calibrated" if v["area_scale"] is None else "area scale k in [0.25, 4]"
@@ -112,22 +157,34 @@ def main(argv=None) -> int:
     for name, r in rows.items():
         print(f"  {name} {r['mean']:.4g} {r['unit']} (90 %: {r['q05']:.4g} .. {r['q95']:.4g})")
     if k:
-        print(f"  k {k['mean']:.3g} (90 %: {k['q05']:.3g} .. {k['q95']:.3g}): the true px/mm is "
-              f"{k['px_per_mm_factor']['q50']:.3g} x {NOMINAL_PX_PER_MM:g}")
+        print(
+            f"  k {k['mean']:.3g} (90 %: {k['q05']:.3g} .. {k['q95']:.3g}): the true px/mm is "
+            f"{k['px_per_mm_factor']['q50']:.3g} x {NOMINAL_PX_PER_MM:g}"
+        )
     nc = summary.get("noise_check") or {}
     if nc:
-        print(f"  residual RMS {nc['residual_rms']['q50']:.3g} mm^2; the recording's own noise sd "
-              f"{nc['recording_noise_sd']:.3g} mm^2")
+        print(
+            f"  residual RMS {nc['residual_rms']['q50']:.3g} mm^2; the recording's own noise sd "
+            f"{nc['recording_noise_sd']:.3g} mm^2"
+        )
     print("\nwhat this does and does not say:")
-    print(f"  - every number above assumes the clip was filmed at {a.fps:g} fps; at 4000 fps (typical of the "
-          "system) its f0 is 4x higher and outside what the model and the human prior set reach")
-    print(f"  - {n} frames: the likelihood sees {n} samples of about "
-          f"{ex.measures['n_cycles']} cycles; the posterior describes those cycles, not a voice")
-    print("  - the moduli are effective values of the 2D section (docs/inference.md, 'Prior sets'); E_lig, rho, "
-          "eta and x0 were held at mid-box values, and the common scale of the material is not determined by "
-          "a GAW alone")
-    print("  - with the area scale free the absolute opening is not measured: p_sub and k trade against each "
-          "other, only shape and frequency inform the moduli")
+    print(
+        f"  - every number above assumes the clip was filmed at {a.fps:g} fps; at 4000 fps (typical of the "
+        "system) its f0 is 4x higher and outside what the model and the human prior set reach"
+    )
+    print(
+        f"  - {n} frames: the likelihood sees {n} samples of about "
+        f"{ex.measures['n_cycles']} cycles; the posterior describes those cycles, not a voice"
+    )
+    print(
+        "  - the moduli are effective values of the 2D section (docs/inference.md, 'Prior sets'); E_lig, rho, "
+        "eta and x0 were held at mid-box values, and the common scale of the material is not determined by "
+        "a GAW alone"
+    )
+    print(
+        "  - with the area scale free the absolute opening is not measured: p_sub and k trade against each "
+        "other, only shape and frequency inform the moduli"
+    )
     for w in summary.get("warnings", []):
         print(f"  warning: {w}")
     if a.diagnose:
@@ -137,10 +194,27 @@ def main(argv=None) -> int:
 
 def diagnose(csv: Path, out: Path, workers: int) -> None:
     """``vfinfer diagnose`` on the recording, from the fit's posterior (no second base fit); prints its verdict."""
-    cmd = [str(Path(sys.executable).with_name("vfinfer")), "diagnose", str(csv), "--out", str(out / "diag"),
-           *FIT_OPTIONS, "--estimate", "E_body,E_cover,p_sub", "--base", str(out / "fit" / "posterior.nc"),
-           "--no-continuation", "--refit-particles", "16", "--max-refits", "2", "--workers", str(workers),
-           "--seed", "0"]
+    cmd = [
+        str(Path(sys.executable).with_name("vfinfer")),
+        "diagnose",
+        str(csv),
+        "--out",
+        str(out / "diag"),
+        *FIT_OPTIONS,
+        "--estimate",
+        "E_body,E_cover,p_sub",
+        "--base",
+        str(out / "fit" / "posterior.nc"),
+        "--no-continuation",
+        "--refit-particles",
+        "16",
+        "--max-refits",
+        "2",
+        "--workers",
+        str(workers),
+        "--seed",
+        "0",
+    ]
     r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "COLUMNS": "160"})
     print("$ " + " ".join(["vfinfer", *cmd[1:]]))
     lines = (r.stdout + r.stderr).rstrip().splitlines()

@@ -41,6 +41,7 @@ log-likelihood no longer matches is scored as tabled, without the audit, and lis
 The reports are read only; the truth is opened here, after the diagnosis, never by the fitting
 code.
 """
+
 from __future__ import annotations
 
 import json
@@ -51,8 +52,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CaseRecord", "load_suite", "load_table", "reference_rms", "summarise", "wilson", "format_summary",
-           "WEAK_SD"]
+__all__ = [
+    "CaseRecord",
+    "load_suite",
+    "load_table",
+    "reference_rms",
+    "summarise",
+    "wilson",
+    "format_summary",
+    "WEAK_SD",
+]
 
 #: effects of the generator that no catalogue entry models (benchmarks/concealed/generate.py)
 OUTSIDE = ("tremor", "diplophonia", "gamma")
@@ -62,37 +71,40 @@ WEAK_SD = 2.0
 #: the generator's presence rule: an effect the base model absorbs to below this many sds is absent
 PRESENCE_SD = 1.02
 
-_RESCUE = re.compile(r"rescue: the (\w+) refit ended at log Z (\S+), below the base's (\S+); refitted (.*?): "
-                     r"log Z (?:>=|=) (\S+) \+- (\S+)")
+_RESCUE = re.compile(
+    r"rescue: the (\w+) refit ended at log Z (\S+), below the base's (\S+); refitted (.*?): "
+    r"log Z (?:>=|=) (\S+) \+- (\S+)"
+)
 
 
 @dataclass
 class CaseRecord:
     """One diagnosed case joined with its truth."""
+
     suite: str
     case: str
-    label: str                       # the truth's effect, or "control"
-    present: bool                    # generator presence rule (False for controls)
-    strength_sd: float               # unabsorbed effect RMS / noise sd (nan for controls)
-    winner: str | None               # the named extension, None (no missing physics), or "rejected"
-    physics: str | None              # the winner's catalogue entry (lr_stiffness -> asymmetry)
+    label: str  # the truth's effect, or "control"
+    present: bool  # generator presence rule (False for controls)
+    strength_sd: float  # unabsorbed effect RMS / noise sd (nan for controls)
+    winner: str | None  # the named extension, None (no missing physics), or "rejected"
+    physics: str | None  # the winner's catalogue entry (lr_stiffness -> asymmetry)
     ok: bool
-    gain: float                      # log-evidence gain of the winner (nan if none)
-    rms_improvement: float           # of the winner (nan if none)
+    gain: float  # log-evidence gain of the winner (nan if none)
+    rms_improvement: float  # of the winner (nan if none)
     n_simulations: int
     wall_s: float
     effect_loglik: float
-    irregular: bool | None           # base fit's regularity, None when the report predates the check
+    irregular: bool | None  # base fit's regularity, None when the report predates the check
     rivals: list = field(default_factory=list)
     reference: str = "base"
-    rescues: list = field(default_factory=list)   # (extension, method, kept)
-    audit_present: bool | None = None             # presence under audit.json, None without one
-    floor_gain: float = math.nan                  # 1 - sigma / RMS of the diagnosis' reference fit
-    regenerated: bool = True                      # load_table: the row's recording regenerated
-    wall_by_stage: dict = field(default_factory=dict)   # report "cost" (absent from older reports): stage -> seconds
-    no_fit: bool = False                          # the verdict was "the model does not fit"
-    material: bool = False                        # the verdict said the fixed parameters were wrong
-    base_absorbed: bool | None = None             # absorption.json: absorbed from the diagnosis's base fit
+    rescues: list = field(default_factory=list)  # (extension, method, kept)
+    audit_present: bool | None = None  # presence under audit.json, None without one
+    floor_gain: float = math.nan  # 1 - sigma / RMS of the diagnosis' reference fit
+    regenerated: bool = True  # load_table: the row's recording regenerated
+    wall_by_stage: dict = field(default_factory=dict)  # report "cost" (absent from older reports): stage -> seconds
+    no_fit: bool = False  # the verdict was "the model does not fit"
+    material: bool = False  # the verdict said the fixed parameters were wrong
+    base_absorbed: bool | None = None  # absorption.json: absorbed from the diagnosis's base fit
 
     @property
     def outside(self) -> bool:
@@ -113,8 +125,7 @@ def _suite_truth(cases_dir: Path) -> tuple[dict, dict]:
     ``FileNotFoundError`` naming a missing ``truth.json``."""
     if not (cases_dir / "truth.json").exists():
         raise FileNotFoundError(f"no truth.json in {cases_dir}: not a concealed-effect suite")
-    audit = (json.loads((cases_dir / "audit.json").read_text())["cases"]
-             if (cases_dir / "audit.json").exists() else {})
+    audit = json.loads((cases_dir / "audit.json").read_text())["cases"] if (cases_dir / "audit.json").exists() else {}
     return _truth_table(cases_dir), audit
 
 
@@ -136,6 +147,7 @@ def _rivals(d: dict) -> list:
     if not d.get("winner"):
         return []
     from vfcore.diagnose.rank import CandidateRow, RankReport
+
     rows = [CandidateRow(**r) for r in d["ranking"]]
     return [f for f, _, _ in RankReport(math.nan, math.nan, rows, d["winner"], 3.0, 3.0).rivals]
 
@@ -146,7 +158,7 @@ def reference_rms(d: dict) -> float:
     ref = d.get("reference", "base")
     base = d.get("base", {})
     if ref.startswith("base near "):
-        mc = base.get("mode_checks", {}).get(ref[len("base near "):])
+        mc = base.get("mode_checks", {}).get(ref[len("base near ") :])
         if mc is not None:
             return float(mc["residual_rms"])
     elif ref in d.get("refits", {}):
@@ -158,6 +170,7 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
     """Records of every case of ``cases_dir``'s truth that has a report in ``out_dir`` (cases not
     yet diagnosed are skipped). Raises ``FileNotFoundError`` naming a missing ``truth.json``."""
     from vfcore.diagnose.extensions import physics_of
+
     cases_dir, out_dir = Path(cases_dir), Path(out_dir)
     truth, audit = _suite_truth(cases_dir)
     cert_path = out_dir / "absorption.json"
@@ -172,12 +185,18 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
         label = t.get("label") or t.get("effect")
         control = label == "control"
         present = False if control else bool(t.get("present", True))
-        strength = (float(t.get("unabsorbed_rms_mm2", math.nan)) / float(t.get("sigma_mm2", math.nan))
-                    if not control else math.nan)
+        strength = (
+            float(t.get("unabsorbed_rms_mm2", math.nan)) / float(t.get("sigma_mm2", math.nan))
+            if not control
+            else math.nan
+        )
         el = float(t.get("effect_loglik", math.nan))
         if "error" in d:
-            recs.append(CaseRecord(suite, cid, label, present, strength, "rejected", None, False, math.nan,
-                                   math.nan, 0, 0.0, el, None))
+            recs.append(
+                CaseRecord(
+                    suite, cid, label, present, strength, "rejected", None, False, math.nan, math.nan, 0, 0.0, el, None
+                )
+            )
             continue
         win = d.get("winner")
         physics = (d.get("physics") or physics_of(win)) if win else None
@@ -188,16 +207,35 @@ def load_suite(cases_dir, out_dir, *, suite: str | None = None) -> list[CaseReco
         reg = d.get("base", {}).get("regularity")
         aud = None if control or cid not in audit else bool(audit[cid]["present"])
         floor = 1.0 - float(t.get("sigma_mm2", math.nan)) / reference_rms(d)
-        recs.append(CaseRecord(
-            suite, cid, label, present, strength, win, physics, ok, float(gain), float(imp),
-            int(d.get("n_simulations", 0)), float(d.get("wall_s", 0.0)), el,
-            None if reg is None else bool(reg["irregular"]),
-            _rivals(d), d.get("reference", "base"), _rescues(d.get("notes", [])), aud, floor,
-            wall_by_stage={k: float(v.get("wall_s") or 0.0)
-                           for k, v in ((d.get("cost") or {}).get("by_stage") or {}).items()},
-            no_fit=bool(d.get("fit_check") and not d["fit_check"]["fits"]),
-            material=bool((d.get("material") or {}).get("found")),
-            base_absorbed=None if control or cid not in cert else bool(cert[cid]["absorbed"])))
+        recs.append(
+            CaseRecord(
+                suite,
+                cid,
+                label,
+                present,
+                strength,
+                win,
+                physics,
+                ok,
+                float(gain),
+                float(imp),
+                int(d.get("n_simulations", 0)),
+                float(d.get("wall_s", 0.0)),
+                el,
+                None if reg is None else bool(reg["irregular"]),
+                _rivals(d),
+                d.get("reference", "base"),
+                _rescues(d.get("notes", [])),
+                aud,
+                floor,
+                wall_by_stage={
+                    k: float(v.get("wall_s") or 0.0) for k, v in ((d.get("cost") or {}).get("by_stage") or {}).items()
+                },
+                no_fit=bool(d.get("fit_check") and not d["fit_check"]["fits"]),
+                material=bool((d.get("material") or {}).get("found")),
+                base_absorbed=None if control or cid not in cert else bool(cert[cid]["absorbed"]),
+            )
+        )
     return recs
 
 
@@ -218,6 +256,7 @@ def load_table(cases_dir, table, *, suite: str | None = None, rtol: float = 1e-4
     Raises ``ValueError`` naming the first row whose truth label differs (another suite), or when
     no row matches."""
     from vfcore.diagnose.extensions import physics_of
+
     cases_dir = Path(cases_dir)
     truth, audit = _suite_truth(cases_dir)
     suite = suite or cases_dir.name
@@ -229,8 +268,10 @@ def load_table(cases_dir, table, *, suite: str | None = None, rtol: float = 1e-4
         cid, label, named, ok, dz, imp, sims, wall, ell, unabs, rest = m.groups()
         t = truth.get(cid)
         if t is None or t["label"] != label:
-            raise ValueError(f"{table}: case {cid} ({label}) does not match {cases_dir}/truth.json "
-                             f"({None if t is None else t['label']}): not the suite the table was made from")
+            raise ValueError(
+                f"{table}: case {cid} ({label}) does not match {cases_dir}/truth.json "
+                f"({None if t is None else t['label']}): not the suite the table was made from"
+            )
         control = label == "control"
         same = abs(float(t["effect_loglik"]) - float(ell)) <= max(0.051, rtol * abs(float(ell)))
         win = None if named == "None" else named
@@ -242,15 +283,33 @@ def load_table(cases_dir, table, *, suite: str | None = None, rtol: float = 1e-4
             strength = float(t["unabsorbed_rms_mm2"]) / float(t["sigma_mm2"])
         else:
             present, strength = not unabs.endswith("*"), float(unabs.rstrip("*"))
-        recs.append(CaseRecord(
-            suite, cid, label, present, strength,
-            win, physics_of(win) if win else None, ok == "Y", float(dz), float(imp) / 100.0, int(sims),
-            float(wall), float(ell), None, [r.strip() for r in rivals], rest.split(";")[0].strip(), [],
-            None if control or not same or cid not in audit else bool(audit[cid]["present"]),
-            regenerated=same))
+        recs.append(
+            CaseRecord(
+                suite,
+                cid,
+                label,
+                present,
+                strength,
+                win,
+                physics_of(win) if win else None,
+                ok == "Y",
+                float(dz),
+                float(imp) / 100.0,
+                int(sims),
+                float(wall),
+                float(ell),
+                None,
+                [r.strip() for r in rivals],
+                rest.split(";")[0].strip(),
+                [],
+                None if control or not same or cid not in audit else bool(audit[cid]["present"]),
+                regenerated=same,
+            )
+        )
     if recs and not any(r.regenerated for r in recs if r.label != "control"):
-        raise ValueError(f"{table}: no effect case's log-likelihood matches {cases_dir}/truth.json: "
-                         "the suite did not regenerate")
+        raise ValueError(
+            f"{table}: no effect case's log-likelihood matches {cases_dir}/truth.json: the suite did not regenerate"
+        )
     return recs
 
 
@@ -259,6 +318,7 @@ def wilson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     if n == 0:
         return math.nan, math.nan
     from scipy.stats import binomtest
+
     ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="wilson")
     return float(ci.low), float(ci.high)
 
@@ -280,11 +340,15 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
     ctl = [r for r in recs if r.label == "control"]
     named = [r for r in recs if r.winner not in (None, "rejected")]
     by_label = {lab: _rate([r for r in present if r.label == lab]) for lab in sorted({r.label for r in present})}
-    strength = {f"weak (< {weak_sd:g} sd)": _rate([r for r in present if r.strength_sd < weak_sd]),
-                f"strong (>= {weak_sd:g} sd)": _rate([r for r in present if r.strength_sd >= weak_sd])}
-    regularity = {"regular": _rate([r for r in present if r.irregular is False]),
-                  "irregular": _rate([r for r in present if r.irregular is True]),
-                  "unknown": _rate([r for r in present if r.irregular is None])}
+    strength = {
+        f"weak (< {weak_sd:g} sd)": _rate([r for r in present if r.strength_sd < weak_sd]),
+        f"strong (>= {weak_sd:g} sd)": _rate([r for r in present if r.strength_sd >= weak_sd]),
+    }
+    regularity = {
+        "regular": _rate([r for r in present if r.irregular is False]),
+        "irregular": _rate([r for r in present if r.irregular is True]),
+        "unknown": _rate([r for r in present if r.irregular is None]),
+    }
     confusion: dict = {}
     for r in present:
         if not r.ok:
@@ -317,9 +381,11 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
         # present effects given another physics's name (a wrong name, not a miss)
         "wrong_names": _count(sum(r.physics is not None and not r.ok for r in present), len(present)),
         # "the model does not fit" verdicts, per class of case
-        "no_fit": {"present": _count(sum(r.no_fit for r in present), len(present)),
-                   "outside": _count(sum(r.no_fit for r in outside), len(outside)),
-                   "controls": _count(sum(r.no_fit for r in ctl), len(ctl))},
+        "no_fit": {
+            "present": _count(sum(r.no_fit for r in present), len(present)),
+            "outside": _count(sum(r.no_fit for r in outside), len(outside)),
+            "controls": _count(sum(r.no_fit for r in ctl), len(ctl)),
+        },
         # effects outside the catalogue: silent (no name) is right
         "outside_silent": _rate(outside),
         "material_verdicts": sum(r.material for r in recs),
@@ -333,14 +399,17 @@ def summarise(recs: list[CaseRecord], *, weak_sd: float = WEAK_SD) -> dict:
         "audited_cases": len(audited),
         "present_under_audit": _rate(audit_present),
         "certified_cases": len(certified),
-        "absorbed_from_base": [r.case if len(suites) == 1 else f"{r.suite}/{r.case}"
-                               for r in audit_present if r.base_absorbed],
+        "absorbed_from_base": [
+            r.case if len(suites) == 1 else f"{r.suite}/{r.case}" for r in audit_present if r.base_absorbed
+        ],
         "present_not_absorbed": _rate(not_absorbed),
         # load_table rows whose recording the regenerated suite no longer reproduces: no audit
         "not_regenerated": [f"{r.suite}/{r.case}" for r in eff if not r.regenerated],
         # over the misses whose floor is known (a kept table has none)
-        "misses_floor_below_30pct": [sum(r.floor_gain < 0.3 for r in missed),
-                                     sum(math.isfinite(r.floor_gain) for r in missed)],
+        "misses_floor_below_30pct": [
+            sum(r.floor_gain < 0.3 for r in missed),
+            sum(math.isfinite(r.floor_gain) for r in missed),
+        ],
         "simulations_per_case": float(np.mean([r.n_simulations for r in recs])) if recs else math.nan,
         "wall_s_per_case": float(np.mean([r.wall_s for r in recs])) if recs else math.nan,
         # mean seconds per case in each stage, over the reports that carry their cost
@@ -363,39 +432,66 @@ def _fmt_rate(x: dict) -> str:
 
 def format_summary(s: dict) -> str:
     """The summary as printed by ``bench_diagnose.py --score``."""
-    lines = [f"suites: {', '.join(s['suites'])}; {s['cases']} cases",
-             f"effect present, named right: {_fmt_rate(s['present'])}",
-             f"all effect cases named right: {_fmt_rate(s['all_effect_cases'])}",
-             f"present effect named or among the winner's rivals: {_fmt_rate(s['named_or_rival'])}",
-             f"false alarms in controls: {s['false_alarms']['count']}/{s['false_alarms']['of']}",
-             *([f"present effects given a wrong name: {_fmt_rate(s['wrong_names'])}",
-                "'the model does not fit' verdicts: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["no_fit"].items()
-                                                                  if v["of"]),
-                f"effects outside the catalogue left unnamed: {_fmt_rate(s['outside_silent'])}"]
-               if "wrong_names" in s else []),
-             f"named effects with RMS improvement >= 30 %: {s['named_rms_ge_30pct'][0]}/{s['named_rms_ge_30pct'][1]}; "
-             f"with dlogZ > 0: {s['named_positive_gain'][0]}/{s['named_positive_gain'][1]}",
-             "by effect (present cases): " + "; ".join(f"{k} {v['named']}/{v['of']}" for k, v in s["by_effect"].items()),
-             "by strength: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_strength"].items()),
-             "by base regularity: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_base_regularity"].items()
-                                                if v["of"]),
-             "misses (truth -> named): " + (", ".join(f"{k} x{v}" for k, v in s["misses"].items()) or "none"),
-             f"misses whose reference fit leaves < 30 % RMS to gain (1 - sigma/rms_ref): "
-             f"{s['misses_floor_below_30pct'][0]}/{s['misses_floor_below_30pct'][1]} with a known floor",
-             *([f"effect present under the presence audit ({s['audited_cases']} effect cases audited, "
-                f"the rest by the generator's rule), named right: {_fmt_rate(s['present_under_audit'])}"]
-               if s["audited_cases"] else []),
-             *([f"absorbed from the diagnosis' base fit ({s['certified_cases']} effect cases certified; "
+    lines = [
+        f"suites: {', '.join(s['suites'])}; {s['cases']} cases",
+        f"effect present, named right: {_fmt_rate(s['present'])}",
+        f"all effect cases named right: {_fmt_rate(s['all_effect_cases'])}",
+        f"present effect named or among the winner's rivals: {_fmt_rate(s['named_or_rival'])}",
+        f"false alarms in controls: {s['false_alarms']['count']}/{s['false_alarms']['of']}",
+        *(
+            [
+                f"present effects given a wrong name: {_fmt_rate(s['wrong_names'])}",
+                "'the model does not fit' verdicts: "
+                + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["no_fit"].items() if v["of"]),
+                f"effects outside the catalogue left unnamed: {_fmt_rate(s['outside_silent'])}",
+            ]
+            if "wrong_names" in s
+            else []
+        ),
+        f"named effects with RMS improvement >= 30 %: {s['named_rms_ge_30pct'][0]}/{s['named_rms_ge_30pct'][1]}; "
+        f"with dlogZ > 0: {s['named_positive_gain'][0]}/{s['named_positive_gain'][1]}",
+        "by effect (present cases): " + "; ".join(f"{k} {v['named']}/{v['of']}" for k, v in s["by_effect"].items()),
+        "by strength: " + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_strength"].items()),
+        "by base regularity: "
+        + "; ".join(f"{k} {_fmt_rate(v)}" for k, v in s["by_base_regularity"].items() if v["of"]),
+        "misses (truth -> named): " + (", ".join(f"{k} x{v}" for k, v in s["misses"].items()) or "none"),
+        f"misses whose reference fit leaves < 30 % RMS to gain (1 - sigma/rms_ref): "
+        f"{s['misses_floor_below_30pct'][0]}/{s['misses_floor_below_30pct'][1]} with a known floor",
+        *(
+            [
+                f"effect present under the presence audit ({s['audited_cases']} effect cases audited, "
+                f"the rest by the generator's rule), named right: {_fmt_rate(s['present_under_audit'])}"
+            ]
+            if s["audited_cases"]
+            else []
+        ),
+        *(
+            [
+                f"absorbed from the diagnosis' base fit ({s['certified_cases']} effect cases certified; "
                 f"absorption.json): {', '.join(s['absorbed_from_base']) or 'none'}; present under the audit and "
-                f"not absorbed, named right: {_fmt_rate(s['present_not_absorbed'])}"]
-               if s.get("certified_cases") else []),
-             *([f"not regenerated (effect log-likelihood changed; scored as tabled, generator's rule, no audit): "
-                f"{', '.join(s['not_regenerated'])}"] if s.get("not_regenerated") else []),
-             "rescue refits: " + (", ".join(f"{m} fired {v['fired']} kept {v['kept']}" for m, v in s["rescues"].items())
-                                  or "none"),
-             f"simulations per case: mean {s['simulations_per_case']:.0f}; wall per case: mean "
-             f"{s['wall_s_per_case']:.0f} s",
-             *([f"wall per case by stage ({s['wall_by_stage']['cases']} reports with their cost): "
-                + ", ".join(f"{k} {v:.0f} s" for k, v in s["wall_by_stage"]["mean_s"].items())]
-               if s.get("wall_by_stage", {}).get("cases") else [])]
+                f"not absorbed, named right: {_fmt_rate(s['present_not_absorbed'])}"
+            ]
+            if s.get("certified_cases")
+            else []
+        ),
+        *(
+            [
+                f"not regenerated (effect log-likelihood changed; scored as tabled, generator's rule, no audit): "
+                f"{', '.join(s['not_regenerated'])}"
+            ]
+            if s.get("not_regenerated")
+            else []
+        ),
+        "rescue refits: "
+        + (", ".join(f"{m} fired {v['fired']} kept {v['kept']}" for m, v in s["rescues"].items()) or "none"),
+        f"simulations per case: mean {s['simulations_per_case']:.0f}; wall per case: mean {s['wall_s_per_case']:.0f} s",
+        *(
+            [
+                f"wall per case by stage ({s['wall_by_stage']['cases']} reports with their cost): "
+                + ", ".join(f"{k} {v:.0f} s" for k, v in s["wall_by_stage"]["mean_s"].items())
+            ]
+            if s.get("wall_by_stage", {}).get("cases")
+            else []
+        ),
+    ]
     return "\n".join(lines)

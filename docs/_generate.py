@@ -1,5 +1,6 @@
 """Writes the generated reference pages' sources: the command line (from the typer app) and the REST API
 (the OpenAPI document of ``create_app()``), into ``docs/_generated/`` (not committed)."""
+
 import contextlib
 import io
 import json

@@ -3,6 +3,7 @@
 The command-line page and the REST page are generated here, at build time, from the typer app and from
 ``create_app().openapi()``, so they cannot drift from the code.
 """
+
 import sys
 from pathlib import Path
 

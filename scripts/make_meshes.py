@@ -9,6 +9,7 @@ length is searched on a grid around each target's and the closest triangle count
     python scripts/make_meshes.py xfine      # only the named ones (gmsh versions may triangulate
                                              # differently: regenerate only what you mean to change)
 """
+
 import sys
 from pathlib import Path
 

@@ -11,6 +11,7 @@ for the configuration's duration, the transient discarded, the GAW taken at 4000
 
 Prints each ensemble's table (markdown) and its wall time.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,10 +39,18 @@ def main(argv=None) -> int:
     for label, cfg in CONFIGS.items():
         if a.only and a.only not in label:
             continue
+
         def progress(done, total, el):
             print(f"\r{label}: {done}/{total} draws, {el:.0f} s", end="", file=sys.stderr, flush=True)
-        ens = build_ensemble(cfg, Prior.default(prior_set=a.prior_set), a.n, a.seed, progress=progress,
-                             on_error=lambda m: print(f"\nerror: {m}", file=sys.stderr))
+
+        ens = build_ensemble(
+            cfg,
+            Prior.default(prior_set=a.prior_set),
+            a.n,
+            a.seed,
+            progress=progress,
+            on_error=lambda m: print(f"\nerror: {m}", file=sys.stderr),
+        )
         print(file=sys.stderr)
         path = ens.save(ensemble_path(ens.key, a.out))
         print(f"### {a.prior_set} priors, {label}: {ens.n} draws, {ens.wall_s:.0f} s on one core -> {path.name}\n")

@@ -11,6 +11,7 @@ it by hand to show them). Each page must pass the test's
 checks (every image loaded, no console error) or nothing is written. The pictures are the top of each page,
 reduced to 256 colours so each stays well under 400 KB.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,18 +21,21 @@ import sys
 import tempfile
 from pathlib import Path
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):   # before numpy loads its BLAS
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # before numpy loads its BLAS
     os.environ.setdefault(_v, "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "service"))     # browser_pages and the helpers it shares with the tests
+sys.path.insert(0, str(ROOT / "tests" / "service"))  # browser_pages and the helpers it shares with the tests
 
 #: page -> (file in docs/img, height shown in px): the part of each page that says what it is.
-PICTURES = {"job_report": ("report_job.png", 1900), "diagnosis_report": ("report_diagnosis.png", 2300),
-            "docs": ("api_docs.png", 1300)}
+PICTURES = {
+    "job_report": ("report_job.png", 1900),
+    "diagnosis_report": ("report_diagnosis.png", 2300),
+    "docs": ("api_docs.png", 1300),
+}
 MAX_BYTES = 400_000
 
 
@@ -41,7 +45,7 @@ def blank_cut(rows: np.ndarray, limit: int, gap: int = 12) -> int:
     or a table; ``limit`` itself where no such band exists."""
     plain = np.all(rows == rows[0, 0], axis=(1, 2))
     for y in range(min(limit, len(plain)) - 1, gap, -1):
-        if plain[y - gap:y + 1].all():
+        if plain[y - gap : y + 1].all():
             return y - gap // 2
     return min(limit, len(plain))
 
@@ -50,6 +54,7 @@ def shrink(src: Path, dst: Path, height: int) -> int:
     """The top of the screenshot ``src``, at most ``height`` px and cut between two blocks, in 256 colours, as
     ``dst``; its size in bytes."""
     from PIL import Image
+
     with Image.open(src) as im:
         im = im.convert("RGB")
         im = im.crop((0, 0, im.width, blank_cut(np.asarray(im), height)))
@@ -66,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from browser_pages import chromium_path, open_pages, pages_service
+
     chromium = chromium_path()
     if chromium is None:
         print("error: no Chromium found (apt-get install chromium, or VFINFER_CHROMIUM=PATH)", file=sys.stderr)
@@ -78,10 +84,13 @@ def main(argv: list[str] | None = None) -> int:
     from distributed import Client, LocalCluster
 
     from vfcore.data import DEMO_SMC, demo_spec_dict
+
     spec = demo_spec_dict(sampler={**DEMO_SMC, "n_particles": args.particles})
-    with tempfile.TemporaryDirectory() as tmp, \
-            LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
         print(f"fitting the demo GAW ({args.particles} SMC particles, {spec['mesh']} mesh) ...", flush=True)
         with pages_service(Path(tmp) / "data", client, spec, diagnosis, png, job_timeout_s=3600) as site:
             views = open_pages(site.page_urls(), Path(tmp) / "shots", chromium)

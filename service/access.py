@@ -4,6 +4,7 @@ A job that is missing or belongs to someone else is the same 404, so ids of othe
 not revealed; results exist only for a finished job (409 otherwise). An endpoint of one kind of job
 (an inference's posterior, a job's diagnosis) answers 404 for a job of another kind.
 """
+
 from __future__ import annotations
 
 from fastapi import HTTPException, status
@@ -30,11 +31,15 @@ def page_reader(manager, job_id: str, user: str | None, signer, scope: str, exp,
     request carries a valid signed link for ``scope`` (only the owner is ever given one). 401 with neither (the
     message names ``how`` to make a link), 403 for a link that does not open this page, 404 for no such job."""
     from .signing import LinkError, link_refused
+
     if user is not None:
         return user
     if exp is None and sig is None:
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"missing bearer token or signed link ({how} makes a "
-                            "link a browser can open)", headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            f"missing bearer token or signed link ({how} makes a link a browser can open)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
     try:
         signer.verify(scope, exp, sig)
     except LinkError as exc:

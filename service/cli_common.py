@@ -1,6 +1,7 @@
 """What every ``vfinfer`` command shares: one-line errors on stderr (exit 2 for a user error), checked
 option types, GAW input with its clipping rule, output folders that appear whole or not at all, and
 human-readable times."""
+
 from __future__ import annotations
 
 import math
@@ -76,8 +77,9 @@ class VfinferGroup(TyperGroup):
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
             with warnings_in_words():
-                rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var,
-                                  standalone_mode=False, **extra)
+                rv = super().main(
+                    args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False, **extra
+                )
         except UsageError as exc:
             if type(exc).__name__.startswith("NoArgsIsHelp") and exc.ctx is not None:
                 typer.echo(exc.ctx.get_help())
@@ -119,6 +121,7 @@ def finite(lo: float | None = None, lo_open: bool = False, hi: float | None = No
         if hi is not None and x > hi:
             raise typer.BadParameter(f"{x:g} must be <= {hi:g}")
         return x
+
     return parse
 
 
@@ -130,6 +133,7 @@ def choice(*values: str):
         if v not in values:
             raise typer.BadParameter(f"{value!r} is not one of {', '.join(repr(c) for c in values)}")
         return v
+
     return parse
 
 
@@ -144,13 +148,14 @@ def load_gaw(path: Path, fps: float | None):
     (the likelihood expects them), deeper ones are refused (``vfcore.gawio.check_negative``). Returns the
     ``GawData``."""
     from vfcore.gawio import check_negative, read_gaw
+
     if path.is_dir():
         raise fail(f"GAW file {path} is a folder, not a file")
     try:
         g = read_gaw(path, fps=fps, allow_negative=True)
     except UnicodeDecodeError:
         raise fail(f"GAW file {path}: not a text CSV (binary content); expected CSV, NPY or NPZ") from None
-    except (ValueError, OSError) as exc:     # GawFileError is a ValueError; its message names the file
+    except (ValueError, OSError) as exc:  # GawFileError is a ValueError; its message names the file
         raise fail(str(exc) if str(path) in str(exc) else f"GAW file {path}: {exc}") from None
     why = check_negative(g.area)
     if why is not None:
@@ -161,8 +166,9 @@ def load_gaw(path: Path, fps: float | None):
 # ------------------------------------------------------------------------------------ output folders
 def _looks_like_output(path: Path) -> bool:
     names = {p.name for p in path.iterdir()}
-    return bool(names & {"posterior.json", "index.html", "diagnosis.json", "timings.json"}) or \
-        any(n.endswith(".zarr") for n in names)
+    return bool(names & {"posterior.json", "index.html", "diagnosis.json", "timings.json"}) or any(
+        n.endswith(".zarr") for n in names
+    )
 
 
 def check_out(out: Path, overwrite: bool) -> None:
@@ -191,7 +197,7 @@ def staged_output(out: Path):
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
     umask = os.umask(0)
     os.umask(umask)
-    stage.chmod(0o777 & ~umask)              # mkdtemp's 0700 would outlive the rename
+    stage.chmod(0o777 & ~umask)  # mkdtemp's 0700 would outlive the rename
     try:
         yield stage
     except BaseException:
@@ -286,7 +292,7 @@ class ProgressLines:
         while not self._stop.wait(self.interval):
             print(self.line(), file=self.stream, flush=True)
 
-    def __enter__(self) -> "ProgressLines":
+    def __enter__(self) -> ProgressLines:
         if self.enabled:
             self._thread = threading.Thread(target=self._run, name="vfinfer-progress", daemon=True)
             self._thread.start()

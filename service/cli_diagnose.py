@@ -3,6 +3,7 @@
 Its settings are the API's :class:`~service.api_models.DiagnoseRequest` (one set of defaults and bounds for the
 command line and the service) and it calls the diagnosis as the service does (:func:`service.diagnosis.run_diagnose`).
 """
+
 from __future__ import annotations
 
 import json
@@ -42,6 +43,7 @@ def diagnose_request(**given):
     from pydantic import ValidationError
 
     from .api_models import DIAGNOSIS_OPTIONS, DiagnoseRequest
+
     try:
         return DiagnoseRequest(**{k: v for k, v in given.items() if v is not None})
     except ValidationError as exc:
@@ -68,7 +70,7 @@ class StageReporter:
 
     def __init__(self, status=None, lines=None):
         self.status = status
-        self.lines = lines                  # cli_common.ProgressLines: stderr that is not a terminal
+        self.lines = lines  # cli_common.ProgressLines: stderr that is not a terminal
         self.last = None
 
     def __call__(self, ev: dict) -> None:
@@ -83,9 +85,22 @@ class StageReporter:
             self.lines.update(where + (f" ({ev['entry']})" if ev.get("entry") else ""), ev["simulations"])
 
 
-def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | None, mesh: str, dt: float,
-                  duration: float, discard: float, sigma_e: float, noise: str = "fixed", prior_set: str = "paper",
-                  area_scale: list[float] | None = None, contact: str = "projection", contact_layer_mm: float = 0.1):
+def build_problem(
+    gaw: Path,
+    fps: float | None,
+    estimate: str,
+    fix: list[str] | None,
+    mesh: str,
+    dt: float,
+    duration: float,
+    discard: float,
+    sigma_e: float,
+    noise: str = "fixed",
+    prior_set: str = "paper",
+    area_scale: list[float] | None = None,
+    contact: str = "projection",
+    contact_layer_mm: float = 0.1,
+):
     """The Problem of the command's options; every bad input raises ``typer.Exit(2)`` with a red line.
     ``prior_set``: the default bounds of the estimated parameters; ``area_scale``: the box of an unknown area
     scale (``parse_area_scale``; None: calibrated areas); ``contact``, ``contact_layer_mm``: the midline law."""
@@ -122,8 +137,10 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
     if mesh not in MESHES:
         raise _fail(f"--mesh must be one of {list(MESHES)}, got {mesh!r}")
     if not (dt > 0 and duration > 0 and 0 <= discard < duration):
-        raise _fail(f"need dt > 0, duration > 0 and 0 <= discard < duration "
-                    f"(got dt={dt}, duration={duration}, discard={discard})")
+        raise _fail(
+            f"need dt > 0, duration > 0 and 0 <= discard < duration "
+            f"(got dt={dt}, duration={duration}, discard={discard})"
+        )
     if not sigma_e > 0:
         raise _fail(f"--sigma-e must be > 0, got {sigma_e}")
     g = load_gaw(gaw, fps)
@@ -131,10 +148,23 @@ def build_problem(gaw: Path, fps: float | None, estimate: str, fix: list[str] | 
         raise _fail(f"--dt: camera fps {g.fps:g} exceeds the simulation rate 1/dt={1 / dt:.0f}")
     try:
         prior = Prior.default(fixed=fixed, prior_set=prior_set)
-        problem = Problem(obs_gaw=g.area, fps=float(g.fps), prior=prior, sigma_e=float(sigma_e), noise=noise,
-                          config=SimConfig(mesh=mesh, dt=dt, duration=duration, discard=discard, fps=float(g.fps),
-                                           contact=contact, contact_layer_mm=contact_layer_mm),
-                          area_scale=None if area_scale is None else tuple(area_scale))
+        problem = Problem(
+            obs_gaw=g.area,
+            fps=float(g.fps),
+            prior=prior,
+            sigma_e=float(sigma_e),
+            noise=noise,
+            config=SimConfig(
+                mesh=mesh,
+                dt=dt,
+                duration=duration,
+                discard=discard,
+                fps=float(g.fps),
+                contact=contact,
+                contact_layer_mm=contact_layer_mm,
+            ),
+            area_scale=None if area_scale is None else tuple(area_scale),
+        )
     except ValueError as exc:
         raise _fail(f"invalid GAW or settings ({gaw}): {exc}") from None
     return problem
@@ -155,8 +185,10 @@ def measures_table(d: dict) -> None:
         return
     win = d.get("winner")
     a = (d.get("refits") or {}).get(win) if win else None
-    t = Table(title="GAW measures (posterior-predictive two-sided p; * p < 0.05; replicate noise "
-                    f"{_f(b.get('predictive_noise_sd'), '.3g')} mm^2, from the recording)")
+    t = Table(
+        title="GAW measures (posterior-predictive two-sided p; * p < 0.05; replicate noise "
+        f"{_f(b.get('predictive_noise_sd'), '.3g')} mm^2, from the recording)"
+    )
     t.add_column("measure")
     for col in ("recording", "base predicts", "base p") + ((f"{win} predicts", f"{win} p") if a else ()):
         t.add_column(col, justify="right")
@@ -175,8 +207,12 @@ def print_report(d: dict) -> None:
     t = Table(title="Base fit")
     for col in ("residual RMS (mm^2)", "log-evidence", "dominant phase", "simulations"):
         t.add_column(col, justify="right")
-    t.add_row(_f(b["residual_rms"]), f"{_f(b['log_evidence'], '.2f')} +- {_f(b['log_evidence_se'], '.2f')}",
-              str(b["dominant_phase"]), str(b["n_simulations"]))
+    t.add_row(
+        _f(b["residual_rms"]),
+        f"{_f(b['log_evidence'], '.2f')} +- {_f(b['log_evidence_se'], '.2f')}",
+        str(b["dominant_phase"]),
+        str(b["n_simulations"]),
+    )
     console.print(t)
     s = Table(title="Screening (best log-likelihood gain at base particles, nats)")
     s.add_column("candidate")
@@ -194,15 +230,23 @@ def print_report(d: dict) -> None:
         for col in ("extension", "dlogZ", "residual RMS", "RMS improvement", "extension parameters", "found"):
             r.add_column(col, justify="left" if col in ("extension", "extension parameters") else "right")
         from vfcore.diagnose.extensions import get
+
         for name, a in d["refits"].items():
             rk = rows.get(name, {})
             ext = set(get(name).param_names)
-            pars = ", ".join(f"{k}={_f(v['mean'])} +- {_f(v['sd'], '.2g')}"
-                             for k, v in a["params"].items() if k in ext) or "-"
+            pars = (
+                ", ".join(f"{k}={_f(v['mean'])} +- {_f(v['sd'], '.2g')}" for k, v in a["params"].items() if k in ext)
+                or "-"
+            )
             imp = a.get("rms_improvement")
-            r.add_row(name, f"{_f(rk.get('delta'), '.2f')} +- {_f(rk.get('delta_se'), '.2f')}",
-                      _f(a["residual_rms"]), "-" if imp is None else f"{100 * imp:.1f} %", pars,
-                      "yes" if rk.get("found") else "no")
+            r.add_row(
+                name,
+                f"{_f(rk.get('delta'), '.2f')} +- {_f(rk.get('delta_se'), '.2f')}",
+                _f(a["residual_rms"]),
+                "-" if imp is None else f"{100 * imp:.1f} %",
+                pars,
+                "yes" if rk.get("found") else "no",
+            )
         console.print(r)
     measures_table(d)
     for n in d.get("notes") or []:
@@ -212,90 +256,184 @@ def print_report(d: dict) -> None:
     console.print(f"{d['n_simulations']} simulations, wall time {d['wall_s']:.1f} s")
     by = (d.get("cost") or {}).get("by_stage") or {}
     if by:
-        console.print("time by stage: " + ", ".join(
-            f"{k} {_f(v.get('wall_s'), '.0f')} s" for k, v in sorted(by.items(), key=lambda kv: -(kv[1].get("wall_s") or 0))),
-            highlight=False)
+        console.print(
+            "time by stage: "
+            + ", ".join(
+                f"{k} {_f(v.get('wall_s'), '.0f')} s"
+                for k, v in sorted(by.items(), key=lambda kv: -(kv[1].get("wall_s") or 0))
+            ),
+            highlight=False,
+        )
 
 
 def diagnose_cmd(
-        gaw: Annotated[Path, typer.Argument(help="GAW file (CSV as written by 'vfinfer simulate'/'gaw', NPY, NPZ)")],
-        out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png, index.html)")],
-        fps: Annotated[Optional[float], typer.Option(parser=POSITIVE, help="camera frame rate, frames/s, if the "
-                                                                                "file does not say")] = None,
-        estimate: Annotated[str, typer.Option(help="comma-separated parameters to estimate (default: the five "
-                                                   "combinations a GAW determines, rho anchoring the scale)")] = DEFAULT_ESTIMATE,
-        fix: Annotated[Optional[list[str]], typer.Option("--fix", help="NAME=VALUE (paper units), repeatable; "
-                                                         "parameters neither estimated nor fixed take Table 3 values")] = None,
-        mesh: Annotated[Optional[str], typer.Option(
-            parser=choice("coarse", "medium", "fine"), metavar="[coarse|medium|fine]",
-            help="finite-element mesh (default: coarse, or the --base fit's)")] = None,
-        dt: Annotated[Optional[float], typer.Option(
-            parser=POSITIVE, help="simulation time step, s (default: 1e-4, or the --base fit's)")] = None,
-        duration: Annotated[Optional[float], typer.Option(
-            parser=POSITIVE, help=f"simulated time, s (default: {DURATION_S:g}, or the --base fit's)")] = None,
-        discard: Annotated[Optional[float], typer.Option(
-            parser=NON_NEGATIVE, help=f"initial transient discarded, s (default: {DISCARD_S:g}, or the --base "
-                                      "fit's)")] = None,
-        sigma_e: Annotated[float, typer.Option(parser=POSITIVE, help="observation noise sd, mm^2")] = 1.0,
-        noise: Annotated[str, typer.Option(parser=choice("fixed", "marginal"), metavar="[fixed|marginal]",
-                                           help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)")] = "fixed",
-        particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = DEFAULTS.n_particles,
-        refit_particles: Annotated[int, typer.Option(
-            help="SMC particles of each extended fit (10-400)")] = DEFAULTS.refit_particles,
-        refit_start: Annotated[str, typer.Option(
-            parser=choice(*REFIT_STARTS), metavar="[" + "|".join(REFIT_STARTS) + "]",
+    gaw: Annotated[Path, typer.Argument(help="GAW file (CSV as written by 'vfinfer simulate'/'gaw', NPY, NPZ)")],
+    out: Annotated[Path, typer.Option(help="output folder (diagnosis.json, diagnosis.png, index.html)")],
+    fps: Annotated[
+        Optional[float], typer.Option(parser=POSITIVE, help="camera frame rate, frames/s, if the file does not say")
+    ] = None,
+    estimate: Annotated[
+        str,
+        typer.Option(
+            help="comma-separated parameters to estimate (default: the five "
+            "combinations a GAW determines, rho anchoring the scale)"
+        ),
+    ] = DEFAULT_ESTIMATE,
+    fix: Annotated[
+        Optional[list[str]],
+        typer.Option(
+            "--fix",
+            help="NAME=VALUE (paper units), repeatable; parameters neither estimated nor fixed take Table 3 values",
+        ),
+    ] = None,
+    mesh: Annotated[
+        Optional[str],
+        typer.Option(
+            parser=choice("coarse", "medium", "fine"),
+            metavar="[coarse|medium|fine]",
+            help="finite-element mesh (default: coarse, or the --base fit's)",
+        ),
+    ] = None,
+    dt: Annotated[
+        Optional[float],
+        typer.Option(parser=POSITIVE, help="simulation time step, s (default: 1e-4, or the --base fit's)"),
+    ] = None,
+    duration: Annotated[
+        Optional[float],
+        typer.Option(parser=POSITIVE, help=f"simulated time, s (default: {DURATION_S:g}, or the --base fit's)"),
+    ] = None,
+    discard: Annotated[
+        Optional[float],
+        typer.Option(
+            parser=NON_NEGATIVE, help=f"initial transient discarded, s (default: {DISCARD_S:g}, or the --base fit's)"
+        ),
+    ] = None,
+    sigma_e: Annotated[float, typer.Option(parser=POSITIVE, help="observation noise sd, mm^2")] = 1.0,
+    noise: Annotated[
+        str,
+        typer.Option(
+            parser=choice("fixed", "marginal"),
+            metavar="[fixed|marginal]",
+            help="'fixed' (--sigma-e) or 'marginal' (noise sd integrated out)",
+        ),
+    ] = "fixed",
+    particles: Annotated[int, typer.Option(help="SMC particles of each base fit (10-400)")] = DEFAULTS.n_particles,
+    refit_particles: Annotated[
+        int, typer.Option(help="SMC particles of each extended fit (10-400)")
+    ] = DEFAULTS.refit_particles,
+    refit_start: Annotated[
+        str,
+        typer.Option(
+            parser=choice(*REFIT_STARTS),
+            metavar="[" + "|".join(REFIT_STARTS) + "]",
             help="where each extended fit's SMC starts: the prior, the base posterior (about a quarter fewer "
-                 "simulations, no rescue), or the base for observation-level entries only")] = DEFAULTS.refit_start,
-        max_refits: Annotated[Optional[int], typer.Option(
-            help="most observation-level extensions refitted, best screened first (0-6; default: all)")] = DEFAULTS.max_refits,
-        candidates: Annotated[Optional[str], typer.Option(
-            help="comma-separated extensions to screen (default: every implemented one)")] = None,
-        continuation: Annotated[bool, typer.Option(
+            "simulations, no rescue), or the base for observation-level entries only",
+        ),
+    ] = DEFAULTS.refit_start,
+    max_refits: Annotated[
+        Optional[int],
+        typer.Option(help="most observation-level extensions refitted, best screened first (0-6; default: all)"),
+    ] = DEFAULTS.max_refits,
+    candidates: Annotated[
+        Optional[str], typer.Option(help="comma-separated extensions to screen (default: every implemented one)")
+    ] = None,
+    continuation: Annotated[
+        bool,
+        typer.Option(
             help="also search the base model and every extension by window continuation and fit from the "
-                 "optimum (~2,000 simulations each; docs/diagnose.md section 4)")] = DEFAULTS.continuation,
-        base: Annotated[Optional[Path], typer.Option(
+            "optimum (~2,000 simulations each; docs/diagnose.md section 4)"
+        ),
+    ] = DEFAULTS.continuation,
+    base: Annotated[
+        Optional[Path],
+        typer.Option(
             help="a fitted posterior of this recording (posterior.nc of 'vfinfer infer' or of a job) to use as the "
-                 "base fit instead of fitting it again; one with fewer estimated parameters is the pinned fit "
-                 "that freeing the material parameters is judged against")] = None,
-        free_material: Annotated[bool, typer.Option(
+            "base fit instead of fitting it again; one with fewer estimated parameters is the pinned fit "
+            "that freeing the material parameters is judged against"
+        ),
+    ] = None,
+    free_material: Annotated[
+        bool,
+        typer.Option(
             help="free the scaled parameters held at Table 3 (all but the anchor rho) before the catalogue is "
-                 "screened, and report whether they explain the mismatch")] = DEFAULTS.free_material,
-        workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
-        resume: Annotated[bool, typer.Option(
+            "screened, and report whether they explain the mismatch"
+        ),
+    ] = DEFAULTS.free_material,
+    workers: Annotated[int, typer.Option(help="local worker processes (1: in this process)")] = 2,
+    resume: Annotated[
+        bool,
+        typer.Option(
             help="store finished simulations in OUT/.resume while running, so the same command run again "
-                 "after an interruption reads them back (same result, bit for bit); deleted once the "
-                 "diagnosis is written")] = True,
-        seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed,
-        prior_set: PriorSet = "paper", area_scale: AreaScale = None, uncalibrated: Uncalibrated = False,
-        contact: Contact = None, contact_layer_mm: ContactLayer = None) -> None:
+            "after an interruption reads them back (same result, bit for bit); deleted once the "
+            "diagnosis is written"
+        ),
+    ] = True,
+    seed: Annotated[int, typer.Option(min=0, help="random seed (>= 0)")] = DEFAULTS.seed,
+    prior_set: PriorSet = "paper",
+    area_scale: AreaScale = None,
+    uncalibrated: Uncalibrated = False,
+    contact: Contact = None,
+    contact_layer_mm: ContactLayer = None,
+) -> None:
     """Fit the model, screen catalogued extensions, refit the promising ones and name the missing physics.
     With --base, the model settings not given on the command line are the fit's own."""
     from .diagnosis import plot
 
-    req = diagnose_request(candidates=None if candidates is None else _names(candidates), n_particles=particles,
-                           refit_particles=refit_particles, refit_start=refit_start, max_refits=max_refits,
-                           continuation=continuation, seed=seed, free_material=free_material)
+    req = diagnose_request(
+        candidates=None if candidates is None else _names(candidates),
+        n_particles=particles,
+        refit_particles=refit_particles,
+        refit_start=refit_start,
+        max_refits=max_refits,
+        continuation=continuation,
+        seed=seed,
+        free_material=free_material,
+    )
     if workers < 1:
         raise _fail(f"--workers must be >= 1, got {workers}")
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out} exists and is not a folder")
-    given = {"mesh": mesh, "dt": dt, "duration": duration, "discard": discard, "contact": contact,
-             "contact_layer_mm": contact_layer_mm}
+    given = {
+        "mesh": mesh,
+        "dt": dt,
+        "duration": duration,
+        "discard": discard,
+        "contact": contact,
+        "contact_layer_mm": contact_layer_mm,
+    }
     base_post = read_base(base) if base is not None else None
     m = model_settings(given, base_post)
-    problem = build_problem(gaw, fps, estimate, fix, m["mesh"], m["dt"], m["duration"], m["discard"], sigma_e, noise,
-                            prior_set, parse_area_scale(area_scale, uncalibrated), m["contact"],
-                            m["contact_layer_mm"])
+    problem = build_problem(
+        gaw,
+        fps,
+        estimate,
+        fix,
+        m["mesh"],
+        m["dt"],
+        m["duration"],
+        m["discard"],
+        sigma_e,
+        noise,
+        prior_set,
+        parse_area_scale(area_scale, uncalibrated),
+        m["contact"],
+        m["contact_layer_mm"],
+    )
     if base_post is not None:
         check_base(base_post, base, problem)
-        taken = [f"{_OPTION[k]} {v:g}" if isinstance(v, float) else f"{_OPTION[k]} {v}"
-                 for k, v in m.items() if given[k] is None and v != MODEL_DEFAULTS[k]]
+        taken = [
+            f"{_OPTION[k]} {v:g}" if isinstance(v, float) else f"{_OPTION[k]} {v}"
+            for k, v in m.items()
+            if given[k] is None and v != MODEL_DEFAULTS[k]
+        ]
         if taken:
             console.print("--base: simulating with the fit's " + ", ".join(taken), highlight=False)
     mesh = m["mesh"]
 
-    console.print(f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "
-                  f"candidates {req.candidates or 'all implemented'}, {workers} worker(s)")
+    console.print(
+        f"diagnosing {gaw.name}: estimate {list(problem.prior.names)}, {req.n_particles} particles, "
+        f"candidates {req.candidates or 'all implemented'}, {workers} worker(s)"
+    )
     print_expected_cost(problem, req, workers, base_post)
     t0 = time.perf_counter()
     store = out / ".resume"
@@ -308,10 +446,10 @@ def diagnose_cmd(
     page = write_page(out, d, gaw, problem, sigma_e, noise, mesh)
     if resume:
         import shutil
+
         shutil.rmtree(store, ignore_errors=True)
     print_report(d)
-    console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} "
-                  f"({time.perf_counter() - t0:.1f} s)")
+    console.print(f"wrote {out / 'diagnosis.json'} and {out / 'diagnosis.png'} ({time.perf_counter() - t0:.1f} s)")
     console.print(f"report: {page.resolve()}", highlight=False, soft_wrap=True)
 
 
@@ -338,35 +476,60 @@ def run_local(problem, req, workers: int, store: Path | None, base_post):
     from vfcore.strict_json import jsonable
 
     from .diagnosis import run_diagnose
+
     try:
-        with console.status("starting", spinner="dots") as status, warnings_in_words() as raised, \
-                ProgressLines() as lines:
+        with (
+            console.status("starting", spinner="dots") as status,
+            warnings_in_words() as raised,
+            ProgressLines() as lines,
+        ):
             if workers == 1:
                 cmap = CachedMap(map, store) if store is not None else None
-                report = run_diagnose(problem, req, map=cmap or map, progress=StageReporter(status, lines), base=base_post)
+                report = run_diagnose(
+                    problem, req, map=cmap or map, progress=StageReporter(status, lines), base=base_post
+                )
             else:
                 from concurrent.futures import ProcessPoolExecutor
 
                 from vfcore.inference.importance import BalancedMap
+
                 with ProcessPoolExecutor(workers) as pool:
                     cmap = CachedMap(pool.map, store) if store is not None else None
-                    report = run_diagnose(problem, req, map=BalancedMap(cmap or pool.map, workers),
-                                          progress=StageReporter(status, lines), base=base_post)
+                    report = run_diagnose(
+                        problem,
+                        req,
+                        map=BalancedMap(cmap or pool.map, workers),
+                        progress=StageReporter(status, lines),
+                        base=base_post,
+                    )
     except Exception as exc:  # noqa: BLE001 - a failed run is reported, not a traceback
         raise fail(f"the diagnosis failed: {type(exc).__name__}: {exc}", code=1) from None
     d = jsonable(account(report.to_dict(), cmap))
-    d["warnings"] = raised                  # shown as they came; the report lists them
+    d["warnings"] = raised  # shown as they came; the report lists them
     return d, report
 
 
 #: the option that sets each model setting a ``--base`` posterior must share with the diagnosis
-_OPTION = {"mesh": "--mesh", "dt": "--dt", "duration": "--duration", "discard": "--discard", "fps": "--fps",
-           "contact": "--contact", "contact_layer_mm": "--contact-layer-mm"}
+_OPTION = {
+    "mesh": "--mesh",
+    "dt": "--dt",
+    "duration": "--duration",
+    "discard": "--discard",
+    "fps": "--fps",
+    "contact": "--contact",
+    "contact_layer_mm": "--contact-layer-mm",
+}
 
 
 #: the model settings of a diagnosis given neither on the command line nor by a ``--base`` fit
-MODEL_DEFAULTS = {"mesh": "coarse", "dt": 1e-4, "duration": DURATION_S, "discard": DISCARD_S,
-                  "contact": "projection", "contact_layer_mm": 0.1}
+MODEL_DEFAULTS = {
+    "mesh": "coarse",
+    "dt": 1e-4,
+    "duration": DURATION_S,
+    "discard": DISCARD_S,
+    "contact": "projection",
+    "contact_layer_mm": 0.1,
+}
 
 
 def model_settings(given: dict, base_post=None) -> dict:
@@ -389,6 +552,7 @@ def read_base(path: Path):
     """The ``--base`` posterior: a NetCDF posterior of an FE fit with predictions; anything else is one error
     line."""
     from vfcore.inference.posterior import Posterior
+
     if not path.is_file():
         raise _fail(f"--base {path}: no such file")
     try:
@@ -410,9 +574,11 @@ def check_base(post, path: Path, problem) -> None:
     if diff:
         was = ", ".join(f"{_OPTION.get(k, k)} {a}" for k, (a, _) in diff.items())
         now = ", ".join(f"{_OPTION.get(k, k)} {b}" for k, (_, b) in diff.items())
-        raise _fail(f"--base {path}: it was simulated with {was}; this diagnosis would simulate {now} "
-                    f"(leave {'/'.join(_OPTION.get(k, k) for k in diff)} out to take the fit's: the base and the extensions "
-                    "must be the same model)")
+        raise _fail(
+            f"--base {path}: it was simulated with {was}; this diagnosis would simulate {now} "
+            f"(leave {'/'.join(_OPTION.get(k, k) for k in diff)} out to take the fit's: the base and the extensions "
+            "must be the same model)"
+        )
     extra = sorted(set(post.names) - set(problem.prior.names))
     if extra:
         raise _fail(f"--base {path}: it estimates {extra}, which --estimate does not")
@@ -425,8 +591,13 @@ def check_base(post, path: Path, problem) -> None:
 def write_page(out: Path, d: dict, gaw: Path, problem, sigma_e: float, noise: str, mesh: str) -> Path:
     """``out/index.html``: the diagnosis report, with the recording and the settings it was run with."""
     from .report_diagnose import write_diagnosis_report
-    source = {"recording": gaw.name, "camera frame rate": f"{problem.fps:g} frames/s",
-              "estimated": ", ".join(problem.prior.names), "mesh": mesh,
-              "contact": contact_label(problem.config.contact, problem.config.contact_layer_mm),
-              "noise": f"{noise}" + (f", sigma_e = {sigma_e:g} mm²" if noise == "fixed" else "")}
+
+    source = {
+        "recording": gaw.name,
+        "camera frame rate": f"{problem.fps:g} frames/s",
+        "estimated": ", ".join(problem.prior.names),
+        "mesh": mesh,
+        "contact": contact_label(problem.config.contact, problem.config.contact_layer_mm),
+        "noise": f"{noise}" + (f", sigma_e = {sigma_e:g} mm²" if noise == "fixed" else ""),
+    }
     return write_diagnosis_report(out, d, title=f"vfinfer diagnosis of {gaw.name}", source=source)

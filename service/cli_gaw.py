@@ -1,4 +1,5 @@
 """``vfinfer gaw VIDEO``: high-speed video (or frame stack) -> GAW CSV + figure."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,13 +14,20 @@ from rich.table import Table
 console = Console()
 
 
-def gaw(video: Annotated[Path, typer.Argument(help="video file, frame folder, multi-page TIFF or .npy stack")],
-        fps: Annotated[float, typer.Option(parser=POSITIVE, help="capture frame rate, frames/s (containers often store playback rates)")],
-        px_per_mm: Annotated[float, typer.Option("--px-per-mm", parser=POSITIVE, help="spatial calibration, pixels per mm")],
-        out: Annotated[Path, typer.Option("-o", "--out", help="GAW CSV to write")] = Path("gaw.csv"),
-        segment_s: Annotated[float, typer.Option(parser=POSITIVE, help="length of the stable segment, s")] = 0.3,
-        figure: Annotated[Optional[Path], typer.Option(help="PNG with contours and the GAW")] = None,
-        fmax: Annotated[float, typer.Option(parser=POSITIVE, help="highest f0 considered, Hz")] = 600.0) -> None:
+def gaw(
+    video: Annotated[Path, typer.Argument(help="video file, frame folder, multi-page TIFF or .npy stack")],
+    fps: Annotated[
+        float,
+        typer.Option(parser=POSITIVE, help="capture frame rate, frames/s (containers often store playback rates)"),
+    ],
+    px_per_mm: Annotated[
+        float, typer.Option("--px-per-mm", parser=POSITIVE, help="spatial calibration, pixels per mm")
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="GAW CSV to write")] = Path("gaw.csv"),
+    segment_s: Annotated[float, typer.Option(parser=POSITIVE, help="length of the stable segment, s")] = 0.3,
+    figure: Annotated[Optional[Path], typer.Option(help="PNG with contours and the GAW")] = None,
+    fmax: Annotated[float, typer.Option(parser=POSITIVE, help="highest f0 considered, Hz")] = 600.0,
+) -> None:
     """Segment the glottis in every frame and write the calibrated GAW (mm^2) of the stable segment."""
     import os
     import tempfile

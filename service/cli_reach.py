@@ -4,6 +4,7 @@ A recording is checked against a reach ensemble of its configuration before a fi
 model's reach"). Ensembles ship for the command line's default configurations only; for another (the paper's
 medium mesh, a new time step or contact law) the first run builds one and caches it, so that every later run
 checks at once."""
+
 from __future__ import annotations
 
 import os
@@ -32,6 +33,7 @@ def ensure_reach(spec, workers: int) -> str | None:
     skips the build (the check then says it was not made)."""
     from vfcore.inference import reach as rc
     from vfcore.inference.prior import Prior as PriorBox
+
     if spec.model != "fe":
         return None
     cfg, prior = spec.sim_config(), spec.to_prior()
@@ -44,19 +46,36 @@ def ensure_reach(spec, workers: int) -> str | None:
     n = rc.DEFAULT_N
     guess = n * REACH_S_PER_DRAW.get(cfg.mesh, 4 * REACH_S_PER_DRAW["medium"]) * (5e-5 / cfg.dt) / workers / 60.0
     path = rc.ensemble_path(rc.reach_key(cfg, target))
-    console.print(f"reach: no ensemble for this configuration yet; building one now: {n} prior draws, about "
-                  f"{guess:.0f} min on {workers} worker{'s' if workers > 1 else ''} at most (measured: 2,000 medium-mesh "
-                  f"draws at dt 5e-5 s in 4 min 14 s on 2 busy workers), cached in {path} for later runs "
-                  "(VFINFER_REACH_BUILD=0 skips it)", highlight=False, soft_wrap=True)
+    console.print(
+        f"reach: no ensemble for this configuration yet; building one now: {n} prior draws, about "
+        f"{guess:.0f} min on {workers} worker{'s' if workers > 1 else ''} at most (measured: 2,000 medium-mesh "
+        f"draws at dt 5e-5 s in 4 min 14 s on 2 busy workers), cached in {path} for later runs "
+        "(VFINFER_REACH_BUILD=0 skips it)",
+        highlight=False,
+        soft_wrap=True,
+    )
     t0 = time.perf_counter()
     with ProgressLines() as lines, _draw_map(workers) as simulate:
+
         def progress(done, total, el):
             lines.update("reach ensemble", done, total)
-        ens = rc.build_ensemble(cfg, target, n, rc.DEFAULT_SEED, block=32 * workers, progress=progress,
-                                simulate_fn=simulate, on_error=lambda m: warn(f"reach ensemble: {m}"))
+
+        ens = rc.build_ensemble(
+            cfg,
+            target,
+            n,
+            rc.DEFAULT_SEED,
+            block=32 * workers,
+            progress=progress,
+            simulate_fn=simulate,
+            on_error=lambda m: warn(f"reach ensemble: {m}"),
+        )
     rc.save_cached(ens)
-    console.print(f"reach: built now: {ens.n} draws in {time.perf_counter() - t0:.0f} s, cached in {path}",
-                  highlight=False, soft_wrap=True)
+    console.print(
+        f"reach: built now: {ens.n} draws in {time.perf_counter() - t0:.0f} s, cached in {path}",
+        highlight=False,
+        soft_wrap=True,
+    )
     return f"built now, {path}"
 
 
@@ -70,6 +89,7 @@ class _draw_map:
     def __enter__(self):
         if self.workers > 1:
             from concurrent.futures import ProcessPoolExecutor
+
             self.pool = ProcessPoolExecutor(self.workers)
         return self
 
@@ -81,6 +101,7 @@ class _draw_map:
         import numpy as np
 
         from vfcore.batch import simulate_many
+
         if self.pool is None:
             return simulate_many(rows, config, block=block)
         parts = [p for p in np.array_split(rows, self.workers) if len(p)]

@@ -1,4 +1,5 @@
 """The Dask client of the service: an external scheduler, or a LocalCluster (laptop, pytest)."""
+
 from __future__ import annotations
 
 from .settings import Settings
@@ -10,8 +11,12 @@ def make_client(settings: Settings):
 
     if settings.scheduler_address:
         return Client(settings.scheduler_address, set_as_default=False), None
-    cluster = LocalCluster(n_workers=settings.n_workers, threads_per_worker=settings.threads_per_worker,
-                           processes=True, dashboard_address=None)
+    cluster = LocalCluster(
+        n_workers=settings.n_workers,
+        threads_per_worker=settings.threads_per_worker,
+        processes=True,
+        dashboard_address=None,
+    )
     return Client(cluster, set_as_default=False), cluster
 
 

@@ -9,6 +9,7 @@ diagnosis of a finished inference (``kind="diagnosis"``, its spec a ``DiagnosisS
 job diagnosed). ``sampler`` and ``model`` are written at submission so that a status read never
 parses a spec again.
 """
+
 from __future__ import annotations
 
 import json
@@ -44,8 +45,25 @@ CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
 #: when it is opened (:meth:`JobDB._migrate`).
 _ADDED = (("kind", "TEXT NOT NULL DEFAULT 'inference'"), ("parent", "TEXT"), ("sampler", "TEXT"), ("model", "TEXT"))
 
-_COLS = ("id", "owner", "state", "spec", "created", "started", "finished", "n_done", "n_total", "ess",
-         "error", "stats", "attempts", "kind", "parent", "sampler", "model")
+_COLS = (
+    "id",
+    "owner",
+    "state",
+    "spec",
+    "created",
+    "started",
+    "finished",
+    "n_done",
+    "n_total",
+    "ess",
+    "error",
+    "stats",
+    "attempts",
+    "kind",
+    "parent",
+    "sampler",
+    "model",
+)
 
 
 def spec_labels(spec_json: str) -> tuple[str, str]:
@@ -98,14 +116,26 @@ class JobDB:
         d["stats"] = json.loads(d["stats"]) if d["stats"] else {}
         return d
 
-    def insert(self, job_id: str, owner: str, spec_json: str, n_total: int, *, kind: str = "inference",
-               parent: str | None = None, sampler: str | None = None, model: str | None = None) -> None:
+    def insert(
+        self,
+        job_id: str,
+        owner: str,
+        spec_json: str,
+        n_total: int,
+        *,
+        kind: str = "inference",
+        parent: str | None = None,
+        sampler: str | None = None,
+        model: str | None = None,
+    ) -> None:
         if kind == "inference" and (sampler is None or model is None):
             sampler, model = spec_labels(spec_json)
         with self._lock:
-            self._con.execute("INSERT INTO jobs (id, owner, state, spec, created, n_total, kind, parent, sampler, model)"
-                              " VALUES (?,?,?,?,?,?,?,?,?,?)",
-                              (job_id, owner, "queued", spec_json, time.time(), n_total, kind, parent, sampler, model))
+            self._con.execute(
+                "INSERT INTO jobs (id, owner, state, spec, created, n_total, kind, parent, sampler, model)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?)",
+                (job_id, owner, "queued", spec_json, time.time(), n_total, kind, parent, sampler, model),
+            )
 
     def get(self, job_id: str, owner: str | None = None, kind: str | None = None) -> dict | None:
         q = f"SELECT {','.join(_COLS)} FROM jobs WHERE id=?"
@@ -119,8 +149,9 @@ class JobDB:
         with self._lock:
             return self._row(self._con.execute(q, args).fetchone())
 
-    def list(self, owner: str | None = None, states: tuple[str, ...] | None = None,
-             kind: str | None = "inference") -> list[dict]:
+    def list(
+        self, owner: str | None = None, states: tuple[str, ...] | None = None, kind: str | None = "inference"
+    ) -> list[dict]:
         """Jobs in submission order; ``kind=None``: every kind (the default lists inferences, what the job
         listings show)."""
         q = f"SELECT {','.join(_COLS)} FROM jobs WHERE 1=1"
@@ -141,9 +172,13 @@ class JobDB:
     def children(self, parent: str, kind: str = "diagnosis") -> list[dict]:
         """The jobs of ``kind`` made of job ``parent``, newest first."""
         with self._lock:
-            return [self._row(r) for r in self._con.execute(
-                f"SELECT {','.join(_COLS)} FROM jobs WHERE parent=? AND kind=? ORDER BY created DESC, rowid DESC",
-                (parent, kind)).fetchall()]
+            return [
+                self._row(r)
+                for r in self._con.execute(
+                    f"SELECT {','.join(_COLS)} FROM jobs WHERE parent=? AND kind=? ORDER BY created DESC, rowid DESC",
+                    (parent, kind),
+                ).fetchall()
+            ]
 
     def delete(self, job_id: str) -> bool:
         with self._lock:
@@ -151,8 +186,12 @@ class JobDB:
 
     def count_active(self, owner: str, kind: str = "inference") -> int:
         with self._lock:
-            return int(self._con.execute("SELECT COUNT(*) FROM jobs WHERE owner=? AND kind=? AND state IN "
-                                         "('queued','running')", (owner, kind)).fetchone()[0])
+            return int(
+                self._con.execute(
+                    "SELECT COUNT(*) FROM jobs WHERE owner=? AND kind=? AND state IN ('queued','running')",
+                    (owner, kind),
+                ).fetchone()[0]
+            )
 
     def update(self, job_id: str, *, only_if_state: tuple[str, ...] | None = None, **fields) -> bool:
         if "stats" in fields and not isinstance(fields["stats"], str):

@@ -1,4 +1,5 @@
 """Typed dependencies: settings, job manager, and the authenticated user (bearer token)."""
+
 from __future__ import annotations
 
 import hmac
@@ -25,19 +26,23 @@ def get_manager(request: Request) -> JobManager:
     return request.app.state.manager
 
 
-def get_user(settings: Annotated[Settings, Depends(get_settings)],
-             cred: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> str:
+def get_user(
+    settings: Annotated[Settings, Depends(get_settings)],
+    cred: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+) -> str:
     if cred is None or cred.scheme.lower() != "bearer":
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing bearer token",
-                            headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED, "missing bearer token", headers={"WWW-Authenticate": "Bearer"}
+        )
     given = cred.credentials.encode()
     user = None
-    for name, tok in settings.users.items():      # constant time per comparison, no early exit
+    for name, tok in settings.users.items():  # constant time per comparison, no early exit
         if hmac.compare_digest(given, tok.encode()):
             user = name
     if user is None:
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED, "invalid bearer token",
-                            headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED, "invalid bearer token", headers={"WWW-Authenticate": "Bearer"}
+        )
     return user
 
 

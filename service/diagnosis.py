@@ -8,6 +8,7 @@ them back. The diagnosis is deterministic given its settings and seed, so the re
 uninterrupted one's: the store keeps the report without its clock readings (wall times, the time by stage, what
 the resume store contributed), which go to the job's stats and are merged back when the report is served.
 """
+
 from __future__ import annotations
 
 import json
@@ -42,6 +43,7 @@ def run_diagnose(problem, request, *, map=map, chunk_size: int | None = None, pr
     place the service and the CLI call it (``chunk_size`` None: the library's). ``base``: a fitted posterior of
     the recording to start from (the diagnosis' ``base``)."""
     from vfcore.diagnose import pipeline
+
     kw = request.settings() | ({} if chunk_size is None else {"chunk_size": chunk_size})
     return pipeline.diagnose(problem, map=map, base=base, progress=progress, **kw)
 
@@ -49,6 +51,7 @@ def run_diagnose(problem, request, *, map=map, chunk_size: int | None = None, pr
 def plot(report, problem, path: Path) -> None:
     """The diagnosis figure (``vfcore.diagnose``'s plot) as a PNG file."""
     from vfcore.diagnose import pipeline
+
     with _PLOT_LOCK:
         pipeline.plot_diagnosis(report, problem, path)
 
@@ -91,15 +94,17 @@ def dask_map(client, stop: threading.Event | None = None):
                 while not done.wait(POLL_S):
                     _check()
                 yield fut.result()
-        finally:                      # stopped early, failed or cancelled: drop what is left
+        finally:  # stopped early, failed or cancelled: drop what is left
             left = [f for f in futures if not f.done()]
             if left:
                 client.cancel(left)
+
     return _map
 
 
 def cancellable(inner, event: threading.Event):
     """``map`` that refuses to start, or to return, a batch once ``event`` is set."""
+
     def _map(fn, parts):
         if event.is_set():
             raise DiagnosisCancelled("cancelled")
@@ -107,6 +112,7 @@ def cancellable(inner, event: threading.Event):
         if event.is_set():
             raise DiagnosisCancelled("cancelled")
         return out
+
     _map.inner = inner
     return _map
 
@@ -129,6 +135,7 @@ def split_clock(report: dict) -> tuple[dict, list]:
         if isinstance(x, list):
             return [walk(v, path + [i]) for i, v in enumerate(x)]
         return x
+
     return walk(report, []), clock
 
 
@@ -195,6 +202,7 @@ def job_posterior(store_path: Path):
     """A finished inference job's posterior from its store (its ``posterior.nc``), or None when the store
     keeps none or one without predicted GAWs (a diagnosis then fits its base itself)."""
     from vfcore.inference.posterior import Posterior
+
     data = st.read_blob(Path(store_path), "posterior_nc")
     if not data:
         return None
@@ -214,29 +222,33 @@ def expected(job_spec_json: str, store_path: Path, request):
     simulation: the service does not time the cluster's workers."""
     from vfcore.diagnose.expected import expected_for
     from worker.jobspec import JobSpec
+
     problem = JobSpec.from_json(job_spec_json).to_problem()
     base = job_posterior(store_path) if request.reuse_posterior else None
     return expected_for(problem, request.options(), None, 1, base)
 
 
 # ------------------------------------------------------------------------------------ the job
-def run_diagnosis(client, job_id: str, store_path: Path, spec, problem, *, stop: threading.Event,
-                  progress=None, base=None) -> dict:
+def run_diagnosis(
+    client, job_id: str, store_path: Path, spec, problem, *, stop: threading.Event, progress=None, base=None
+) -> dict:
     """Run (or resume) the diagnosis job ``spec`` (a :class:`~service.api_models.DiagnosisSpec`) of ``problem`` to
     its stored report; returns its stats (the report's clock readings, the simulations). Raises
     :class:`DiagnosisCancelled` once ``stop`` is set. ``base``: the diagnosed job's posterior
     (:func:`job_posterior`) to start from, or None."""
     from vfcore.inference.importance import BalancedMap
     from vfcore.inference.memo import CachedMap, account
+
     st.create_diagnosis_store(store_path, job_id, spec.to_json())
     cmap = CachedMap(dask_map(client, stop), resume_dir(store_path))
-    if spec.chunk_size and not spec.parts:       # a spec stored with fixed chunks keeps them
+    if spec.chunk_size and not spec.parts:  # a spec stored with fixed chunks keeps them
         inner, chunk = cmap, spec.chunk_size
-    else:                                        # every batch in equal parts, one per worker thread
+    else:  # every batch in equal parts, one per worker thread
         inner, chunk = BalancedMap(cmap, spec.parts or cluster_threads(client)), None
-    report = run_diagnose(problem, spec.request, map=cancellable(inner, stop), chunk_size=chunk, progress=progress,
-                          base=base)
-    d = account(report.to_dict(), cmap)          # a resumed run counts its earlier attempts' time
+    report = run_diagnose(
+        problem, spec.request, map=cancellable(inner, stop), chunk_size=chunk, progress=progress, base=base
+    )
+    d = account(report.to_dict(), cmap)  # a resumed run counts its earlier attempts' time
     png = figure_png(report, problem, store_path)
     clock = write_report(store_path, job_id, spec.to_json(), d, png)
     discard_resume(store_path)

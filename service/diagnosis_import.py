@@ -7,6 +7,7 @@ diagnosis job with its own store, so nothing of it is lost over the upgrade: a f
 before, an interrupted one goes on from its simulations (its earlier interruptions counted), and a failed
 one's simulations are there for the next request of it.
 """
+
 from __future__ import annotations
 
 import json
@@ -40,7 +41,7 @@ def _legacy(stores: Path) -> dict[str, dict[str, Path]]:
 def _import_one(manager, jid: str, files: dict[str, Path]) -> str | None:
     job = manager.db.get(jid)
     if job is None or job["kind"] != "inference" or manager.db.children(jid):
-        return None                       # a job that is gone (its diagnosis goes with it), or imported before
+        return None  # a job that is gone (its diagnosis goes with it), or imported before
     saved, report = {}, None
     try:
         if "request.json" in files:
@@ -64,17 +65,17 @@ def _import_one(manager, jid: str, files: dict[str, Path]) -> str | None:
         fields.update(state="done", finished=now, n_done=n, n_total=n, stats={"clock": clock})
     else:
         from worker.store import create_diagnosis_store
+
         create_diagnosis_store(store, diag_id, spec.to_json())
         if "resume" in files:
             os.replace(files["resume"], dg.resume_dir(store))
-        if "request.json" in files:                   # interrupted: goes on, its earlier interruptions counted
+        if "request.json" in files:  # interrupted: goes on, its earlier interruptions counted
             fields.update(state="running", attempts=int(saved.get("resumes", 0)) + 1)
         elif "error" in files:
             fields.update(state="failed", finished=now, error=files["error"].read_text(errors="replace")[:2000])
         else:
             fields.update(state="cancelled", finished=now)
-    manager.db.insert(diag_id, job["owner"], spec.to_json(), 0, kind="diagnosis", parent=jid, sampler="smc",
-                      model="fe")
+    manager.db.insert(diag_id, job["owner"], spec.to_json(), 0, kind="diagnosis", parent=jid, sampler="smc", model="fe")
     manager.db.update(diag_id, **fields)
     return diag_id
 

@@ -1,4 +1,5 @@
 """422 responses that name the field and never echo the (possibly huge or non-JSON) input."""
+
 from __future__ import annotations
 
 from fastapi import FastAPI, Request

@@ -1,4 +1,5 @@
 """Request-size limit as a plain ASGI middleware (checks Content-Length and streamed bodies)."""
+
 from __future__ import annotations
 
 import json
@@ -11,8 +12,13 @@ class BodySizeLimit:
 
     async def _reject(self, send) -> None:
         body = json.dumps({"detail": f"request body larger than {self.max_bytes} bytes"}).encode()
-        await send({"type": "http.response.start", "status": 413,
-                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 413,
+                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())],
+            }
+        )
         await send({"type": "http.response.body", "body": body})
 
     async def __call__(self, scope, receive, send):

@@ -1,4 +1,5 @@
 """FastAPI application: settings, Dask client and job manager are created in the lifespan."""
+
 from __future__ import annotations
 
 import asyncio
@@ -28,8 +29,8 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
         db = JobDB(s.db_path)
         manager = JobManager(s, db, cl)
         app.state.settings, app.state.manager = s, manager
-        app.state.signer = Signer.from_settings(s)   # keys the signed links of the HTML pages
-        manager.start()                            # interrupted jobs, inferences and diagnoses, go on
+        app.state.signer = Signer.from_settings(s)  # keys the signed links of the HTML pages
+        manager.start()  # interrupted jobs, inferences and diagnoses, go on
         try:
             yield
         finally:
@@ -39,8 +40,12 @@ def create_app(settings: Settings | None = None, client=None) -> FastAPI:
                 await asyncio.to_thread(close_client, cl, cluster)
 
     # /docs and /redoc load Swagger UI and ReDoc from the installed package, never from a CDN
-    app = FastAPIOffline(title="vfinfer", version="0.1.0", lifespan=lifespan,
-                         description="Distributed Bayesian inference of vocal-fold properties from GAWs")
+    app = FastAPIOffline(
+        title="vfinfer",
+        version="0.1.0",
+        lifespan=lifespan,
+        description="Distributed Bayesian inference of vocal-fold properties from GAWs",
+    )
     errors.install(app)
     app.include_router(pages.router)
     app.include_router(health.router)

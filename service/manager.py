@@ -9,6 +9,7 @@ store already marks done, a diagnosis reads its finished simulations back from i
 (``cancel``) and a shutdown (``stop``) stop a job the same way; a cancelled job is marked so, a job
 stopped by a shutdown stays ``running`` and goes on at the next start.
 """
+
 from __future__ import annotations
 
 import logging
@@ -125,8 +126,9 @@ class JobManager:
                 dg.adopt_resume(self.store_path(r["id"]), store)
                 self.db.delete(r["id"])
                 shutil.rmtree(self.store_path(r["id"]), ignore_errors=True)
-            self.db.insert(diag_id, owner, spec.to_json(), 0, kind="diagnosis", parent=job_id, sampler="smc",
-                           model="fe")
+            self.db.insert(
+                diag_id, owner, spec.to_json(), 0, kind="diagnosis", parent=job_id, sampler="smc", model="fe"
+            )
         self._q.put(diag_id)
         return diag_id
 
@@ -169,19 +171,27 @@ class JobManager:
         if rec is None or rec["state"] not in ACTIVE or self._stopping.is_set():
             return
         if rec["kind"] == "diagnosis" and rec["state"] == "running" and rec["attempts"] > MAX_AUTO_RESUMES:
-            self.db.update(job_id, only_if_state=ACTIVE, state="failed", finished=time.time(), error=(
-                f"InterruptedError: the diagnosis was interrupted {rec['attempts']} times by a stop of the service "
-                f"and is not started again automatically; POST /jobs/{rec['parent']}/diagnose again to go on from "
-                "its finished simulations"))
+            self.db.update(
+                job_id,
+                only_if_state=ACTIVE,
+                state="failed",
+                finished=time.time(),
+                error=(
+                    f"InterruptedError: the diagnosis was interrupted {rec['attempts']} times by a stop of the service "
+                    f"and is not started again automatically; POST /jobs/{rec['parent']}/diagnose again to go on from "
+                    "its finished simulations"
+                ),
+            )
             return
         now = time.time()
-        if not self.db.update(job_id, only_if_state=ACTIVE, state="running", started=rec["started"] or now,
-                              attempts=rec["attempts"] + 1):
+        if not self.db.update(
+            job_id, only_if_state=ACTIVE, state="running", started=rec["started"] or now, attempts=rec["attempts"] + 1
+        ):
             return
         lv = Live(progress=Progress(n_total=rec["n_total"]), control=JobControl(), started=now)
         with self._lock:
             self._live[job_id] = lv
-        if self.db.get(job_id)["state"] == "cancelled":   # cancelled between the two updates
+        if self.db.get(job_id)["state"] == "cancelled":  # cancelled between the two updates
             lv.control.cancel()
         work = self._diagnose if rec["kind"] == "diagnosis" else self._infer
         try:
@@ -192,21 +202,27 @@ class JobManager:
                 self._discard(job_id)
             return
         except Exception as exc:  # noqa: BLE001 - recorded as the job's error
-            if self._stopping.is_set():          # e.g. the cluster went first: an interruption, resumed
+            if self._stopping.is_set():  # e.g. the cluster went first: an interruption, resumed
                 return
             if lv.control.cancelled.is_set():
                 self._discard(job_id)
                 return
             log.exception("job %s failed", job_id)
-            self.db.update(job_id, only_if_state=("running",), state="failed", finished=time.time(),
-                           error=f"{type(exc).__name__}: {exc}"[:2000])
+            self.db.update(
+                job_id,
+                only_if_state=("running",),
+                state="failed",
+                finished=time.time(),
+                error=f"{type(exc).__name__}: {exc}"[:2000],
+            )
             return
         finally:
             with self._lock:
                 self._live.pop(job_id, None)
         prev = rec["stats"] or {}
-        stats["runs"] = prev.get("runs", []) + [{k: stats[k] for k in ("chunks_computed", "chunks_skipped",
-                                                                      "total_s") if k in stats}]
+        stats["runs"] = prev.get("runs", []) + [
+            {k: stats[k] for k in ("chunks_computed", "chunks_skipped", "total_s") if k in stats}
+        ]
         stats["queued_s"] = (rec["started"] or now) - rec["created"]
         for k in SUBMIT_NOTES:
             if k in prev:
@@ -215,20 +231,28 @@ class JobManager:
 
     def _flusher(self, job_id: str, lv: Live):
         """Keep ``lv.progress`` current, and the table at most once a second."""
+
         def report(p: Progress) -> None:
             lv.progress = p
             t = time.monotonic()
             if t - lv.last_flush > 1.0:
                 lv.last_flush = t
-                self.db.update(job_id, only_if_state=("running",), n_done=p.n_done,
-                               n_total=max(p.n_total, p.n_done), ess=_finite(p.ess))
+                self.db.update(
+                    job_id,
+                    only_if_state=("running",),
+                    n_done=p.n_done,
+                    n_total=max(p.n_total, p.n_done),
+                    ess=_finite(p.ess),
+                )
+
         return report
 
     def _infer(self, rec: dict, lv: Live) -> tuple[dict, dict]:
         job_id = rec["id"]
         spec = JobSpec.from_json(rec["spec"])
-        stats = run_job(self.client, job_id, self.store_path(job_id), spec, report=self._flusher(job_id, lv),
-                        control=lv.control)
+        stats = run_job(
+            self.client, job_id, self.store_path(job_id), spec, report=self._flusher(job_id, lv), control=lv.control
+        )
         n = stats["n_simulations"]
         return stats, {"n_done": n, "n_total": n, "ess": _finite(stats["ess"])}
 
@@ -237,8 +261,9 @@ class JobManager:
         spec = DiagnosisSpec.model_validate_json(rec["spec"])
         job = self.db.get(spec.job)
         if job is None or job["state"] != "done":
-            raise RuntimeError(f"the job it diagnoses ({spec.job}) is "
-                               f"{'gone' if job is None else job['state'] + ', not done'}")
+            raise RuntimeError(
+                f"the job it diagnoses ({spec.job}) is {'gone' if job is None else job['state'] + ', not done'}"
+            )
         problem = JobSpec.from_json(job["spec"]).to_problem()
         flush = self._flusher(job_id, lv)
 
@@ -247,8 +272,16 @@ class JobManager:
             flush(Progress(n_done=int(ev.get("simulations") or 0), phase=str(ev.get("stage"))))
 
         base = dg.job_posterior(self.store_path(spec.job)) if spec.request.reuse_posterior else None
-        stats = dg.run_diagnosis(self.client, job_id, self.store_path(job_id), spec, problem,
-                                 stop=lv.control.cancelled, progress=progress, base=base)
+        stats = dg.run_diagnosis(
+            self.client,
+            job_id,
+            self.store_path(job_id),
+            spec,
+            problem,
+            stop=lv.control.cancelled,
+            progress=progress,
+            base=base,
+        )
         n = stats["n_simulations"]
         return stats, {"n_done": n, "n_total": n}
 

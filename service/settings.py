@@ -6,6 +6,7 @@ one user, and every job belongs to the user whose token submitted it. ``VFINFER_
 characters) keys the signed links of the HTML pages (``service.signing``); every API process behind one address
 needs the same one, and without it each process draws its own at start.
 """
+
 from __future__ import annotations
 
 import json
@@ -27,10 +28,12 @@ class Settings(BaseModel):
     max_body_bytes: int = Field(default=8_000_000, ge=1_000)
     max_running_jobs: int = Field(default=4, ge=1, le=64, description="jobs driven concurrently")
     max_active_jobs_per_user: int = Field(default=50, ge=1)
-    allow_toy_model: bool = Field(default=False,
-                                  description="accept jobs for models registered as test doubles (worker.models)")
-    link_secret: SecretStr | None = Field(default=None,
-                                          description="HMAC key of signed page links; None = random per process")
+    allow_toy_model: bool = Field(
+        default=False, description="accept jobs for models registered as test doubles (worker.models)"
+    )
+    link_secret: SecretStr | None = Field(
+        default=None, description="HMAC key of signed page links; None = random per process"
+    )
     link_ttl_s: int = Field(default=300, ge=10, le=3600, description="how long a signed page link stays valid (s)")
 
     @field_validator("users")
@@ -77,10 +80,13 @@ class Settings(BaseModel):
         for key, name in (("scheduler_address", "VFINFER_SCHEDULER"),):
             if env.get(name):
                 kw[key] = env[name]
-        for key, name in (("n_workers", "VFINFER_N_WORKERS"), ("threads_per_worker", "VFINFER_THREADS"),
-                          ("max_body_bytes", "VFINFER_MAX_BODY_BYTES"),
-                          ("max_running_jobs", "VFINFER_MAX_RUNNING_JOBS"),
-                          ("max_active_jobs_per_user", "VFINFER_MAX_ACTIVE_JOBS_PER_USER")):
+        for key, name in (
+            ("n_workers", "VFINFER_N_WORKERS"),
+            ("threads_per_worker", "VFINFER_THREADS"),
+            ("max_body_bytes", "VFINFER_MAX_BODY_BYTES"),
+            ("max_running_jobs", "VFINFER_MAX_RUNNING_JOBS"),
+            ("max_active_jobs_per_user", "VFINFER_MAX_ACTIVE_JOBS_PER_USER"),
+        ):
             if env.get(name):
                 kw[key] = int(env[name])
         if env.get("VFINFER_LINK_SECRET"):

@@ -9,6 +9,7 @@ therefore opens exactly one page, for a few minutes, and no edit of its job id, 
 verification; signatures are compared with ``hmac.compare_digest``. A link cannot be revoked before it
 expires except by changing the secret, which is why it is short-lived.
 """
+
 from __future__ import annotations
 
 import base64
@@ -49,8 +50,8 @@ def _utc(epoch: float) -> str:
 
 @dataclass(frozen=True)
 class SignedLink:
-    path: str          # relative to the service, query included
-    expires: int       # epoch seconds
+    path: str  # relative to the service, query included
+    expires: int  # epoch seconds
     ttl_s: int
 
 
@@ -84,8 +85,9 @@ class Signer:
         if exp is None or sig is None:
             raise LinkError("incomplete signed link: it needs both exp and sig; ask for a new link")
         if not _SIG_RE.match(sig) or not hmac.compare_digest(sig.encode(), self._mac(scope, exp).encode()):
-            raise LinkError("invalid link signature: the link was altered or was made for another page; "
-                            "ask for a new link")
+            raise LinkError(
+                "invalid link signature: the link was altered or was made for another page; ask for a new link"
+            )
         if exp <= int(time.time() if now is None else now):
             raise LinkError(f"link expired at {_utc(exp)}; ask for a new link")
 
@@ -106,14 +108,24 @@ def get_signer(request: Request) -> Signer:
 #: The same scheme as every API endpoint's, but optional: a page also opens with a signed link.
 _optional_bearer = HTTPBearer(auto_error=False, description="per-user bearer token (VFINFER_TOKENS)")
 SignerDep = Annotated[Signer, Depends(get_signer)]
-Exp = Annotated[int | None, Query(ge=0, le=2**40, description="signed link: expiry, epoch seconds "
-                                                               "(with sig, instead of a bearer token)")]
-Sig = Annotated[str | None, Query(max_length=64, description="signed link: HMAC-SHA256 of the page and exp "
-                                                             "(from POST /jobs/{id}/report-link or POST /page-link)")]
+Exp = Annotated[
+    int | None,
+    Query(ge=0, le=2**40, description="signed link: expiry, epoch seconds (with sig, instead of a bearer token)"),
+]
+Sig = Annotated[
+    str | None,
+    Query(
+        max_length=64,
+        description="signed link: HMAC-SHA256 of the page and exp "
+        "(from POST /jobs/{id}/report-link or POST /page-link)",
+    ),
+]
 
 
-def bearer_user(settings: Annotated[Settings, Depends(get_settings)],
-                cred: Annotated[HTTPAuthorizationCredentials | None, Depends(_optional_bearer)]) -> str | None:
+def bearer_user(
+    settings: Annotated[Settings, Depends(get_settings)],
+    cred: Annotated[HTTPAuthorizationCredentials | None, Depends(_optional_bearer)],
+) -> str | None:
     """The token's user when an ``Authorization`` header is sent (401 if it is wrong), else None."""
     return None if cred is None else get_user(settings, cred)
 
@@ -126,5 +138,9 @@ def link_refused(exc: LinkError) -> HTTPException:
 
 
 def link_out(request: Request, link: SignedLink) -> LinkOut:
-    return LinkOut(url=link.path, absolute_url=str(request.base_url).rstrip("/") + link.path,
-                   expires=link.expires, expires_in_s=link.ttl_s)
+    return LinkOut(
+        url=link.path,
+        absolute_url=str(request.base_url).rstrip("/") + link.path,
+        expires=link.expires,
+        expires_in_s=link.ttl_s,
+    )

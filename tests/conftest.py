@@ -6,6 +6,7 @@ that width for good, so the tests that give the CLI a wide terminal (``env={"COL
 80 columns in a worker and not in a single process. Without the variables a console asks for the width each time
 it prints, as it does outside the tests.
 """
+
 import os
 
 for _name in ("COLUMNS", "LINES"):

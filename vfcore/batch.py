@@ -9,6 +9,7 @@ Rows may carry their own configurations (``configs=``): rows whose configuration
 only in the model extensions (separation ratio, epithelium membrane, subglottal resonators)
 share a block; the extensions are per-sample data of the lock-step kernel.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -20,8 +21,18 @@ from .config import SimConfig
 from .params import PARAM_NAMES, Params
 from .result import SimResult
 from .scalar import simulate_one
-from .simcore import (BLOWUP, CLOSED_TOL, as_params, assemble_result, contact_law, flow_code, flow_coefficient, midline, setup,
-                      stop_settings)
+from .simcore import (
+    BLOWUP,
+    CLOSED_TOL,
+    as_params,
+    assemble_result,
+    contact_law,
+    flow_code,
+    flow_coefficient,
+    midline,
+    setup,
+    stop_settings,
+)
 from .solver import _kernels as kern
 from .solver._args import Coupling, Matrices, Model, Outputs, Pattern, State, Stepper, Stop
 from .solver._batch_kernels import integrate_many
@@ -68,20 +79,20 @@ class BlockInputs:
     backend shares, from :func:`prepare_block`."""
 
     system: object
-    config: SimConfig                  # the block's shared numerics (configs[0])
+    config: SimConfig  # the block's shared numerics (configs[0])
     n_steps: int
-    coefs: tuple                       # (am, af, beta, gamma)
-    kv: np.ndarray                     # (nnz, B)
+    coefs: tuple  # (am, af, beta, gamma)
+    kv: np.ndarray  # (nnz, B)
     mv: np.ndarray
     dv: np.ndarray
-    Lx: np.ndarray                     # (nnz_L, B)
-    G: np.ndarray                      # (B, n, m)
-    u: np.ndarray                      # (n, B)
-    x_mid: np.ndarray                  # (B,)
+    Lx: np.ndarray  # (nnz_L, B)
+    G: np.ndarray  # (B, n, m)
+    u: np.ndarray  # (n, B)
+    x_mid: np.ndarray  # (B,)
     p_sub: np.ndarray
     sep: np.ndarray
-    sub_coef: np.ndarray               # (B, n_modes, 3)
-    kc: np.ndarray                     # (B, m)
+    sub_coef: np.ndarray  # (B, n_modes, 3)
+    kc: np.ndarray  # (B, m)
     cc: np.ndarray
     traj_every: int
     n_traj: int
@@ -106,7 +117,7 @@ def prepare_block(ps: list[Params], configs: list[SimConfig]) -> BlockInputs:
     sep = np.empty(B)
     coefs = [kern.subglottal_coefficients(c.subglottal_modes, h) for c in configs]
     nmod = max(c.shape[0] for c in coefs)
-    sub_coef = np.zeros((B, nmod, 3))            # zero rows: resonators that add exactly 0 Pa
+    sub_coef = np.zeros((B, nmod, 3))  # zero rows: resonators that add exactly 0 Pa
     kc = np.empty((B, m))
     cc = np.empty((B, m))
     for b, p in enumerate(ps):
@@ -121,21 +132,65 @@ def prepare_block(ps: list[Params], configs: list[SimConfig]) -> BlockInputs:
     if config.keep_trajectories:
         traj_every = max(1, int(round(1.0 / (config.fps * h))))
         n_traj = n_steps // traj_every
-    return BlockInputs(system, config, n_steps, kern.newmark_coefficients(h, config.rho_inf), kv, mv, dv, Lx, G, u,
-                       x_mid, p_sub, sep, sub_coef, kc, cc, traj_every, n_traj)
+    return BlockInputs(
+        system,
+        config,
+        n_steps,
+        kern.newmark_coefficients(h, config.rho_inf),
+        kv,
+        mv,
+        dv,
+        Lx,
+        G,
+        u,
+        x_mid,
+        p_sub,
+        sep,
+        sub_coef,
+        kc,
+        cc,
+        traj_every,
+        n_traj,
+    )
 
 
-def assemble_block(blk: BlockInputs, ps: list[Params], configs: list[SimConfig], status, width, gsep, lam, tu, p_in,
-                   proj, stop, t_wall: float) -> list[SimResult]:
+def assemble_block(
+    blk: BlockInputs,
+    ps: list[Params],
+    configs: list[SimConfig],
+    status,
+    width,
+    gsep,
+    lam,
+    tu,
+    p_in,
+    proj,
+    stop,
+    t_wall: float,
+) -> list[SimResult]:
     """SimResults of a block from its per-sample outputs, indexed ``[b]`` (``lam[b]`` (n_steps, m), ``p_in[b]``
     (n_steps,) when the block has subglottal modes); ``t_wall``: the block's start (perf_counter)."""
     t_each = (time.perf_counter() - t_wall) / len(ps)
     out = []
     for b, p in enumerate(ps):
-        t0 = time.perf_counter() - t_each   # wall_time: this sample's share of the block
-        out.append(assemble_result(p, configs[b], blk.system, int(status[b]), width[b], gsep[b], lam[b],
-                                   blk.traj_every, tu[b], t0, p_in[b] if configs[b].has_subglottal else None, proj[b],
-                                   int(stop[b])))
+        t0 = time.perf_counter() - t_each  # wall_time: this sample's share of the block
+        out.append(
+            assemble_result(
+                p,
+                configs[b],
+                blk.system,
+                int(status[b]),
+                width[b],
+                gsep[b],
+                lam[b],
+                blk.traj_every,
+                tu[b],
+                t0,
+                p_in[b] if configs[b].has_subglottal else None,
+                proj[b],
+                int(stop[b]),
+            )
+        )
     return out
 
 
@@ -157,19 +212,32 @@ def _simulate_block(ps: list[Params], configs: list[SimConfig]) -> list[SimResul
     status = np.zeros(B, dtype=np.int64)
     proj = np.zeros((B, n_steps, m))
     stop = np.zeros(B, dtype=np.int64)
-    integrate_many(Stepper(n_steps, config.dt, *blk.coefs),
-                   Pattern(system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz, system.sX,
-                           system.sZ),
-                   Model(blk.p_sub, config.p_sup, blk.sep, blk.x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3,
-                         flow_code(config), BLOWUP),
-                   Coupling(blk.sub_coef, flow_coefficient(config), config.contact == "layer", blk.kc, blk.cc),
-                   Stop(*stop_settings(config)), Matrices(blk.kv, blk.mv, blk.dv, blk.Lx, blk.G), State(blk.u, v, a),
-                   Outputs(width, gsep, lam, proj, p_in, blk.traj_every, tu, tv, stop), status)
+    integrate_many(
+        Stepper(n_steps, config.dt, *blk.coefs),
+        Pattern(system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz, system.sX, system.sZ),
+        Model(
+            blk.p_sub,
+            config.p_sup,
+            blk.sep,
+            blk.x_mid,
+            CLOSED_TOL,
+            config.closure_gap_mm * 1e-3,
+            flow_code(config),
+            BLOWUP,
+        ),
+        Coupling(blk.sub_coef, flow_coefficient(config), config.contact == "layer", blk.kc, blk.cc),
+        Stop(*stop_settings(config)),
+        Matrices(blk.kv, blk.mv, blk.dv, blk.Lx, blk.G),
+        State(blk.u, v, a),
+        Outputs(width, gsep, lam, proj, p_in, blk.traj_every, tu, tv, stop),
+        status,
+    )
     return assemble_block(blk, ps, configs, status, width, gsep, lam, tu, p_in, proj, stop, t_wall)
 
 
-def simulate_group_cuda(ps: list[Params], configs: list[SimConfig], max_batch: int | None = None,
-                        timings: dict | None = None) -> list[SimResult]:
+def simulate_group_cuda(
+    ps: list[Params], configs: list[SimConfig], max_batch: int | None = None, timings: dict | None = None
+) -> list[SimResult]:
     """SimResults of rows that share a :func:`block_key`, integrated on the GPU (:mod:`vfcore.gpu`).
 
     The rows are set up on the CPU (:func:`prepare_block`), integrated in launches of at most ``max_batch``
@@ -191,15 +259,30 @@ def simulate_group_cuda(ps: list[Params], configs: list[SimConfig], max_batch: i
         sel = np.arange(lo, min(len(ps), lo + cap))
         status, width, gsep, lam, proj, p_in, tu, stop = integrate_cuda(blk, sel, timings)
         ta = time.perf_counter()
-        out.extend(assemble_block(blk, [ps[i] for i in sel], [configs[i] for i in sel], status, width, gsep, lam, tu,
-                                  p_in, proj, stop, t_wall))
+        out.extend(
+            assemble_block(
+                blk,
+                [ps[i] for i in sel],
+                [configs[i] for i in sel],
+                status,
+                width,
+                gsep,
+                lam,
+                tu,
+                p_in,
+                proj,
+                stop,
+                t_wall,
+            )
+        )
         if timings is not None:
             timings["assemble_s"] = timings.get("assemble_s", 0.0) + time.perf_counter() - ta
     return out
 
 
-def simulate_many(params_array, config: SimConfig | None = None, block: int = LOCKSTEP_WIDTH,
-                  configs=None, device: str = "cpu") -> list[SimResult]:
+def simulate_many(
+    params_array, config: SimConfig | None = None, block: int = LOCKSTEP_WIDTH, configs=None, device: str = "cpu"
+) -> list[SimResult]:
     """Simulate each row of ``params_array`` ((N, 7), ``PARAM_NAMES`` order, paper units).
 
     Rows are advanced ``block`` at a time in lock-step; results equal ``simulate`` row by
@@ -219,6 +302,7 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = LO
     if block < 1:
         raise ValueError(f"block must be >= 1, got {block}")
     from .gpu import resolve_device
+
     device = resolve_device(device)
     ps = [Params.from_array(r) for r in arr]
     if configs is None:
@@ -239,7 +323,7 @@ def simulate_many(params_array, config: SimConfig | None = None, block: int = LO
                 out[i] = r
             continue
         for s in range(0, len(idx), block):
-            sel = idx[s:s + block]
+            sel = idx[s : s + block]
             if len(sel) < MIN_LOCKSTEP:
                 res = [simulate_one(ps[i], configs[i]) for i in sel]
             else:
@@ -263,7 +347,7 @@ def probe_seconds_per_sim(params_array, config: SimConfig, seconds: float = 0.1)
     if seconds <= 0:
         raise ValueError(f"seconds must be > 0, got {seconds!r}")
     cfg = config.replace(duration=min(seconds, config.duration), discard=0.0, early_stop=False)
-    simulate_many(arr[:1], cfg.replace(duration=cfg.dt * 4), block=1)        # load the compiled kernels
+    simulate_many(arr[:1], cfg.replace(duration=cfg.dt * 4), block=1)  # load the compiled kernels
     t = time.perf_counter()
     simulate_many(arr, cfg, block=n)
     return (time.perf_counter() - t) / n * config.duration / cfg.duration

@@ -1,10 +1,17 @@
 """Simulation configuration (numerics and observation), SI units except where named."""
+
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
 
-MESHES = ("coarse", "medium", "fine", "xfine", "xxfine")  # ~172, ~205, ~263, ~1050, ~4190 triangles; "medium" is the paper's default
+MESHES = (
+    "coarse",
+    "medium",
+    "fine",
+    "xfine",
+    "xxfine",
+)  # ~172, ~205, ~263, ~1050, ~4190 triangles; "medium" is the paper's default
 ELEMENTS = ("p1", "anp")  # as vfcore.fem.assemble.ELEMENTS (kept import-free here)
 CONTACTS = ("projection", "layer")
 FLOWS = ("continuous", "paper")  # the flow load: continuous between nodes, or the paper's node-wise rule
@@ -135,7 +142,7 @@ class SimConfig:
         if not math.isfinite(self.p_sup):
             raise ValueError(f"config p_sup must be finite, got {self.p_sup!r}")
         if self.fps * self.dt > 1.0:
-            raise ValueError(f"config fps={self.fps} exceeds the simulation rate 1/dt={1/self.dt:.0f}")
+            raise ValueError(f"config fps={self.fps} exceeds the simulation rate 1/dt={1 / self.dt:.0f}")
         self._check_extensions()
 
     def _check_extensions(self) -> None:
@@ -147,23 +154,28 @@ class SimConfig:
         try:
             prof = tuple(float(x) for x in self.epithelium_profile)
         except (TypeError, ValueError):
-            raise ValueError("config epithelium_profile must be a sequence of numbers, "
-                             f"got {self.epithelium_profile!r}") from None
+            raise ValueError(
+                f"config epithelium_profile must be a sequence of numbers, got {self.epithelium_profile!r}"
+            ) from None
         if not all(math.isfinite(x) and x >= 0 for x in prof):
             raise ValueError(f"config epithelium_profile multipliers must be finite and >= 0, got {prof!r}")
         object.__setattr__(self, "epithelium_profile", prof)
         if prof:
             from .mesh import load_mesh
+
             n_edges = len(load_mesh(self.mesh).surface) - 1
             if len(prof) != n_edges:
-                raise ValueError(f"config epithelium_profile must have one multiplier per free-surface edge of mesh "
-                                 f"{self.mesh!r}: expected length {n_edges}, got {len(prof)}")
+                raise ValueError(
+                    f"config epithelium_profile must have one multiplier per free-surface edge of mesh "
+                    f"{self.mesh!r}: expected length {n_edges}, got {len(prof)}"
+                )
         modes = []
         try:
             raw = tuple(self.subglottal_modes)
         except TypeError:
-            raise ValueError(f"config subglottal_modes must be a sequence of (f_hz, zeta, Z_peak), "
-                             f"got {self.subglottal_modes!r}") from None
+            raise ValueError(
+                f"config subglottal_modes must be a sequence of (f_hz, zeta, Z_peak), got {self.subglottal_modes!r}"
+            ) from None
         for k, md in enumerate(raw):
             try:
                 f, z, Zp = (float(x) for x in md)
@@ -172,13 +184,14 @@ class SimConfig:
             if not (math.isfinite(f) and f > 0):
                 raise ValueError(f"config subglottal_modes[{k}] f_hz must be finite and > 0, got {f!r}")
             if not (math.isfinite(f) and f < 0.5 / self.dt):
-                raise ValueError(f"config subglottal_modes[{k}] f_hz={f} must lie below the Nyquist rate "
-                                 f"1/(2 dt) = {0.5 / self.dt:.0f} Hz")
+                raise ValueError(
+                    f"config subglottal_modes[{k}] f_hz={f} must lie below the Nyquist rate "
+                    f"1/(2 dt) = {0.5 / self.dt:.0f} Hz"
+                )
             if not (math.isfinite(z) and 0.0 < z <= 1.0):
                 raise ValueError(f"config subglottal_modes[{k}] zeta must lie in (0, 1], got {z!r}")
             if not (math.isfinite(Zp) and Zp > 0):
-                raise ValueError(f"config subglottal_modes[{k}] Z_peak must be finite and > 0 (Pa s/m^3), "
-                                 f"got {Zp!r}")
+                raise ValueError(f"config subglottal_modes[{k}] Z_peak must be finite and > 0 (Pa s/m^3), got {Zp!r}")
             modes.append((f, z, Zp))
         object.__setattr__(self, "subglottal_modes", tuple(modes))
 
@@ -207,6 +220,7 @@ class SimConfig:
         """:meth:`as_dict` as JSON gives it back (tuples as lists): what a stored record such as
         ``Posterior.model`` holds, and what :meth:`differences` compares."""
         import json
+
         return json.loads(json.dumps(self.as_dict()))
 
     def differences(self, recorded: dict) -> dict[str, tuple]:

@@ -17,6 +17,7 @@ instants found by linear interpolation between samples. ``t_o`` (opening instant
 - open time ``T_o = t_c - t_o``, opening time ``T_op = t_p - t_o``,
   closing time ``T_cl = t_c - t_p``, period ``T = (b[k+1] - b[k]) / fps``.
 """
+
 from __future__ import annotations
 
 import math
@@ -27,6 +28,7 @@ __all__ = ["DEFAULT_LEVEL", "as_gaw", "cycle_boundaries", "cycle_table", "estima
 
 #: Default open-phase threshold, as a fraction of each cycle's peak-to-peak amplitude.
 DEFAULT_LEVEL = 0.05
+
 
 def estimate_f0(gaw: np.ndarray, fps: float, fmin: float = 40.0, fmax: float = 600.0) -> float:
     """Fundamental frequency from the normalised autocorrelation.
@@ -89,7 +91,7 @@ def _autocorrelation(x: np.ndarray) -> np.ndarray:
 def _first_peak_lag(ac: np.ndarray, lo: int, hi: int) -> float | None:
     """Lag (samples, fractional) of the first autocorrelation peak in ``[lo, hi]`` above 0.3 that reaches
     80 % of the best one, refined by a parabola through it and its neighbours; None without such a peak."""
-    seg = ac[lo:hi + 1]
+    seg = ac[lo : hi + 1]
     # first local maximum above 0.3 (avoid picking sub-harmonic multiples)
     cand = [i for i in range(1, seg.size - 1) if seg[i] >= seg[i - 1] and seg[i] >= seg[i + 1] and seg[i] > 0.3]
     if not cand:
@@ -113,7 +115,7 @@ def _refined_period(x: np.ndarray, period: float) -> float:
     n = x.size
 
     def nccf(lag: int) -> float:
-        a, b = x[:n - lag], x[lag:]
+        a, b = x[: n - lag], x[lag:]
         den = math.sqrt(float(np.dot(a, a)) * float(np.dot(b, b)))
         return float(np.dot(a, b)) / den if den > 0 else 0.0
 
@@ -222,8 +224,9 @@ def _crossing(x: np.ndarray, thr: float, start: int, stop: int, rising: bool) ->
     return float(stop)
 
 
-def cycle_table(gaw: np.ndarray, fps: float, level: float = DEFAULT_LEVEL,
-                boundaries: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def cycle_table(
+    gaw: np.ndarray, fps: float, level: float = DEFAULT_LEVEL, boundaries: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """Per-cycle timing and amplitude quantities.
 
     Parameters
@@ -251,7 +254,7 @@ def cycle_table(gaw: np.ndarray, fps: float, level: float = DEFAULT_LEVEL,
     rows = {k: [] for k in keys}
     for k in range(b.size - 1):
         s, e = int(b[k]), int(b[k + 1])
-        c = x[s:e + 1]
+        c = x[s : e + 1]
         amin, amax = float(c.min()), float(c.max())
         p = s + int(np.argmax(c))
         if amax <= amin:
@@ -266,5 +269,5 @@ def cycle_table(gaw: np.ndarray, fps: float, level: float = DEFAULT_LEVEL,
         rows["t_open"].append((tc - to) / fps)
         rows["t_opening"].append((p - to) / fps)
         rows["t_closing"].append((tc - p) / fps)
-        rows["dmin"].append(float(dx[s:e + 1].min()))
+        rows["dmin"].append(float(dx[s : e + 1].min()))
     return {k: np.asarray(v, dtype=int if k == "start" else float) for k, v in rows.items()}

@@ -5,6 +5,7 @@ driver is :mod:`vfcore.scalar`; the set-up and result assembly live in :mod:`vfc
 lock-step :mod:`vfcore.batch`; the constants and steps are re-exported here, where callers read them as
 ``vfcore.forward.X``.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor
@@ -35,9 +36,26 @@ from .simcore import (
     stop_settings,
 )
 
-__all__ = ["simulate", "simulate_batch", "BLOWUP", "CLOSED_TOL", "MIN_CYCLE_AMPLITUDE", "RHO_AIR", "STOP_VEL",
-           "STOP_WIDTH", "STOP_WINDOW_S", "as_params", "assemble_result", "contact_law", "cycle_summary",
-           "flow_coefficient", "midline", "prestress", "setup", "stop_settings"]
+__all__ = [
+    "simulate",
+    "simulate_batch",
+    "BLOWUP",
+    "CLOSED_TOL",
+    "MIN_CYCLE_AMPLITUDE",
+    "RHO_AIR",
+    "STOP_VEL",
+    "STOP_WIDTH",
+    "STOP_WINDOW_S",
+    "as_params",
+    "assemble_result",
+    "contact_law",
+    "cycle_summary",
+    "flow_coefficient",
+    "midline",
+    "prestress",
+    "setup",
+    "stop_settings",
+]
 
 
 def simulate(params, config: SimConfig | None = None) -> SimResult:
@@ -63,8 +81,9 @@ def _simulate_rows(args):
     return batch.simulate_many(rows, config, block=max(1, block))
 
 
-def simulate_batch(params, config: SimConfig | None = None, n_workers: int = 1, block: int = batch.LOCKSTEP_WIDTH
-                   ) -> list[SimResult]:
+def simulate_batch(
+    params, config: SimConfig | None = None, n_workers: int = 1, block: int = batch.LOCKSTEP_WIDTH
+) -> list[SimResult]:
     """Simulate many parameter vectors.
 
     params : (n, 7) array in ``PARAM_NAMES`` order (paper units), or a list of Params.

@@ -18,6 +18,7 @@ column, or a single area column), ``.npy`` (1D area, or (n, 2) time and area) an
 comments, or column names such as ``area_mm2``, ``area_px``, ``time_ms``) or from
 arguments, which take precedence.
 """
+
 from __future__ import annotations
 
 import math
@@ -61,8 +62,10 @@ def check_negative(area) -> str | None:
     deepest = float(a.min())
     if deepest >= -NEGATIVE_NOISE_SDS * sd:
         return None
-    return (f"{int(neg.sum())} negative areas down to {deepest:.3g} mm^2, beyond the recording's noise "
-            f"({NEGATIVE_NOISE_SDS:g} x {sd:.3g} mm^2): an area cannot be negative; check the baseline subtraction")
+    return (
+        f"{int(neg.sum())} negative areas down to {deepest:.3g} mm^2, beyond the recording's noise "
+        f"({NEGATIVE_NOISE_SDS:g} x {sd:.3g} mm^2): an area cannot be negative; check the baseline subtraction"
+    )
 
 
 class GawFileError(ValueError):
@@ -76,6 +79,7 @@ _TIME_TO_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 @dataclass
 class GawData:
     """A GAW read from a file: times (s), area (mm^2), frame rate (Hz), header metadata."""
+
     t: np.ndarray
     area: np.ndarray
     fps: float
@@ -91,7 +95,7 @@ def _area_factor(unit: str, px_per_mm: float | None) -> float:
     if u in ("px", "pixel", "pixels", "px^2"):
         if not px_per_mm or px_per_mm <= 0:
             raise GawFileError("area is in pixels: give px_per_mm to convert it to mm^2")
-        return 1.0 / px_per_mm ** 2
+        return 1.0 / px_per_mm**2
     if u not in _AREA_TO_MM2:
         raise GawFileError(f"unknown area unit '{unit}' (use mm^2, cm^2, m^2 or px)")
     return _AREA_TO_MM2[u]
@@ -112,8 +116,14 @@ def _col_unit(name: str, kind: str) -> str | None:
     return None
 
 
-def read_gaw(path, fps: float | None = None, area_unit: str | None = None, time_unit: str | None = None,
-             px_per_mm: float | None = None, allow_negative: bool = False) -> GawData:
+def read_gaw(
+    path,
+    fps: float | None = None,
+    area_unit: str | None = None,
+    time_unit: str | None = None,
+    px_per_mm: float | None = None,
+    allow_negative: bool = False,
+) -> GawData:
     """Read a GAW file (CSV, NPY, NPZ) into times (s) and areas (mm^2).
 
     Parameters
@@ -221,8 +231,7 @@ def _parse_lines(p: Path, text: str, meta: dict) -> tuple[list[str] | None, list
             if m:
                 meta[m.group(1).strip().lower()] = m.group(2).strip()
             continue
-        parts = [q.strip() for q in re.split(r"[,;\t]", s) if q.strip() != ""] if re.search(r"[,;\t]", s) \
-            else s.split()
+        parts = [q.strip() for q in re.split(r"[,;\t]", s) if q.strip() != ""] if re.search(r"[,;\t]", s) else s.split()
         try:
             rows.append([float(q) for q in parts])
         except ValueError:
@@ -233,8 +242,9 @@ def _parse_lines(p: Path, text: str, meta: dict) -> tuple[list[str] | None, list
     return header, rows
 
 
-def _named_columns(p: Path, arr: np.ndarray, header: list[str], names: list[str],
-                   meta: dict) -> tuple[np.ndarray | None, np.ndarray]:
+def _named_columns(
+    p: Path, arr: np.ndarray, header: list[str], names: list[str], meta: dict
+) -> tuple[np.ndarray | None, np.ndarray]:
     """``(t, area)`` chosen by column name (``t...``/``time...``; ``area...``/``gaw...``, else the last of at
     most two columns); units in the names (``area_mm2``, ``time_ms``) go into ``meta`` unless a header
     comment gave them."""
@@ -258,8 +268,7 @@ def _named_columns(p: Path, arr: np.ndarray, header: list[str], names: list[str]
     return t, area
 
 
-def _area_in_mm2(p: Path, area, area_u: str, px_per_mm: float | None, meta: dict,
-                 allow_negative: bool) -> np.ndarray:
+def _area_in_mm2(p: Path, area, area_u: str, px_per_mm: float | None, meta: dict, allow_negative: bool) -> np.ndarray:
     """The areas converted from ``area_u`` to mm^2 (pixels with ``px_per_mm``, else the header's) and checked:
     at least two samples, finite, and non-negative unless ``allow_negative``."""
     if px_per_mm is None and "px_per_mm" in meta:

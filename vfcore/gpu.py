@@ -12,6 +12,7 @@ GPU can be used) and ``"auto"`` (``"cuda"`` when a real GPU is usable, else ``"c
 (set before numba is imported) runs ``"cuda"`` on numba's CUDA simulator, on the CPU: how the kernel is
 tested without a GPU.
 """
+
 from __future__ import annotations
 
 import os
@@ -45,9 +46,12 @@ def cuda_status() -> tuple[bool, str]:
             why = " ".join(str(cuda.cuda_error() or "no CUDA device was found").split())
             return False, f"no usable NVIDIA GPU ({why})"
         from numba.cuda.cudadrv import nvvm
+
         if not nvvm.is_available():
-            return False, ("the GPU's driver is present but the CUDA toolkit's NVVM compiler is not: install the "
-                           "[gpu] extra (numba-cuda with the CUDA 12 toolkit wheels) or set CUDA_HOME to a toolkit")
+            return False, (
+                "the GPU's driver is present but the CUDA toolkit's NVVM compiler is not: install the "
+                "[gpu] extra (numba-cuda with the CUDA 12 toolkit wheels) or set CUDA_HOME to a toolkit"
+            )
         dev = cuda.get_current_device()
         name = dev.name.decode() if isinstance(dev.name, bytes) else str(dev.name)
         return True, f"{name} (compute capability {dev.compute_capability[0]}.{dev.compute_capability[1]})"
@@ -57,6 +61,7 @@ def cuda_status() -> tuple[bool, str]:
 
 def is_simulator() -> bool:
     from numba.core import config
+
     return bool(config.ENABLE_CUDASIM)
 
 
@@ -77,11 +82,26 @@ def resolve_device(device: str) -> str:
 
 def _bytes_per_sample(system, n_steps: int, nmod: int, n_traj: int, projection: bool) -> int:
     n, m, nnz, nl = system.n, system.sdx.size, system.indices.size, system.nnz_factor
-    doubles = (3 * nnz + nl + n * m + 3 * n + 3 + 3 * nmod + 2 * m          # inputs
-               + 4 * n + 10 * m + m + m * m + 2 * nmod                      # work (idx int64 counted as a double)
-               + 2 * n_steps + n_steps * m * (2 if projection else 1)       # outputs
-               + (n_steps if nmod else 0) + 2 * n_traj * n + 2)
-    return 8 * doubles + m                                                  # + the bool active set
+    doubles = (
+        3 * nnz
+        + nl
+        + n * m
+        + 3 * n
+        + 3
+        + 3 * nmod
+        + 2 * m  # inputs
+        + 4 * n
+        + 10 * m
+        + m
+        + m * m
+        + 2 * nmod  # work (idx int64 counted as a double)
+        + 2 * n_steps
+        + n_steps * m * (2 if projection else 1)  # outputs
+        + (n_steps if nmod else 0)
+        + 2 * n_traj * n
+        + 2
+    )
+    return 8 * doubles + m  # + the bool active set
 
 
 def _host_memory() -> int:
@@ -95,6 +115,7 @@ def max_launch(system, n_steps: int, nmod: int, n_traj: int, projection: bool, h
     """Most samples one launch holds: a share of the free GPU memory and (``host``: the outputs come back) of
     the host's memory."""
     from numba import cuda
+
     per = _bytes_per_sample(system, n_steps, nmod, n_traj, projection)
     cap = DEVICE_MEMORY_SHARE * cuda.current_context().get_memory_info()[0]
     if host:
@@ -106,6 +127,7 @@ def _zeros(shape):
     """A zero-filled float64 device array (filled on the device, not copied from the host)."""
     from numba import cuda
     from .solver._cuda_kernels import SIMULATOR, THREADS_PER_BLOCK, fill_zero
+
     if SIMULATOR or int(np.prod(shape)) == 0:
         return cuda.to_device(np.zeros(shape))
     d = cuda.device_array(shape)
@@ -157,23 +179,91 @@ def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None, fetch: boo
     tv = cuda.device_array((blk.n_traj, n, B))
     status = cuda.to_device(np.zeros(B, dtype=np.int64))
     stop = cuda.to_device(np.zeros(B, dtype=np.int64))
-    shared = [cuda.to_device(x) for x in (system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz,
-                                          system.sX, system.sZ)]
+    shared = [
+        cuda.to_device(x)
+        for x in (system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz, system.sX, system.sZ)
+    ]
     t1 = time.perf_counter()
     stop_window, stop_width, stop_vel = stop_settings(config)
     f = float
     # fixed scalar types: one compiled kernel whatever numeric types a config holds
-    scalars = (int(n_steps), f(config.dt), *(f(x) for x in blk.coefs), f(config.p_sup), f(CLOSED_TOL),
-               f(config.closure_gap_mm * 1e-3), int(flow_code(config)), f(BLOWUP), f(flow_coefficient(config)), bool(not projection),
-               int(blk.traj_every), int(stop_window), f(stop_width), f(stop_vel))
-    launch(B, scalars, (*shared, kdm, Lx, G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam,
-                        proj, p_in, tu, tv, status, stop))
+    scalars = (
+        int(n_steps),
+        f(config.dt),
+        *(f(x) for x in blk.coefs),
+        f(config.p_sup),
+        f(CLOSED_TOL),
+        f(config.closure_gap_mm * 1e-3),
+        int(flow_code(config)),
+        f(BLOWUP),
+        f(flow_coefficient(config)),
+        bool(not projection),
+        int(blk.traj_every),
+        int(stop_window),
+        f(stop_width),
+        f(stop_vel),
+    )
+    launch(
+        B,
+        scalars,
+        (
+            *shared,
+            kdm,
+            Lx,
+            G,
+            uva,
+            spar,
+            sub_coef,
+            kcc,
+            wn,
+            wm,
+            active,
+            idx,
+            S,
+            subw,
+            width,
+            gsep,
+            lam,
+            proj,
+            p_in,
+            tu,
+            tv,
+            status,
+            stop,
+        ),
+    )
     t2 = time.perf_counter()
     if timings is not None:
         timings["kernel_s"] = timings.get("kernel_s", 0.0) + t2 - t1
         timings["to_device_s"] = timings.get("to_device_s", 0.0) + t1 - t0
-        used = sum(int(x.nbytes) for x in (*shared, kdm, Lx, G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S,
-                                           subw, width, gsep, lam, proj, p_in, tu, tv, status, stop))
+        used = sum(
+            int(x.nbytes)
+            for x in (
+                *shared,
+                kdm,
+                Lx,
+                G,
+                uva,
+                spar,
+                sub_coef,
+                kcc,
+                wn,
+                wm,
+                active,
+                idx,
+                S,
+                subw,
+                width,
+                gsep,
+                lam,
+                proj,
+                p_in,
+                tu,
+                tv,
+                status,
+                stop,
+            )
+        )
         timings["device_bytes"] = max(timings.get("device_bytes", 0), used)
     if not fetch:
         return None
@@ -186,8 +276,7 @@ def integrate_cuda(blk, sel: np.ndarray, timings: dict | None = None, fetch: boo
     else:
         h_p_in = np.zeros((B, 0))
     h_tu = tu.copy_to_host().transpose(2, 0, 1)
-    out = (status.copy_to_host(), c(h_width), c(h_gsep), c(h_lam), c(h_proj), c(h_p_in), c(h_tu),
-           stop.copy_to_host())
+    out = (status.copy_to_host(), c(h_width), c(h_gsep), c(h_lam), c(h_proj), c(h_p_in), c(h_tu), stop.copy_to_host())
     t3 = time.perf_counter()
     if timings is not None:
         timings["to_host_s"] = timings.get("to_host_s", 0.0) + t3 - t2

@@ -8,6 +8,7 @@ convention) are :mod:`vfcore.cycles`; their names are re-exported here.
 
 Cycle measures are averaged (arithmetic mean) over all complete cycles.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,10 +16,22 @@ import numpy as np
 from .cycles import DEFAULT_LEVEL, as_gaw, cycle_boundaries, cycle_table, estimate_f0
 
 __all__ = [
-    "estimate_f0", "cycle_boundaries", "cycle_table", "open_quotient", "speed_quotient",
-    "closing_quotient", "amplitude_quotient", "naq", "glottal_gap_index", "harmonic_amplitudes",
-    "harmonic_richness_factor", "jitter", "shimmer", "subharmonic_to_harmonic_ratio",
-    "gaw_measures", "DEFAULT_LEVEL",
+    "estimate_f0",
+    "cycle_boundaries",
+    "cycle_table",
+    "open_quotient",
+    "speed_quotient",
+    "closing_quotient",
+    "amplitude_quotient",
+    "naq",
+    "glottal_gap_index",
+    "harmonic_amplitudes",
+    "harmonic_richness_factor",
+    "jitter",
+    "shimmer",
+    "subharmonic_to_harmonic_ratio",
+    "gaw_measures",
+    "DEFAULT_LEVEL",
 ]
 
 
@@ -99,7 +112,7 @@ def _whole_cycle_segment(x: np.ndarray, b: np.ndarray, even: bool) -> tuple[np.n
         m -= 1
     if m < 1:
         return x[:0], 0
-    return x[b[0]:b[m]], m
+    return x[b[0] : b[m]], m
 
 
 def harmonic_amplitudes(gaw, fps, n_harmonics: int = 10) -> np.ndarray:

@@ -5,6 +5,7 @@ surface to the midline; area A = L * W with L = 17 mm; the simulated GAW is
 downsampled to the camera rate and phase-aligned to the observation by
 cross-correlating the first two cycles.
 """
+
 from __future__ import annotations
 
 import math
@@ -66,7 +67,8 @@ def alignment_window(obs: np.ndarray, fps: float, n_sim: int, search: str = "win
     n_cmp = min(obs.size, n_sim - max_lag)
     if n_cmp < 2 * period:
         raise ValueError(
-            f"simulation ({n_sim} frames) too short to align an observation with period {period:.1f} frames")
+            f"simulation ({n_sim} frames) too short to align an observation with period {period:.1f} frames"
+        )
     return max_lag, n_cmp
 
 
@@ -93,12 +95,13 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
     transforms and sums then run over all rows at once, and each row's scores are the same bytes
     as its own call's (every step acts on a row alone, in the same order)."""
     from scipy import fft as sfft
+
     n = tmpl.size
-    span = j_max + q * (n - 1) + 1                     # the samples any window reads
+    span = j_max + q * (n - 1) + 1  # the samples any window reads
     if hr.shape[-1] < span:
         raise ValueError(f"record of {hr.shape[-1]} samples is too short for lags up to {j_max} of a {n}-frame window")
     x = hr[..., :span]
-    nfft = sfft.next_fast_len(span, real=True)        # circular wrap cannot reach lags <= j_max
+    nfft = sfft.next_fast_len(span, real=True)  # circular wrap cannot reach lags <= j_max
     key = (q, nfft, tmpl.tobytes())
     spec = _TEMPLATE_SPECTRA.get(key)
     if spec is None:
@@ -114,9 +117,10 @@ def _profile_scores(hr: np.ndarray, tmpl: np.ndarray, q: int, j_max: int) -> np.
     y = np.zeros(lead + (rows * q,))
     y[..., :span] = x * x
     # e[..., k q + r]: sum of y[..., k' q + r] over k' < k
-    e = np.concatenate([np.zeros(lead + (q,)),
-                        np.cumsum(y.reshape(lead + (rows, q)), axis=-2).reshape(lead + (rows * q,))], axis=-1)
-    s2 = e[..., q * n: q * n + j_max + 1] - e[..., : j_max + 1]
+    e = np.concatenate(
+        [np.zeros(lead + (q,)), np.cumsum(y.reshape(lead + (rows, q)), axis=-2).reshape(lead + (rows * q,))], axis=-1
+    )
+    s2 = e[..., q * n : q * n + j_max + 1] - e[..., : j_max + 1]
     return -(s2 - 2.0 * c + float(tmpl @ tmpl))
 
 
@@ -134,7 +138,7 @@ def _read_at_best(cs: np.ndarray, js: np.ndarray, hr: np.ndarray, q: int, n_cmp:
         den = c0 - 2.0 * c1 + c2
         use = inner & (den < 0)
         frac[use] = np.clip(0.5 * (c0[use] - c2[use]) / den[use], -0.5, 0.5)
-    pos = js[m] + frac                       # fine-grid position of the aligned start
+    pos = js[m] + frac  # fine-grid position of the aligned start
     x = pos[:, None] + q * np.arange(n_cmp)[None, :]
     i0 = np.minimum(np.floor(x).astype(np.int64), hr.shape[-1] - 2)
     w = x - i0
@@ -142,8 +146,9 @@ def _read_at_best(cs: np.ndarray, js: np.ndarray, hr: np.ndarray, q: int, n_cmp:
     return seg, pos / q
 
 
-def align_many(sims_hr: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int], oversample: int,
-               method: str = "profile") -> tuple[np.ndarray, np.ndarray]:
+def align_many(
+    sims_hr: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int], oversample: int, method: str = "profile"
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`align` of several oversampled simulated GAWs of one length, ``sims_hr`` (m, N), to one
     observation: the many waveforms one simulation yields under an extension's parameters. Each
     row's segment and lag are the same bytes as :func:`align` of that row alone (``sim`` its
@@ -167,9 +172,15 @@ def align_many(sims_hr: np.ndarray, obs: np.ndarray, fps: float, window: tuple[i
     return _read_at_best(cs, js, hr, q, n_cmp)
 
 
-def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] | None = None,
-          sim_hr: np.ndarray | None = None, oversample: int | None = None, method: str = "xcorr",
-          ) -> tuple[np.ndarray, np.ndarray, float]:
+def align(
+    sim: np.ndarray,
+    obs: np.ndarray,
+    fps: float,
+    window: tuple[int, int] | None = None,
+    sim_hr: np.ndarray | None = None,
+    oversample: int | None = None,
+    method: str = "xcorr",
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Phase-align a simulated GAW to an observed one over lags 0..max_lag frames.
 
     ``method="xcorr"`` (the paper, Section 4.1): the lag maximises the cross-correlation of
@@ -200,7 +211,7 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
         n_tmpl = min(n_cmp, int(math.ceil(2 * fps / f0)) if math.isfinite(f0) else n_cmp)
         tmpl = obs[:n_tmpl] - obs[:n_tmpl].mean()
 
-        def score(segs):                       # larger is better
+        def score(segs):  # larger is better
             return (segs - segs.mean(axis=-1, keepdims=True)) @ tmpl
     else:
         n_tmpl = n_cmp
@@ -209,11 +220,12 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
         def score(segs):
             d = segs - tmpl
             return -np.einsum("...i,...i->...", d, d)
+
     if sim_hr is None:
         lags = np.arange(0, max_lag + 1)
         segs = sim[lags[:, None] + np.arange(n_tmpl)[None, :]]
         best_lag = int(lags[int(np.argmax(score(segs)))])
-        return sim[best_lag:best_lag + n_cmp], obs[:n_cmp], float(best_lag)
+        return sim[best_lag : best_lag + n_cmp], obs[:n_cmp], float(best_lag)
     q = int(oversample) if oversample is not None else 0
     hr = np.asarray(sim_hr, dtype=float)
     if q < 1 or hr.size < q * (sim.size - 1) + 1:
@@ -224,7 +236,8 @@ def align(sim: np.ndarray, obs: np.ndarray, fps: float, window: tuple[int, int] 
     if method == "profile":
         cs = _profile_scores(hr, tmpl, q, int(js[-1]))
     else:
-        cs = np.concatenate([score(hr[js[b:b + 64, None] + q * np.arange(n_tmpl)[None, :]])
-                             for b in range(0, js.size, 64)])
+        cs = np.concatenate(
+            [score(hr[js[b : b + 64, None] + q * np.arange(n_tmpl)[None, :]]) for b in range(0, js.size, 64)]
+        )
     seg, lag = _read_at_best(cs[None, :], js, hr[None, :], q, n_cmp)
     return seg[0], obs[:n_cmp], float(lag[0])

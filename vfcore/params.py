@@ -3,6 +3,7 @@
 Units at the edge follow Hadwin et al. (2019), Table 2/3: E_body kPa, E_cover Pa,
 E_lig kPa, p_sub Pa, rho kg/m^3, eta Poise, x0 mm. Everything inside vfcore is SI.
 """
+
 from __future__ import annotations
 
 import math
@@ -15,14 +16,24 @@ PARAM_NAMES: tuple[str, ...] = ("E_body", "E_cover", "E_lig", "p_sub", "rho", "e
 
 #: Units of each parameter at the edge (input/output).
 PARAM_UNITS: dict[str, str] = {
-    "E_body": "kPa", "E_cover": "Pa", "E_lig": "kPa", "p_sub": "Pa",
-    "rho": "kg/m^3", "eta": "Poise", "x0": "mm",
+    "E_body": "kPa",
+    "E_cover": "Pa",
+    "E_lig": "kPa",
+    "p_sub": "Pa",
+    "rho": "kg/m^3",
+    "eta": "Poise",
+    "x0": "mm",
 }
 
 #: Multiply an edge value by this factor to get SI (Pa, Pa, Pa, Pa, kg/m^3, Pa s, m).
 TO_SI: dict[str, float] = {
-    "E_body": 1e3, "E_cover": 1.0, "E_lig": 1e3, "p_sub": 1.0,
-    "rho": 1.0, "eta": 0.1, "x0": 1e-3,
+    "E_body": 1e3,
+    "E_cover": 1.0,
+    "E_lig": 1e3,
+    "p_sub": 1.0,
+    "rho": 1.0,
+    "eta": 0.1,
+    "x0": 1e-3,
 }
 
 #: Fold width (medial-lateral extent) of the undeformed M5 section, mm.  x0 = this means
@@ -55,7 +66,8 @@ class Params:
             raise ValueError(f"parameter p_sub must be >= 0 Pa, got {self.p_sub}")
         if not (0.0 < self.x0 <= FOLD_WIDTH_MM):
             raise ValueError(
-                f"parameter x0 must lie in (0, {FOLD_WIDTH_MM}] mm (8.4 = no medial compression), got {self.x0}")
+                f"parameter x0 must lie in (0, {FOLD_WIDTH_MM}] mm (8.4 = no medial compression), got {self.x0}"
+            )
 
     @classmethod
     def from_dict(cls, d: dict) -> Params:

@@ -1,4 +1,5 @@
 """Result of one forward simulation."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -35,15 +36,15 @@ class CycleSummary:
       force scales like m v / h) and are kept for comparison only.
     """
 
-    t_start: np.ndarray          # s, cycle start (glottal-area minimum) relative to the kept window
-    period: np.ndarray           # s
-    peak_area: np.ndarray        # mm^2
-    min_area: np.ndarray         # mm^2
-    mean_flow: np.ndarray        # m^3/s
+    t_start: np.ndarray  # s, cycle start (glottal-area minimum) relative to the kept window
+    period: np.ndarray  # s
+    peak_area: np.ndarray  # mm^2
+    min_area: np.ndarray  # mm^2
+    mean_flow: np.ndarray  # m^3/s
     mean_peak_contact_pressure_unconverged: np.ndarray  # Pa, time-mean over the cycle of the spatial max
-    max_contact_pressure_unconverged: np.ndarray        # Pa, max over the cycle and over nodes
-    contact_impulse: np.ndarray = field(default_factory=lambda: np.empty(0))              # N s/m
-    contact_duration: np.ndarray = field(default_factory=lambda: np.empty(0))             # s
+    max_contact_pressure_unconverged: np.ndarray  # Pa, max over the cycle and over nodes
+    contact_impulse: np.ndarray = field(default_factory=lambda: np.empty(0))  # N s/m
+    contact_duration: np.ndarray = field(default_factory=lambda: np.empty(0))  # s
     contact_pressure_in_contact: np.ndarray = field(default_factory=lambda: np.empty(0))  # Pa
 
     @property

@@ -1,6 +1,7 @@
 """The scalar forward kernel for one parameter vector: what :func:`vfcore.forward.simulate` runs, and what
 :func:`vfcore.batch.simulate_many` runs for blocks too small for the lock-step kernel (both sit above this module,
 so neither imports the other)."""
+
 from __future__ import annotations
 
 import time
@@ -10,8 +11,17 @@ import numpy as np
 from .config import SimConfig
 from .params import Params
 from .result import SimResult
-from .simcore import (BLOWUP, CLOSED_TOL, assemble_result, contact_law, flow_code, flow_coefficient, midline, setup,
-                      stop_settings)
+from .simcore import (
+    BLOWUP,
+    CLOSED_TOL,
+    assemble_result,
+    contact_law,
+    flow_code,
+    flow_coefficient,
+    midline,
+    setup,
+    stop_settings,
+)
 from .solver import _kernels as kern
 from .solver._args import Coupling, Matrices, Model, Outputs, Pattern, State, Stepper, Stop
 from .solver.system import get_system
@@ -50,12 +60,39 @@ def simulate_one(p: Params, config: SimConfig) -> SimResult:
     status = kern.integrate_coupled(
         Stepper(n_steps, h, am, af, beta, gamma),
         Pattern(system.indptr, system.indices, system.Lp, system.Lj, system.sdx, system.sdz, system.sX, system.sZ),
-        Model(si["p_sub"], config.p_sup, config.sep_ratio, x_mid, CLOSED_TOL, config.closure_gap_mm * 1e-3,
-              flow_code(config), BLOWUP),
-        Coupling(kern.subglottal_coefficients(config.subglottal_modes, h), flow_coefficient(config),
-                 config.contact == "layer", *contact_law(p, config, system)),
+        Model(
+            si["p_sub"],
+            config.p_sup,
+            config.sep_ratio,
+            x_mid,
+            CLOSED_TOL,
+            config.closure_gap_mm * 1e-3,
+            flow_code(config),
+            BLOWUP,
+        ),
+        Coupling(
+            kern.subglottal_coefficients(config.subglottal_modes, h),
+            flow_coefficient(config),
+            config.contact == "layer",
+            *contact_law(p, config, system),
+        ),
         Stop(*stop_settings(config)),
-        Matrices(K_vals, M_vals, D_vals, Lx, G), State(u, v, a),
-        Outputs(width, gsep, lam, proj, p_in, traj_every, tu, tv, stop))
-    return assemble_result(p, config, system, status, width, gsep, lam, traj_every, tu, t_wall,
-                           p_in if config.has_subglottal else None, proj, int(stop[0]))
+        Matrices(K_vals, M_vals, D_vals, Lx, G),
+        State(u, v, a),
+        Outputs(width, gsep, lam, proj, p_in, traj_every, tu, tv, stop),
+    )
+    return assemble_result(
+        p,
+        config,
+        system,
+        status,
+        width,
+        gsep,
+        lam,
+        traj_every,
+        tu,
+        t_wall,
+        p_in if config.has_subglottal else None,
+        proj,
+        int(stop[0]),
+    )

@@ -5,6 +5,7 @@ factorisation, contact law), and the assembly of a :class:`SimResult` from the p
 Both time loops call exactly these functions, which is what keeps a lock-step row bit-identical to a
 scalar simulation. Hadwin et al. (2019), Sections 3 and 4.1; :ref:`model`.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,24 +20,27 @@ from .result import HR_OVERSAMPLE, CycleSummary, SimResult
 from .solver import _kernels as kern
 from .solver.system import System
 
-RHO_AIR = 1.14          # kg/m^3 (Hadwin et al. 2019)
-CLOSED_TOL = 1e-9       # m: a surface node within 1 nm of the midline closes the glottis (the paper's flow rule)
+RHO_AIR = 1.14  # kg/m^3 (Hadwin et al. 2019)
+CLOSED_TOL = 1e-9  # m: a surface node within 1 nm of the midline closes the glottis (the paper's flow rule)
 
 
 def flow_code(config: SimConfig) -> int:
     """The kernels' ``flow`` argument for ``config.flow`` (:data:`.solver._kernels.FLOW_PAPER` or
     ``FLOW_CONTINUOUS``)."""
     from .solver._kernels import FLOW_CONTINUOUS, FLOW_PAPER
+
     return FLOW_PAPER if config.flow == "paper" else FLOW_CONTINUOUS
+
+
 MIN_CYCLE_AMPLITUDE = 0.05  # mm^2
-BLOWUP = 1e-2           # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
+BLOWUP = 1e-2  # m: a displacement beyond 1 cm (more than the 8.4-mm fold width) is a failure
 # Settled-response stop (SimConfig.early_stop; :ref:`model-numerics-stopping-settled-simulations`): windows of
 # 50 ms (longer than any period the model produces), quiet when the width moved by at most 10 nm
 # (1.7e-4 mm^2 of area) and no node moved faster than 1 mm/s (a phonating fold: ~0.1-0.5 m/s), nor faster
 # than in the window before.
 STOP_WINDOW_S = 0.05
-STOP_WIDTH = 1e-8       # m
-STOP_VEL = 1e-3         # m/s
+STOP_WIDTH = 1e-8  # m
+STOP_VEL = 1e-3  # m/s
 
 
 def stop_settings(config: SimConfig) -> tuple[int, float, float]:
@@ -78,8 +82,9 @@ def contact_law(p: Params, config: SimConfig, system: System) -> tuple[np.ndarra
     return si["E_cover"] / hl * share, si["eta"] / hl * share
 
 
-def prestress(system: System, K_vals: np.ndarray, x_mid: float,
-              kc: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def prestress(
+    system: System, K_vals: np.ndarray, x_mid: float, kc: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Static equilibrium with no surface node beyond the midline (medial compression).
 
     Solves K u = E lambda with the active-set contact of :func:`_kernels.contact_correct`, or, given
@@ -97,17 +102,42 @@ def prestress(system: System, K_vals: np.ndarray, x_mid: float,
     if kc is None:
         it = kern.contact_correct(u, system.sdx, system.sX, x_mid, G, lam, active, 200)
     else:
-        it = kern.contact_layer_ws(u, np.zeros(system.n), 1.0, 1.0, system.sdx, system.sX, x_mid, G, kc,
-                                   np.zeros(m), lam, active, 200, np.empty(system.n), np.empty((m, m)), np.empty(m),
-                                   np.empty(m, dtype=np.int64), np.empty(m), np.empty(m))
+        it = kern.contact_layer_ws(
+            u,
+            np.zeros(system.n),
+            1.0,
+            1.0,
+            system.sdx,
+            system.sX,
+            x_mid,
+            G,
+            kc,
+            np.zeros(m),
+            lam,
+            active,
+            200,
+            np.empty(system.n),
+            np.empty((m, m)),
+            np.empty(m),
+            np.empty(m, dtype=np.int64),
+            np.empty(m),
+            np.empty(m),
+        )
     if it < 0:
         raise RuntimeError("static contact (medial compression) did not converge")
     return u, -lam
 
 
-def cycle_summary(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.ndarray,
-            force: np.ndarray | None = None, share: np.ndarray | None = None, h: float = 0.0,
-            proj: np.ndarray | None = None) -> CycleSummary:
+def cycle_summary(
+    t: np.ndarray,
+    gaw: np.ndarray,
+    flow: np.ndarray,
+    cp_max: np.ndarray,
+    force: np.ndarray | None = None,
+    share: np.ndarray | None = None,
+    h: float = 0.0,
+    proj: np.ndarray | None = None,
+) -> CycleSummary:
     """Cycles between successive upward crossings of the mean area (opening phases).
 
     ``force`` (n, m) per-step contact forces, N/m, ``share`` (m,) edge share of each surface node, m,
@@ -133,10 +163,10 @@ def cycle_summary(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.n
     per, pk, mn, qf, cm, cx = [], [], [], [], [], []
     imp, dur, pin = [], [], []
     if force is not None:
-        f_tot = force.sum(axis=1)                       # N/m on the whole surface, per step
-        p_tot = proj.sum(axis=1) if proj is not None else np.zeros(f_tot.size)   # N s/m, per step
+        f_tot = force.sum(axis=1)  # N/m on the whole surface, per step
+        p_tot = proj.sum(axis=1) if proj is not None else np.zeros(f_tot.size)  # N s/m, per step
         touching = force > 0.0
-        c_len = touching.astype(float) @ share          # m of surface in contact, per step
+        c_len = touching.astype(float) @ share  # m of surface in contact, per step
     for a, b in zip(up[:-1], up[1:]):
         sl = slice(a + 1, b + 1)
         pk.append(gaw[sl].max())
@@ -151,10 +181,18 @@ def cycle_summary(t: np.ndarray, gaw: np.ndarray, flow: np.ndarray, cp_max: np.n
             dur.append(h * np.count_nonzero(touching[sl].any(axis=1)))
             pin.append(i_c / ext if ext > 0.0 else 0.0)
     per = np.diff(tc)
-    return CycleSummary(t_start=tc[:-1], period=per, peak_area=np.array(pk), min_area=np.array(mn),
-                        mean_flow=np.array(qf), mean_peak_contact_pressure_unconverged=np.array(cm),
-                        max_contact_pressure_unconverged=np.array(cx), contact_impulse=np.array(imp),
-                        contact_duration=np.array(dur), contact_pressure_in_contact=np.array(pin))
+    return CycleSummary(
+        t_start=tc[:-1],
+        period=per,
+        peak_area=np.array(pk),
+        min_area=np.array(mn),
+        mean_flow=np.array(qf),
+        mean_peak_contact_pressure_unconverged=np.array(cm),
+        max_contact_pressure_unconverged=np.array(cx),
+        contact_impulse=np.array(imp),
+        contact_duration=np.array(dur),
+        contact_pressure_in_contact=np.array(pin),
+    )
 
 
 def flow_coefficient(config: SimConfig) -> float:
@@ -176,8 +214,9 @@ def setup(p: Params, config: SimConfig, system: System):
     if config.has_epithelium:
         # membrane on the free surface: enters K (prestress, K_eff, contact columns G, the
         # K u product of the time loop) and D alike
-        K_ep, D_ep = system.epithelium_values(config.epithelium_E_kpa, config.epithelium_h_mm,
-                                              config.epithelium_profile, si["eta"])
+        K_ep, D_ep = system.epithelium_values(
+            config.epithelium_E_kpa, config.epithelium_h_mm, config.epithelium_profile, si["eta"]
+        )
         K_vals = K_vals + K_ep
         D_vals = D_vals + D_ep
     M_vals = si["rho"] * system.m_vals
@@ -188,9 +227,21 @@ def setup(p: Params, config: SimConfig, system: System):
     return K_vals, D_vals, M_vals, u, Lx, system.contact_columns(Lx)
 
 
-def assemble_result(p: Params, config: SimConfig, system: System, status: int, width: np.ndarray, gsep: np.ndarray,
-            lam: np.ndarray, traj_every: int, tu: np.ndarray, t_wall: float,
-            p_in: np.ndarray | None = None, proj: np.ndarray | None = None, stop_step: int = 0) -> SimResult:
+def assemble_result(
+    p: Params,
+    config: SimConfig,
+    system: System,
+    status: int,
+    width: np.ndarray,
+    gsep: np.ndarray,
+    lam: np.ndarray,
+    traj_every: int,
+    tu: np.ndarray,
+    t_wall: float,
+    p_in: np.ndarray | None = None,
+    proj: np.ndarray | None = None,
+    stop_step: int = 0,
+) -> SimResult:
     """SimResult from the per-step arrays of one integration (status 0 = ok, else failing step).
 
     ``p_in`` (n_steps,): glottal inlet pressure after each step (subglottal coupling), or None
@@ -205,22 +256,36 @@ def assemble_result(p: Params, config: SimConfig, system: System, status: int, w
     L = config.length_mm * 1e-3
     if status != 0:
         why = "state diverged" if status > 0 else "contact active set did not settle"
-        return SimResult(ok=False, message=f"{why} at t = {abs(status) * h * 1e3:.2f} ms",
-                         params=p, config=config, fps=config.fps, wall_time=time.perf_counter() - t_wall)
+        return SimResult(
+            ok=False,
+            message=f"{why} at t = {abs(status) * h * 1e3:.2f} ms",
+            params=p,
+            config=config,
+            fps=config.fps,
+            wall_time=time.perf_counter() - t_wall,
+        )
     dp = max(si["p_sub"] - config.p_sup, 0.0)
     t_all = h * np.arange(1, n_steps + 1)
-    gaw_full = config.length_mm * width * 1e3                    # mm * mm
+    gaw_full = config.length_mm * width * 1e3  # mm * mm
     if p_in is None:
-        flow_full = 2.0 * L * gsep * math.sqrt(2.0 * dp / RHO_AIR)    # m^3/s
+        flow_full = 2.0 * L * gsep * math.sqrt(2.0 * dp / RHO_AIR)  # m^3/s
     else:
         # exactly the flow that drove the resonators: step k uses p_in after step k - 1 (explicit coupling)
         p_prev = np.concatenate([[si["p_sub"]], p_in[:-1]])
         flow_full = 2.0 * L * gsep * np.sqrt(2.0 * np.maximum(p_prev - config.p_sup, 0.0) / RHO_AIR)
     w_share = system.mesh.surface_weights()
-    cp_full = lam / np.where(w_share > 0, w_share, np.inf)       # Pa
+    cp_full = lam / np.where(w_share > 0, w_share, np.inf)  # Pa
     keep = t_all >= config.discard - 1e-12
-    cyc = cycle_summary(t_all[keep] - config.discard, gaw_full[keep], flow_full[keep], cp_full[keep].max(axis=1),
-                  lam[keep], w_share, h, None if proj is None else proj[keep])
+    cyc = cycle_summary(
+        t_all[keep] - config.discard,
+        gaw_full[keep],
+        flow_full[keep],
+        cp_full[keep].max(axis=1),
+        lam[keep],
+        w_share,
+        h,
+        None if proj is None else proj[keep],
+    )
     tc, gaw = downsample(t_all, gaw_full, config.fps, config.discard)
     _, gaw_hr = downsample(t_all, gaw_full, config.fps * HR_OVERSAMPLE, config.discard)
     gaw_hr = gaw_hr[: HR_OVERSAMPLE * (gaw.size - 1) + 1]
@@ -238,7 +303,23 @@ def assemble_result(p: Params, config: SimConfig, system: System, status: int, w
         full[:, system.dofs] = tu
         _, tr = downsample(t_tr, full, config.fps, config.discard)
         traj = tr.reshape(tr.shape[0], -1, 2) * 1e3
-    return SimResult(ok=True, message="ok", params=p, config=config, fps=config.fps, t=tc, gaw=gaw, width=wd,
-                     flow=q, contact_pressure=cp, contact_force=cf, surface_z=system.sZ * 1e3, cycles=cyc,
-                     trajectories=traj, wall_time=time.perf_counter() - t_wall, gaw_hr=gaw_hr,
-                     p_in=p_in_cam, settled_at=stop_step * h)
+    return SimResult(
+        ok=True,
+        message="ok",
+        params=p,
+        config=config,
+        fps=config.fps,
+        t=tc,
+        gaw=gaw,
+        width=wd,
+        flow=q,
+        contact_pressure=cp,
+        contact_force=cf,
+        surface_z=system.sZ * 1e3,
+        cycles=cyc,
+        trajectories=traj,
+        wall_time=time.perf_counter() - t_wall,
+        gaw_hr=gaw_hr,
+        p_in=p_in_cam,
+        settled_at=stop_step * h,
+    )

@@ -4,6 +4,7 @@ JSON has no NaN or infinity (RFC 8259, section 6) and no numpy types, while the 
 both; one conversion, shared by the library's tables, the worker's summaries and the service's reports,
 keeps every file the product writes readable by any JSON parser.
 """
+
 from __future__ import annotations
 
 import math

@@ -6,11 +6,25 @@
 
 See ``:ref:`video`.
 """
+
 from .extract import GawExtraction, extract_gaw, select_segment
 from .figure import plot_extraction
 from .io import Frames, GawData, GawFileError, VideoError, read_frames, read_gaw, write_gaw_csv
 from .segment import Segmentation, find_roi, segment_frames
 
-__all__ = ["extract_gaw", "GawExtraction", "select_segment", "plot_extraction", "read_frames", "read_gaw",
-           "write_gaw_csv", "Frames", "GawData", "VideoError", "GawFileError", "Segmentation", "find_roi",
-           "segment_frames"]
+__all__ = [
+    "extract_gaw",
+    "GawExtraction",
+    "select_segment",
+    "plot_extraction",
+    "read_frames",
+    "read_gaw",
+    "write_gaw_csv",
+    "Frames",
+    "GawData",
+    "VideoError",
+    "GawFileError",
+    "Segmentation",
+    "find_roi",
+    "segment_frames",
+]

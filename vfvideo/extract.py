@@ -1,4 +1,5 @@
 """Video -> calibrated glottal area waveform, stable segment, f0 and GAW measures."""
+
 from __future__ import annotations
 
 import math
@@ -46,6 +47,7 @@ class GawExtraction:
         Frame rate stored in the container (reported only).
     notes : list of str
     """
+
     t: np.ndarray
     area: np.ndarray
     area_left: np.ndarray
@@ -88,20 +90,35 @@ class GawExtraction:
         """Write the GAW (the stable segment, or every frame with ``full=True``) as a
         CSV that :func:`vfvideo.io.read_gaw`, the CLI and the service read."""
         a, b = (0, self.area.size) if full else self.segment
-        meta = {"source": self.source, "px_per_mm": f"{self.px_per_mm:.10g}",
-                "pixel_area_mm2": f"{self.pixel_area_mm2:.6g}",
-                "segment_frames": f"{a}-{b}" + (" (full video)" if full else " of the video"),
-                "f0_hz": f"{self.f0:.6g}", "frames_flagged": int(np.sum(~self.ok[a:b])),
-                "roi_rows_cols": "{}:{},{}:{}".format(*self.seg.roi)}
+        meta = {
+            "source": self.source,
+            "px_per_mm": f"{self.px_per_mm:.10g}",
+            "pixel_area_mm2": f"{self.pixel_area_mm2:.6g}",
+            "segment_frames": f"{a}-{b}" + (" (full video)" if full else " of the video"),
+            "f0_hz": f"{self.f0:.6g}",
+            "frames_flagged": int(np.sum(~self.ok[a:b])),
+            "roi_rows_cols": "{}:{},{}:{}".format(*self.seg.roi),
+        }
         return write_gaw_csv(path, self.t[a:b] - self.t[a], self.area[a:b], self.fps, meta=meta)
 
     def summary(self) -> dict:
         """JSON-friendly summary (no arrays)."""
-        return {"source": self.source, "n_frames": int(self.area.size), "fps": self.fps, "meta_fps": self.meta_fps,
-                "px_per_mm": self.px_per_mm, "pixel_area_mm2": self.pixel_area_mm2, "roi": list(self.seg.roi),
-                "segment": list(self.segment), "segment_s": (self.segment[1] - self.segment[0]) / self.fps,
-                "f0_hz": self.f0, "frames_flagged": int(np.sum(~self.ok)), "asymmetry": self.asymmetry(),
-                "measures": self.measures, "notes": list(self.notes) + list(self.seg.notes)}
+        return {
+            "source": self.source,
+            "n_frames": int(self.area.size),
+            "fps": self.fps,
+            "meta_fps": self.meta_fps,
+            "px_per_mm": self.px_per_mm,
+            "pixel_area_mm2": self.pixel_area_mm2,
+            "roi": list(self.seg.roi),
+            "segment": list(self.segment),
+            "segment_s": (self.segment[1] - self.segment[0]) / self.fps,
+            "f0_hz": self.f0,
+            "frames_flagged": int(np.sum(~self.ok)),
+            "asymmetry": self.asymmetry(),
+            "measures": self.measures,
+            "notes": list(self.notes) + list(self.seg.notes),
+        }
 
 
 def _periodicity(x: np.ndarray, fps: float, fmin: float, fmax: float) -> float:
@@ -121,8 +138,9 @@ def _periodicity(x: np.ndarray, fps: float, fmin: float, fmax: float) -> float:
     return best
 
 
-def select_segment(area: np.ndarray, ok: np.ndarray, fps: float, duration_s: float = 0.3,
-                   fmin: float = 40.0, fmax: float = 600.0) -> tuple[tuple[int, int], list[str]]:
+def select_segment(
+    area: np.ndarray, ok: np.ndarray, fps: float, duration_s: float = 0.3, fmin: float = 40.0, fmax: float = 600.0
+) -> tuple[tuple[int, int], list[str]]:
     """Choose the most stable window of ``duration_s`` (default 300 ms as in the paper).
 
     Windows start every ~1/10 window; the one with the fewest flagged frames wins,
@@ -134,8 +152,10 @@ def select_segment(area: np.ndarray, ok: np.ndarray, fps: float, duration_s: flo
     w = int(round(duration_s * fps))
     if w >= n:
         if w > n:
-            notes.append(f"video ({n / fps * 1e3:.1f} ms) shorter than the requested {duration_s * 1e3:.0f} ms "
-                         "segment: whole video used")
+            notes.append(
+                f"video ({n / fps * 1e3:.1f} ms) shorter than the requested {duration_s * 1e3:.0f} ms "
+                "segment: whole video used"
+            )
         return (0, n), notes
     step = max(1, w // 10)
     starts = list(range(0, n - w + 1, step))
@@ -144,7 +164,7 @@ def select_segment(area: np.ndarray, ok: np.ndarray, fps: float, duration_s: flo
     bad = np.concatenate([[0], np.cumsum(~ok)])
     best, best_key = (0, w), None
     for s in starts:
-        key = (-(bad[s + w] - bad[s]), _periodicity(area[s:s + w], fps, fmin, fmax))
+        key = (-(bad[s + w] - bad[s]), _periodicity(area[s : s + w], fps, fmin, fmax))
         if best_key is None or key > best_key:
             best, best_key = (s, s + w), key
     return best, notes
@@ -156,15 +176,24 @@ def _thumbs(frames: np.ndarray, seg: Segmentation, segment, fps: float, f0: floa
     area = seg.area_px
     if math.isfinite(f0):
         P = fps / f0
-        i0 = a + int(np.argmin(area[a:min(b, a + int(math.ceil(P)) + 1)]))
+        i0 = a + int(np.argmin(area[a : min(b, a + int(math.ceil(P)) + 1)]))
         idx = [min(b - 1, int(round(i0 + j * P / k))) for j in range(k)]
     else:
         idx = list(np.linspace(a, b - 1, k).round().astype(int))
     return [(int(i), frames[i, r0:r1, c0:c1].copy(), seg.masks[i].copy()) for i in idx]
 
 
-def extract_gaw(source, fps: float, px_per_mm: float, *, roi=None, segment_s: float = 0.3,
-                max_frames: int | None = None, fmin: float = 40.0, fmax: float = 600.0) -> GawExtraction:
+def extract_gaw(
+    source,
+    fps: float,
+    px_per_mm: float,
+    *,
+    roi=None,
+    segment_s: float = 0.3,
+    max_frames: int | None = None,
+    fmin: float = 40.0,
+    fmax: float = 600.0,
+) -> GawExtraction:
     """Segment the glottis in a video or image stack and return the calibrated GAW.
 
     Parameters
@@ -208,7 +237,7 @@ def extract_gaw(source, fps: float, px_per_mm: float, *, roi=None, segment_s: fl
     fr = source if isinstance(source, Frames) else read_frames(source, max_frames=max_frames)
     frames = fr.data
     seg = segment_frames(frames, roi=roi)
-    pa = 1.0 / px_per_mm ** 2
+    pa = 1.0 / px_per_mm**2
     area = seg.area_px * pa
     notes = []
     if fr.meta_fps and abs(fr.meta_fps - fps) > 1e-6 * fps:
@@ -224,8 +253,22 @@ def extract_gaw(source, fps: float, px_per_mm: float, *, roi=None, segment_s: fl
     except ValueError as e:
         measures = {}
         notes.append(f"measures not computed: {e}")
-    return GawExtraction(t=np.arange(area.size) / fps, area=area, area_left=seg.left_px * pa,
-                         area_right=seg.right_px * pa, ok=seg.ok, flags=seg.flags, fps=fps, px_per_mm=px_per_mm,
-                         pixel_area_mm2=pa, segment=segment, f0=f0, measures=measures, seg=seg,
-                         thumbs=_thumbs(frames, seg, segment, fps, f0), source=fr.source, meta_fps=fr.meta_fps,
-                         notes=notes)
+    return GawExtraction(
+        t=np.arange(area.size) / fps,
+        area=area,
+        area_left=seg.left_px * pa,
+        area_right=seg.right_px * pa,
+        ok=seg.ok,
+        flags=seg.flags,
+        fps=fps,
+        px_per_mm=px_per_mm,
+        pixel_area_mm2=pa,
+        segment=segment,
+        f0=f0,
+        measures=measures,
+        seg=seg,
+        thumbs=_thumbs(frames, seg, segment, fps, f0),
+        source=fr.source,
+        meta_fps=fr.meta_fps,
+        notes=notes,
+    )

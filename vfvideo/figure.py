@@ -1,4 +1,5 @@
 """Figure of an extraction: a few frames with the contour overlaid, and the GAW."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,6 +15,7 @@ def plot_extraction(ex, path=None):
     segment shaded and flagged frames marked. Saves to ``path`` if given; returns the
     matplotlib Figure."""
     import matplotlib
+
     if path is not None:
         matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt

@@ -6,6 +6,7 @@ TIFF, or a ``.npy`` array of shape (n, h, w) or (n, h, w, 3).
 
 GAW files (read_gaw, write_gaw_csv, GawData, GawFileError) are :mod:`vfcore.gawio`'s, re-exported here.
 """
+
 from __future__ import annotations
 
 import math
@@ -17,8 +18,16 @@ import numpy as np
 
 from vfcore.gawio import GawData, GawFileError, read_gaw, write_gaw_csv
 
-__all__ = ["VideoError", "GawFileError", "Frames", "GawData", "read_frames", "read_gaw", "write_gaw_csv",
-           "IMAGE_EXTENSIONS"]
+__all__ = [
+    "VideoError",
+    "GawFileError",
+    "Frames",
+    "GawData",
+    "read_frames",
+    "read_gaw",
+    "write_gaw_csv",
+    "IMAGE_EXTENSIONS",
+]
 
 IMAGE_EXTENSIONS = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 _LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
@@ -35,6 +44,7 @@ class Frames:
     ``meta_fps`` is the container's nominal frame rate (often the playback rate,
     not the capture rate: it is only reported, never used for calibration).
     """
+
     data: np.ndarray
     source: str
     meta_fps: float | None = None
@@ -67,8 +77,10 @@ def _stack(frames_iter, source: str) -> tuple[np.ndarray, bool]:
         if shape0 is None:
             shape0 = g.shape
         elif g.shape != shape0:
-            raise VideoError(f"{source}: frames of different sizes: frame {i} is {g.shape[1]}x{g.shape[0]} "
-                             f"but frame 0 is {shape0[1]}x{shape0[0]} (width x height)")
+            raise VideoError(
+                f"{source}: frames of different sizes: frame {i} is {g.shape[1]}x{g.shape[0]} "
+                f"but frame 0 is {shape0[1]}x{shape0[0]} (width x height)"
+            )
         out.append(g)
     if not out:
         raise VideoError(f"{source}: contains no frames")
@@ -123,8 +135,9 @@ def _frames_of_array(source, max_frames: int | None) -> Frames:
 
 def _frames_of_folder(path: Path, src: str, max_frames: int | None) -> Frames:
     """Frames from a folder of image files, in natural order of their names."""
-    files = sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS),
-                   key=lambda p: _natural_key(p.name))
+    files = sorted(
+        (p for p in path.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS), key=lambda p: _natural_key(p.name)
+    )
     if not files:
         raise VideoError(f"{src}: folder contains no frames (no {'/'.join(IMAGE_EXTENSIONS)} files)")
     if max_frames:
@@ -137,6 +150,7 @@ def _frames_of_folder(path: Path, src: str, max_frames: int | None) -> Frames:
                 yield iio.imread(f)
             except Exception as e:  # noqa: BLE001 - report which file
                 raise VideoError(f"cannot read frame file '{f}': {e}") from e
+
     data, color = _stack(gen(), src)
     return Frames(data=data, source=src, color=color)
 
@@ -158,6 +172,7 @@ def _frames_of_video(path: Path, src: str, max_frames: int | None) -> Frames:
     if path.stat().st_size == 0:
         raise VideoError(f"cannot read '{src}': the file is empty")
     import imageio.v3 as iio
+
     meta_fps = None
     try:
         meta = iio.immeta(path)
@@ -176,6 +191,7 @@ def _frames_of_video(path: Path, src: str, max_frames: int | None) -> Frames:
             raise
         except Exception as e:  # noqa: BLE001 - any decoder failure is an unreadable file
             raise VideoError(f"cannot read '{src}' as a video or image stack: {type(e).__name__}: {e}") from e
+
     data, color = _stack(gen(), src)
     if data.shape[0] == 1 and path.suffix.lower() in IMAGE_EXTENSIONS:
         raise VideoError(f"{src}: a single image, not a video; pass a folder of frames or a multi-page TIFF")

@@ -24,6 +24,7 @@ Steps (each documented in ``:ref:`video`):
 5. Quality per frame: the opening touches the ROI border, an area jump (more than
    20 % of the peak area and 5 robust s.d. away from the mean of the two neighbours), or an exposure change of more than 30 %.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -65,6 +66,7 @@ class Segmentation:
         Smoothed temporal standard deviation (for figures).
     notes : list of str
     """
+
     masks: np.ndarray
     roi: tuple[int, int, int, int]
     area_px: np.ndarray
@@ -117,10 +119,14 @@ def find_roi(frames: np.ndarray, pad_frac: float = 0.3, min_pad: int = 10):
     motion = ndimage.gaussian_filter(sd, 2.0)
     noise = float(np.median(motion))
     peak = float(motion.max())
-    rng = float(np.percentile(sub[::max(1, len(sub) // 10)], 99.5) - np.percentile(sub[::max(1, len(sub) // 10)], 0.5))
+    rng = float(
+        np.percentile(sub[:: max(1, len(sub) // 10)], 99.5) - np.percentile(sub[:: max(1, len(sub) // 10)], 0.5)
+    )
     if not (peak > 4.0 * noise and peak > 0.02 * max(rng, 1e-12)):
-        raise VideoError("no visible opening: nothing in the video oscillates clearly above the noise "
-                         f"(max temporal s.d. {peak:.3g} vs median {noise:.3g}); is the glottis in view?")
+        raise VideoError(
+            "no visible opening: nothing in the video oscillates clearly above the noise "
+            f"(max temporal s.d. {peak:.3g} vs median {noise:.3g}); is the glottis in view?"
+        )
     thr = noise + 0.25 * (peak - noise)
     lab, nl = ndimage.label(motion > thr)
     score = ndimage.sum(motion, lab, index=np.arange(1, nl + 1))
@@ -168,8 +174,10 @@ def _segment_roi(stack: np.ndarray, core: np.ndarray):
     # the 1st percentile alone would sit in the dark tail and bias the threshold low
     dark = float(np.median(rc[rc < p1 + 0.25 * (tissue - p1)]))
     if tissue - dark < 0.12 * tissue:
-        raise VideoError("no visible opening: the moving region is not clearly darker than the tissue "
-                         f"(normalised levels dark {dark:.2f}, tissue {tissue:.2f})")
+        raise VideoError(
+            "no visible opening: the moving region is not clearly darker than the tissue "
+            f"(normalised levels dark {dark:.2f}, tissue {tissue:.2f})"
+        )
     thr = dark + 0.5 * (tissue - dark)
     seed_thr = dark + 0.25 * (tissue - dark)
     lab, _ = ndimage.label(r < thr, structure=ndimage.generate_binary_structure(3, 1))
@@ -204,6 +212,7 @@ def _axis(masks: np.ndarray, r0: int, c0: int, k: int = 3):
 
     def end(sel):
         return float(np.mean(sel + 0.5)), float(np.mean(mid[sel]))
+
     (ya, xa), (yb, xb) = end(rows[:k]), end(rows[-k:])
     b = (xb - xa) / (yb - ya) if yb != ya else 0.0
     a_roi = xa - b * ya
@@ -254,8 +263,12 @@ def segment_frames(frames: np.ndarray, roi=None, max_grow: int = 3) -> Segmentat
         if not auto or not (top and r0 > 0 or bot and r1 < h or lef and c0 > 0 or rig and c1 < w):
             break
         gh, gw = max(10, (r1 - r0) // 4), max(10, (c1 - c0) // 4)
-        roi = (max(0, r0 - gh) if top else r0, min(h, r1 + gh) if bot else r1,
-               max(0, c0 - gw) if lef else c0, min(w, c1 + gw) if rig else c1)
+        roi = (
+            max(0, r0 - gh) if top else r0,
+            min(h, r1 + gh) if bot else r1,
+            max(0, c0 - gw) if lef else c0,
+            min(w, c1 + gw) if rig else c1,
+        )
         notes.append(f"ROI grown to {roi} (opening touched the border)")
     area = masks.sum(axis=(1, 2)).astype(float)
     if area.max() <= 0:
@@ -266,14 +279,28 @@ def segment_frames(frames: np.ndarray, roi=None, max_grow: int = 3) -> Segmentat
     left, right = _edges(masks, c0)
     a, b = _axis(masks, r0, c0)
     rows_c = np.arange(r0, r1) + 0.5
-    m = a + b * rows_c                                            # axis column per ROI row
+    m = a + b * rows_c  # axis column per ROI row
     cols = np.arange(c0, c1, dtype=float)
-    wl = np.clip(m[:, None] - cols[None, :], 0.0, 1.0)            # fraction of each pixel left of the axis
+    wl = np.clip(m[:, None] - cols[None, :], 0.0, 1.0)  # fraction of each pixel left of the axis
     left_px = np.tensordot(masks, wl, axes=([1, 2], [0, 1]))
     right_px = area - left_px
-    return Segmentation(masks=masks, roi=tuple(int(v) for v in roi), area_px=area, ok=ok, flags=flags,
-                        left_edge=left, right_edge=right, axis=(a, b), left_px=left_px, right_px=right_px,
-                        threshold=thr, dark_level=dark, tissue_level=tissue, motion=motion, notes=notes)
+    return Segmentation(
+        masks=masks,
+        roi=tuple(int(v) for v in roi),
+        area_px=area,
+        ok=ok,
+        flags=flags,
+        left_edge=left,
+        right_edge=right,
+        axis=(a, b),
+        left_px=left_px,
+        right_px=right_px,
+        threshold=thr,
+        dark_level=dark,
+        tissue_level=tissue,
+        motion=motion,
+        notes=notes,
+    )
 
 
 def _check_darker(frames: np.ndarray, masks: np.ndarray, area: np.ndarray, roi) -> None:
@@ -282,17 +309,19 @@ def _check_darker(frames: np.ndarray, masks: np.ndarray, area: np.ndarray, roi) 
     im = int(np.argmax(area))
     m = masks[im]
     ring = ndimage.binary_dilation(m, iterations=4) & ~m
-    crop = frames[im, roi[0]:roi[1], roi[2]:roi[3]]
+    crop = frames[im, roi[0] : roi[1], roi[2] : roi[3]]
     inside, around = float(np.median(crop[m])), float(np.median(crop[ring])) if ring.any() else float("inf")
     if not inside < 0.8 * around:
-        raise VideoError("no visible opening: the segmented region is not darker than the tissue around it "
-                         f"(median grey {inside:.3g} inside vs {around:.3g} around)")
+        raise VideoError(
+            "no visible opening: the segmented region is not darker than the tissue around it "
+            f"(median grey {inside:.3g} inside vs {around:.3g} around)"
+        )
 
 
 def _quality_flags(masks: np.ndarray, area: np.ndarray, gain: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Per frame: ok (n,) and the flags that are set ("roi_border", "area_jump", "exposure", comma-separated)."""
     n = masks.shape[0]
-    border = (masks[:, 0, :].any(1) | masks[:, -1, :].any(1) | masks[:, :, 0].any(1) | masks[:, :, -1].any(1))
+    border = masks[:, 0, :].any(1) | masks[:, -1, :].any(1) | masks[:, :, 0].any(1) | masks[:, :, -1].any(1)
     # area jump: residual against the mean of the two neighbouring frames
     pad = np.concatenate([[area[0]], area, [area[-1]]])
     res = area - 0.5 * (pad[:-2] + pad[2:])
@@ -300,6 +329,8 @@ def _quality_flags(masks: np.ndarray, area: np.ndarray, gain: np.ndarray) -> tup
     jump = (np.abs(res) > 5.0 * mad) & (np.abs(res) > 0.2 * area.max())
     expo = np.abs(gain / np.median(gain) - 1.0) > 0.3
     ok = ~(border | jump | expo)
-    flags = [",".join(name for name, f in (("roi_border", border[i]), ("area_jump", jump[i]),
-                                           ("exposure", expo[i])) if f) for i in range(n)]
+    flags = [
+        ",".join(name for name, f in (("roi_border", border[i]), ("area_jump", jump[i]), ("exposure", expo[i])) if f)
+        for i in range(n)
+    ]
     return ok, flags

@@ -7,6 +7,7 @@ opening's per-pixel coverage is computed analytically row by row, so the dark
 fraction of each frame sums exactly to the prescribed area (before blur/noise).
 Used by the tests in ``tests/vfvideo``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -17,8 +18,16 @@ from scipy import ndimage
 __all__ = ["SyntheticVideo", "pulse_gaw", "render_video"]
 
 
-def pulse_gaw(fps: float, f0: float, n_frames: int, peak_mm2: float = 8.0, open_quotient: float = 0.7,
-              speed_quotient: float = 2.0, gap_mm2: float = 0.0, phase: float = 0.13) -> tuple[np.ndarray, np.ndarray]:
+def pulse_gaw(
+    fps: float,
+    f0: float,
+    n_frames: int,
+    peak_mm2: float = 8.0,
+    open_quotient: float = 0.7,
+    speed_quotient: float = 2.0,
+    gap_mm2: float = 0.0,
+    phase: float = 0.13,
+) -> tuple[np.ndarray, np.ndarray]:
     """A known GAW: periodic asymmetric raised-cosine pulses with a closed phase.
 
     Parameters
@@ -68,6 +77,7 @@ class SyntheticVideo:
     center : (row, col)
         Centre of the glottis in pixels.
     """
+
     frames: np.ndarray
     area_mm2: np.ndarray
     area_left_mm2: np.ndarray
@@ -82,10 +92,22 @@ def _smooth_noise(rng, shape, sigma):
     return f / (f.std() + 1e-12)
 
 
-def render_video(area_mm2: np.ndarray, fps: float, px_per_mm: float = 24.4, shape=(484, 504),
-                 center=(200.0, 300.0), length_mm: float = 12.0, tilt: float = 0.15, asymmetry: float = 0.0,
-                 blur_sigma: float = 1.2, noise_sigma: float = 4.0, illumination: float = 0.5,
-                 texture: float = 0.12, chink_mm2: float = 0.0, seed: int = 0) -> SyntheticVideo:
+def render_video(
+    area_mm2: np.ndarray,
+    fps: float,
+    px_per_mm: float = 24.4,
+    shape=(484, 504),
+    center=(200.0, 300.0),
+    length_mm: float = 12.0,
+    tilt: float = 0.15,
+    asymmetry: float = 0.0,
+    blur_sigma: float = 1.2,
+    noise_sigma: float = 4.0,
+    illumination: float = 0.5,
+    texture: float = 0.12,
+    chink_mm2: float = 0.0,
+    seed: int = 0,
+) -> SyntheticVideo:
     """Render a grey-scale high-speed video of a glottis opening with the given areas.
 
     Parameters
@@ -132,14 +154,14 @@ def render_video(area_mm2: np.ndarray, fps: float, px_per_mm: float = 24.4, shap
     if r0 < 2 or r0 + L > h - 2:
         raise ValueError("glottis does not fit into the frame")
     rows = r0 + np.arange(L)
-    s = np.sin(np.pi * (np.arange(L) + 0.5) / L) ** 0.6          # opening profile along the glottis
-    xc = center[1] + tilt * (rows + 0.5 - center[0])              # glottal axis (continuous column coords)
-    px_area = 1.0 / px_per_mm ** 2
+    s = np.sin(np.pi * (np.arange(L) + 0.5) / L) ** 0.6  # opening profile along the glottis
+    xc = center[1] + tilt * (rows + 0.5 - center[0])  # glottal axis (continuous column coords)
+    px_area = 1.0 / px_per_mm**2
     if chink_mm2 > area.min() + 1e-12:
         raise ValueError("chink_mm2 exceeds the smallest area")
-    g = np.clip((np.arange(L) + 0.5 - 0.7 * L) / (0.3 * L), 0.0, None)   # posterior chink profile
+    g = np.clip((np.arange(L) + 0.5 - 0.7 * L) / (0.3 * L), 0.0, None)  # posterior chink profile
     G = chink_mm2 / px_area / (2.0 * g.sum())
-    W = (area - chink_mm2) / px_area / (2.0 * s.sum())            # half-width scale per frame (px)
+    W = (area - chink_mm2) / px_area / (2.0 * s.sum())  # half-width scale per frame (px)
     kl, kr = 1.0 + asymmetry, 1.0 - asymmetry
 
     tissue, dark, illum = _background(rng, shape, texture, illumination)
@@ -155,24 +177,36 @@ def render_video(area_mm2: np.ndarray, fps: float, px_per_mm: float = 24.4, shap
         b_edge = (xc + hr)[:, None]
         cov = np.clip(np.minimum(b_edge, cols + 1) - np.maximum(a_edge, cols), 0.0, 1.0)
         img = tissue.copy()
-        sub = img[r0:r0 + L, c_lo:c_hi]
-        img[r0:r0 + L, c_lo:c_hi] = sub * (1 - cov) + dark[r0:r0 + L, c_lo:c_hi] * cov
+        sub = img[r0 : r0 + L, c_lo:c_hi]
+        img[r0 : r0 + L, c_lo:c_hi] = sub * (1 - cov) + dark[r0 : r0 + L, c_lo:c_hi] * cov
         frames[i] = _expose(img, illum, blur_sigma, noise_sigma, rng)
         left[i] = hl.sum() * px_area
         right[i] = hr.sum() * px_area
-    return SyntheticVideo(frames=frames, area_mm2=left + right, area_left_mm2=left, area_right_mm2=right,
-                          fps=float(fps), px_per_mm=float(px_per_mm), center=(float(center[0]), float(center[1])))
+    return SyntheticVideo(
+        frames=frames,
+        area_mm2=left + right,
+        area_left_mm2=left,
+        area_right_mm2=right,
+        fps=float(fps),
+        px_per_mm=float(px_per_mm),
+        center=(float(center[0]), float(center[1])),
+    )
 
 
-def _background(rng: np.random.Generator, shape, texture: float,
-                illumination: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _background(
+    rng: np.random.Generator, shape, texture: float, illumination: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The tissue's and the glottis' brightness (0..1) and the multiplicative illumination, each (h, w)."""
     h, w = shape
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
-    tissue = 0.78 * (1 + texture * _smooth_noise(rng, shape, 3.0)) * (1 + 0.5 * texture * _smooth_noise(rng, shape, 12.0))
+    tissue = (
+        0.78 * (1 + texture * _smooth_noise(rng, shape, 3.0)) * (1 + 0.5 * texture * _smooth_noise(rng, shape, 12.0))
+    )
     dark = 0.08 * (1 + 0.3 * _smooth_noise(rng, shape, 4.0))
     cy, cx = h * 0.45, w * 0.55
-    illum = (1 - illumination) + illumination * np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * (0.45 * max(h, w)) ** 2))
+    illum = (1 - illumination) + illumination * np.exp(
+        -((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * (0.45 * max(h, w)) ** 2)
+    )
     illum = illum * (1 + 0.3 * illumination * (xx / w - 0.5))
     return tissue, dark, illum
 
@@ -187,8 +221,9 @@ def _column_window(xc: np.ndarray, half_max: float, w: int) -> tuple[int, int]:
     return c_lo, c_hi
 
 
-def _expose(img: np.ndarray, illum: np.ndarray, blur_sigma: float, noise_sigma: float,
-            rng: np.random.Generator) -> np.ndarray:
+def _expose(
+    img: np.ndarray, illum: np.ndarray, blur_sigma: float, noise_sigma: float, rng: np.random.Generator
+) -> np.ndarray:
     """The camera's view of the scene ``img`` (h, w; 0..1, changed in place): illumination, optical blur,
     sensor noise, 8-bit grey levels."""
     img *= illum

@@ -4,6 +4,7 @@ cycles with the residual below so that the bands are visible; an ArviZ pair plot
 mean, the 90 % interval and, when known, the truth; flow and contact pressure in readable units.
 
 Every function returns PNG bytes and is deterministic (fixed seeds, no timestamps in the file)."""
+
 from __future__ import annotations
 
 import io
@@ -13,11 +14,13 @@ import numpy as np
 from vfcore.params import PARAM_UNITS
 
 #: Posterior-predictive quantities shown, with their label and the factor from SI to the unit shown.
-PREDICTIVE = {"mean_flow": ("mean flow rate", "ml/s", 1e6),
-              "contact_impulse": ("contact impulse per cycle", "mN s/m", 1e3),
-              "contact_pressure_in_contact": ("contact pressure while in contact", "kPa", 1e-3),
-              "mean_contact": ("mean nodal contact pressure*", "kPa", 1e-3),
-              "max_contact": ("peak nodal contact pressure*", "kPa", 1e-3)}
+PREDICTIVE = {
+    "mean_flow": ("mean flow rate", "ml/s", 1e6),
+    "contact_impulse": ("contact impulse per cycle", "mN s/m", 1e3),
+    "contact_pressure_in_contact": ("contact pressure while in contact", "kPa", 1e-3),
+    "mean_contact": ("mean nodal contact pressure*", "kPa", 1e-3),
+    "max_contact": ("peak nodal contact pressure*", "kPa", 1e-3),
+}
 #: Replicated recordings drawn per posterior draw for the band that includes noise.
 N_REPLICATES = 20
 LEGEND = dict(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
@@ -25,8 +28,10 @@ LEGEND = dict(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=
 
 def _plt():
     import matplotlib
+
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
+
     return plt
 
 
@@ -71,6 +76,7 @@ def fig_gaw_fit(post, bands, noise_sd: float | None = None, cycles: int = 4, pre
     lo = 0
     try:
         from vfcore.measures import estimate_f0
+
         f0 = float(estimate_f0(obs, fps))
         if np.isfinite(f0) and f0 > 0:
             lo = max(0, n - int(round(cycles * fps / f0)))
@@ -83,22 +89,31 @@ def fig_gaw_fit(post, bands, noise_sd: float | None = None, cycles: int = 4, pre
     if noise_sd and g is not None and g.shape[0]:
         rep = replicate_band(g[:, :n], float(noise_sd))
     if rep is not None:
-        ax.fill_between(t[sl], rep[0, sl], rep[2, sl], color="C0", alpha=0.18, lw=0,
-                        label=f"90 % of replicated recordings (noise sd {noise_sd:.2g} mm$^2$)")
+        ax.fill_between(
+            t[sl],
+            rep[0, sl],
+            rep[2, sl],
+            color="C0",
+            alpha=0.18,
+            lw=0,
+            label=f"90 % of replicated recordings (noise sd {noise_sd:.2g} mm$^2$)",
+        )
     if bands is not None:
         ax.fill_between(t[sl], bands[0, sl], bands[2, sl], color="C1", alpha=0.55, lw=0, label="90 % model band")
         ax.plot(t[sl], bands[1, sl], color="C1", lw=1.4, label="posterior median")
     ax.plot(t[sl], obs[sl], "k.", ms=3, label="recording")
     ax.set_ylabel("glottal area (mm$^2$)")
-    ax.set_title(f"GAW fit: last {cycles} cycles ({post.method}, ESS {post.ess:.0f})" if lo else
-                 f"GAW fit ({post.method}, ESS {post.ess:.0f})")
+    ax.set_title(
+        f"GAW fit: last {cycles} cycles ({post.method}, ESS {post.ess:.0f})"
+        if lo
+        else f"GAW fit ({post.method}, ESS {post.ess:.0f})"
+    )
     ax.legend(**LEGEND)
     if bands is not None:
         res = obs[sl] - bands[1, sl]
         if rep is not None:
             axr.fill_between(t[sl], rep[0, sl] - bands[1, sl], rep[2, sl] - bands[1, sl], color="C0", alpha=0.18, lw=0)
-        axr.fill_between(t[sl], bands[0, sl] - bands[1, sl], bands[2, sl] - bands[1, sl], color="C1", alpha=0.55,
-                         lw=0)
+        axr.fill_between(t[sl], bands[0, sl] - bands[1, sl], bands[2, sl] - bands[1, sl], color="C1", alpha=0.55, lw=0)
         axr.axhline(0.0, color="C1", lw=1)
         axr.plot(t[sl], res, "k.", ms=3)
         axr.set_ylabel("residual (mm$^2$)")
@@ -116,6 +131,7 @@ def fig_corner(post, bands=None, truth: dict | None = None) -> bytes:
     90 % interval, solid: the posterior mean; red: ``truth`` ({name: value}, paper units) when known."""
     import arviz as az
     from matplotlib.ticker import MaxNLocator
+
     plt = _plt()
     x = np.asarray(post.resampled_samples, dtype=float)
     names = list(post.names)
@@ -125,22 +141,34 @@ def fig_corner(post, bands=None, truth: dict | None = None) -> bytes:
     size = max(4.0, 2.2 * d)
     if d == 1:
         fig, ax = plt.subplots(figsize=(5, 3.5))
-        az.plot_posterior(data, var_names=names, hdi_prob=0.9, point_estimate="mean", ax=ax,
-                          ref_val=truth.get(names[0]))
+        az.plot_posterior(
+            data, var_names=names, hdi_prob=0.9, point_estimate="mean", ax=ax, ref_val=truth.get(names[0])
+        )
         ax.set_xlabel(_label(names[0]))
         return _png(fig)
     fig, axes = plt.subplots(d, d, figsize=(size, size), squeeze=False)
     # a degenerate ensemble (a few distinct draws, or a parameter without spread) has no density to
     # smooth: scatter and histograms only
     smooth = np.unique(x, axis=0).shape[0] >= 5 and bool(np.all(np.ptp(x, axis=0) > 0))
-    axes = az.plot_pair(data, var_names=names, kind=["scatter", "kde"] if smooth else "scatter", marginals=True,
-                        point_estimate="mean", marginal_kwargs=None if smooth else {"kind": "hist"},
-                        ax=axes, reference_values=truth if truth and set(truth) >= set(names) else None, textsize=9,
-                        scatter_kwargs={"color": "0.55", "alpha": 0.35, "s": 5},
-                        kde_kwargs={"fill_last": False, "contour_kwargs": {"colors": "C0", "linewidths": 1},
-                                    "contourf_kwargs": {"alpha": 0}},
-                        point_estimate_marker_kwargs={"color": "k", "s": 20},
-                        reference_values_kwargs={"color": "C3", "marker": "x", "markersize": 8})
+    axes = az.plot_pair(
+        data,
+        var_names=names,
+        kind=["scatter", "kde"] if smooth else "scatter",
+        marginals=True,
+        point_estimate="mean",
+        marginal_kwargs=None if smooth else {"kind": "hist"},
+        ax=axes,
+        reference_values=truth if truth and set(truth) >= set(names) else None,
+        textsize=9,
+        scatter_kwargs={"color": "0.55", "alpha": 0.35, "s": 5},
+        kde_kwargs={
+            "fill_last": False,
+            "contour_kwargs": {"colors": "C0", "linewidths": 1},
+            "contourf_kwargs": {"alpha": 0},
+        },
+        point_estimate_marker_kwargs={"color": "k", "s": 20},
+        reference_values_kwargs={"color": "C3", "marker": "x", "markersize": 8},
+    )
     axes = np.atleast_2d(axes)
     q05, q95 = np.quantile(x, 0.05, axis=0), np.quantile(x, 0.95, axis=0)
     for i in range(d):
@@ -162,8 +190,9 @@ def fig_corner(post, bands=None, truth: dict | None = None) -> bytes:
                     line(truth[names[i]], color="C3", lw=1.2)
             a.set_xlabel(_label(names[j]) if i == d - 1 and not rotated else "", fontsize=9)
             a.set_ylabel(_label(names[i]) if (j == 0 and i > 0) else "", fontsize=9)
-    fig.suptitle("posterior (resampled ensemble); dashed: 90 % interval" + ("; red: truth" if truth else ""),
-                 fontsize=10)
+    fig.suptitle(
+        "posterior (resampled ensemble); dashed: 90 % interval" + ("; red: truth" if truth else ""), fontsize=10
+    )
     return _png(fig, dpi=100)
 
 
@@ -171,6 +200,7 @@ def fig_contact(post, bands=None) -> bytes:
     """Posterior predictive histograms of flow and contact pressure with mean and 90 % interval; * marks the
     nodal peaks that depend on the mesh and time step (:ref:`model-contact`)."""
     from matplotlib.ticker import MaxNLocator
+
     plt = _plt()
     pred = post.resampled_predictive()
     shown = [(k, v) for k, v in PREDICTIVE.items() if pred is not None and getattr(pred, k, None) is not None]
@@ -194,9 +224,10 @@ def fig_contact(post, bands=None) -> bytes:
         ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.tick_params(labelsize=8)
         ax.set_yticks([])
-    for ax in list(axes.flat)[len(shown):]:
+    for ax in list(axes.flat)[len(shown) :]:
         ax.set_visible(False)
-    fig.suptitle("posterior predictive flow and contact (solid: mean, dashed: 90 % interval; * mesh-dependent)",
-                 fontsize=10)
+    fig.suptitle(
+        "posterior predictive flow and contact (solid: mean, dashed: 90 % interval; * mesh-dependent)", fontsize=10
+    )
     fig.tight_layout()
     return _png(fig)

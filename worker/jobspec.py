@@ -4,6 +4,7 @@ One versioned, JSON-serialisable pydantic model.  It is validated once at the ed
 CLI arguments) and stored verbatim in the job's Zarr attributes, so a job can always be
 re-run from its store alone.  Validation errors name the offending field (pydantic ``loc``).
 """
+
 from __future__ import annotations
 
 from typing import Annotated, Any, Literal
@@ -62,10 +63,13 @@ class _Strict(BaseModel):
 class GAWSpec(_Strict):
     """An observed glottal area waveform."""
 
-    areas: list[FiniteFloat] = Field(min_length=4, max_length=MAX_FRAMES,
-                                     description="glottal area per frame, mm^2, finite; negative values only "
-                                                 "within the recording's noise of zero (noise around a closed "
-                                                 "glottis, kept as measured)")
+    areas: list[FiniteFloat] = Field(
+        min_length=4,
+        max_length=MAX_FRAMES,
+        description="glottal area per frame, mm^2, finite; negative values only "
+        "within the recording's noise of zero (noise around a closed "
+        "glottis, kept as measured)",
+    )
     fps: FiniteFloat = Field(gt=0, le=1e6, description="camera frame rate, frames/s")
     units: Literal["mm2"] = "mm2"
 
@@ -73,6 +77,7 @@ class GAWSpec(_Strict):
     @classmethod
     def _negative_only_as_noise(cls, v: list[float]) -> list[float]:
         from vfcore.gawio import check_negative
+
         why = check_negative(v)
         if why is not None:
             raise ValueError(why)
@@ -81,8 +86,9 @@ class GAWSpec(_Strict):
     @model_validator(mode="after")
     def _two_cycles(self) -> GAWSpec:
         from vfcore.inference.problem import validate_observation
+
         try:
-            validate_observation(self.areas, self.fps)   # NaN/inf, constant, < 2 cycles
+            validate_observation(self.areas, self.fps)  # NaN/inf, constant, < 2 cycles
         except ValueError as exc:
             raise ValueError(f"gaw.areas: {exc}") from None
         return self
@@ -108,19 +114,24 @@ class SMCSettings(_Strict):
     kind: Literal["smc"] = "smc"
     n_particles: int = Field(ge=10, le=MAX_SIMULATIONS)
     max_generations: int = Field(default=50, ge=1, le=MAX_SMC_GENERATIONS)
-    ess_fraction: FiniteFloat = Field(default=0.5, gt=0, lt=1,
-                                      description="target relative ESS per tempering step")
+    ess_fraction: FiniteFloat = Field(default=0.5, gt=0, lt=1, description="target relative ESS per tempering step")
     min_moves: int = Field(default=2, ge=1, le=50, description="fewest Metropolis moves per generation")
     max_moves: int = Field(default=8, ge=1, le=50, description="most Metropolis moves per generation")
-    runs: int = Field(default=1, ge=1, le=MAX_SMC_RUNS,
-                      description="independent runs (own seeds), pooled: runs whose best particle lies more than 3 "
-                                  "nats of log-likelihood below the best run's left out, the rest sharing the "
-                                  "posterior equally (a single run of a rugged likelihood can settle in a basin of "
-                                  "negligible mass); cost x runs")
+    runs: int = Field(
+        default=1,
+        ge=1,
+        le=MAX_SMC_RUNS,
+        description="independent runs (own seeds), pooled: runs whose best particle lies more than 3 "
+        "nats of log-likelihood below the best run's left out, the rest sharing the "
+        "posterior equally (a single run of a rugged likelihood can settle in a basin of "
+        "negligible mass); cost x runs",
+    )
     screen: ScreenSettings | None = Field(
-        default=None, description="delayed acceptance (Christen & Fox 2005): each proposal is first scored by this "
-                                  "cheaper model and only the survivors are simulated with the job's model; the "
-                                  "posterior stays the job's model's")
+        default=None,
+        description="delayed acceptance (Christen & Fox 2005): each proposal is first scored by this "
+        "cheaper model and only the survivors are simulated with the job's model; the "
+        "posterior stays the job's model's",
+    )
 
     @model_validator(mode="after")
     def _moves(self) -> SMCSettings:
@@ -129,8 +140,12 @@ class SMCSettings(_Strict):
         return self
 
     def sampler_options(self) -> dict:
-        return {"ess_fraction": self.ess_fraction, "max_generations": self.max_generations,
-                "min_moves": self.min_moves, "max_moves": self.max_moves}
+        return {
+            "ess_fraction": self.ess_fraction,
+            "max_generations": self.max_generations,
+            "min_moves": self.min_moves,
+            "max_moves": self.max_moves,
+        }
 
 
 SamplerSettings = Annotated[ISSettings | SMCSettings, Field(discriminator="kind")]
@@ -141,51 +156,73 @@ class JobSpec(_Strict):
 
     version: Literal[1] = SCHEMA_VERSION
     model: str = Field(
-        default="fe", description='"fe": the vfcore finite-element model; or another registered model '
-                                  "(worker.models; a test double is accepted only when the service enables it)")
+        default="fe",
+        description='"fe": the vfcore finite-element model; or another registered model '
+        "(worker.models; a test double is accepted only when the service enables it)",
+    )
     gaw: GAWSpec
     priors: dict[str, tuple[FiniteFloat, FiniteFloat]] | None = Field(
-        default=None, description="{name: [lo, hi]} in paper units; omitted names keep the default "
-                                  "(Table 2) bounds unless fixed")
+        default=None,
+        description="{name: [lo, hi]} in paper units; omitted names keep the default (Table 2) bounds unless fixed",
+    )
     fixed: dict[str, FiniteFloat] = Field(default_factory=dict, description="{name: value}, paper units")
     prior_set: Literal["paper", "human"] = Field(
-        default="paper", description='the default bounds of parameters not in "priors": "paper" (Table 2, a '
-                                     'silicone fold) or "human" (human tissue; docs/inference.md, "Prior sets")')
+        default="paper",
+        description='the default bounds of parameters not in "priors": "paper" (Table 2, a '
+        'silicone fold) or "human" (human tissue; docs/inference.md, "Prior sets")',
+    )
     sampler: SamplerSettings
     mesh: Literal["coarse", "medium", "fine"] = "medium"
     dt: FiniteFloat = Field(default=5e-5, gt=0, le=1e-3, description="time step, s")
     contact: Literal[CONTACTS] = Field(
-        default="projection", description="midline contact law: 'projection' (the paper's rigid midline, inelastic "
-                                          "impact) or 'layer' (a compliant layer with the cover's modulus and "
-                                          "viscosity; docs/model.md, 'Contact')")
-    contact_layer_mm: FiniteFloat = Field(default=0.1, gt=CONTACT_LAYER_MM[0], lt=CONTACT_LAYER_MM[1],
-                                          description="contact layer thickness, mm (contact 'layer')")
+        default="projection",
+        description="midline contact law: 'projection' (the paper's rigid midline, inelastic "
+        "impact) or 'layer' (a compliant layer with the cover's modulus and "
+        "viscosity; docs/model.md, 'Contact')",
+    )
+    contact_layer_mm: FiniteFloat = Field(
+        default=0.1,
+        gt=CONTACT_LAYER_MM[0],
+        lt=CONTACT_LAYER_MM[1],
+        description="contact layer thickness, mm (contact 'layer')",
+    )
     duration: FiniteFloat = Field(default=0.55, gt=0, le=5.0, description="simulated time, s")
     discard: FiniteFloat = Field(default=0.25, ge=0, le=5.0, description="initial transient discarded, s")
     sigma_e: FiniteFloat = Field(gt=0, le=1e6, description="observation noise sd, mm^2")
     noise: Literal["fixed", "marginal"] = Field(
-        default="fixed", description="'fixed': the likelihood uses sigma_e (paper, Eq. 15); 'marginal': the noise sd "
-                                     "is unknown, log-uniform on sigma_bounds, and integrated out (docs/inference.md)")
+        default="fixed",
+        description="'fixed': the likelihood uses sigma_e (paper, Eq. 15); 'marginal': the noise sd "
+        "is unknown, log-uniform on sigma_bounds, and integrated out (docs/inference.md)",
+    )
     sigma_bounds: tuple[FiniteFloat, FiniteFloat] = Field(
-        default=(0.01, 100.0), description="[lo, hi] of the noise sd's log-uniform prior, mm^2 (noise='marginal')")
+        default=(0.01, 100.0), description="[lo, hi] of the noise sd's log-uniform prior, mm^2 (noise='marginal')"
+    )
     measurements: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
-        default_factory=dict, description="{name: [mean, sd]} in paper units: independent Gaussian measurements of "
-                                          "estimated parameters (e.g. a measured p_sub), added to the likelihood; "
-                                          "they anchor the common scale a GAW cannot determine (docs/inference.md)")
+        default_factory=dict,
+        description="{name: [mean, sd]} in paper units: independent Gaussian measurements of "
+        "estimated parameters (e.g. a measured p_sub), added to the likelihood; "
+        "they anchor the common scale a GAW cannot determine (docs/inference.md)",
+    )
     area_scale: tuple[FiniteFloat, FiniteFloat] | None = Field(
-        default=None, description="[k_lo, k_hi]: the recorded areas are k times the true areas with k unknown (a video "
-                                  "without spatial calibration; k = (true px/mm / assumed px/mm)^2), uniform on "
-                                  "[k_lo, k_hi] and integrated out of the likelihood; null: calibrated areas "
-                                  "(docs/inference.md, 'Unknown area scale')")
+        default=None,
+        description="[k_lo, k_hi]: the recorded areas are k times the true areas with k unknown (a video "
+        "without spatial calibration; k = (true px/mm / assumed px/mm)^2), uniform on "
+        "[k_lo, k_hi] and integrated out of the likelihood; null: calibrated areas "
+        "(docs/inference.md, 'Unknown area scale')",
+    )
     seed: int = Field(ge=0, lt=2**63)
-    chunk_size: int | None = Field(default=None, ge=1, le=10_000,
-                                   description="simulations per worker task (default: sized to run for seconds)")
+    chunk_size: int | None = Field(
+        default=None, ge=1, le=10_000, description="simulations per worker task (default: sized to run for seconds)"
+    )
     model_options: dict[str, Any] | None = Field(
-        default=None, description="options of a registered model that takes some (its defaults when omitted)")
+        default=None, description="options of a registered model that takes some (its defaults when omitted)"
+    )
     force_reach: bool = Field(
-        default=False, description="fit even when the recording lies outside the model's reach (its GAW measures "
-                                   "beyond every prior-predictive draw; docs/inference.md, \"The model's reach\"): "
-                                   "the job is accepted with a warning instead of a 422")
+        default=False,
+        description="fit even when the recording lies outside the model's reach (its GAW measures "
+        'beyond every prior-predictive draw; docs/inference.md, "The model\'s reach"): '
+        "the job is accepted with a warning instead of a 422",
+    )
     _derived: _Derived = PrivateAttr(default_factory=_Derived)
 
     @model_validator(mode="before")
@@ -201,12 +238,14 @@ class JobSpec(_Strict):
     @classmethod
     def _known_model(cls, v):
         from .models import model_named
+
         model_named(v)
         return v
 
     def _check_model_options(self) -> None:
         """Validate ``model_options`` against the model's options type and store them with defaults filled in."""
         from .models import model_named
+
         kind = model_named(self.model).options_type
         if kind is None:
             if self.model_options is not None:
@@ -231,6 +270,7 @@ class JobSpec(_Strict):
     @classmethod
     def _check_area_scale(cls, v):
         from vfcore.inference.problem import validate_area_scale
+
         return validate_area_scale(v)
 
     @field_validator("priors")
@@ -249,7 +289,8 @@ class JobSpec(_Strict):
     @classmethod
     def _check_measurements(cls, v):
         from vfcore.inference.problem import validate_measurements
-        validate_measurements(v)      # names and sds; against the prior in the model validator
+
+        validate_measurements(v)  # names and sds; against the prior in the model validator
         return v
 
     @field_validator("fixed")
@@ -279,6 +320,7 @@ class JobSpec(_Strict):
         except ValueError as exc:
             raise ValueError(f"priors/fixed: {exc}") from None
         from vfcore.inference.problem import validate_measurements
+
         try:
             validate_measurements(self.measurements, prior)
         except ValueError as exc:
@@ -312,8 +354,16 @@ class JobSpec(_Strict):
 
     def sim_config(self):
         from vfcore.config import SimConfig
-        return SimConfig(mesh=self.mesh, dt=self.dt, duration=self.duration, discard=self.discard,
-                         fps=self.gaw.fps, contact=self.contact, contact_layer_mm=self.contact_layer_mm)
+
+        return SimConfig(
+            mesh=self.mesh,
+            dt=self.dt,
+            duration=self.duration,
+            discard=self.discard,
+            fps=self.gaw.fps,
+            contact=self.contact,
+            contact_layer_mm=self.contact_layer_mm,
+        )
 
     def observed(self) -> np.ndarray:
         return np.asarray(self.gaw.areas, dtype=float)
@@ -321,6 +371,7 @@ class JobSpec(_Strict):
     def to_prior(self):
         """The ``vfcore.inference`` Prior: the prior set's bounds, overridden by ``priors``, minus ``fixed``."""
         from vfcore.inference.prior import PRIOR_SETS, Prior
+
         bounds = {k: tuple(v) for k, v in PRIOR_SETS[self.prior_set].items()}
         bounds.update({k: (float(lo), float(hi)) for k, (lo, hi) in (self.priors or {}).items()})
         for k in self.fixed:
@@ -329,11 +380,18 @@ class JobSpec(_Strict):
 
     def _problem(self, prior):
         from vfcore.inference.problem import Problem
-        return Problem(obs_gaw=self.observed(), fps=float(self.gaw.fps), prior=prior,
-                       sigma_e=float(self.sigma_e), config=self.sim_config(), noise=self.noise,
-                       sigma_bounds=tuple(float(b) for b in self.sigma_bounds),
-                       measurements={k: (float(m), float(sd)) for k, (m, sd) in self.measurements.items()},
-                       area_scale=self.area_scale)
+
+        return Problem(
+            obs_gaw=self.observed(),
+            fps=float(self.gaw.fps),
+            prior=prior,
+            sigma_e=float(self.sigma_e),
+            config=self.sim_config(),
+            noise=self.noise,
+            sigma_bounds=tuple(float(b) for b in self.sigma_bounds),
+            measurements={k: (float(m), float(sd)) for k, (m, sd) in self.measurements.items()},
+            area_scale=self.area_scale,
+        )
 
     def to_problem(self):
         """The ``vfcore.inference.Problem`` this job solves (every registered model is scored against it): the
@@ -348,8 +406,9 @@ class JobSpec(_Strict):
         and prior (none is built here: that takes minutes) and for a model other than "fe", which is not
         the model the ensembles describe."""
         from vfcore.inference.reach import ReachVerdict, reach_for
+
         if self.model != "fe":
-            return ReachVerdict("unchecked", f"the model's reach is not checked for model {self.model!r}",
-                                exact=False)
-        return reach_for(self.observed(), float(self.gaw.fps), self.sim_config(), self.to_prior(),
-                         area_scale=self.area_scale)
+            return ReachVerdict("unchecked", f"the model's reach is not checked for model {self.model!r}", exact=False)
+        return reach_for(
+            self.observed(), float(self.gaw.fps), self.sim_config(), self.to_prior(), area_scale=self.area_scale
+        )

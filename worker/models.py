@@ -7,6 +7,7 @@ is plugged in with :func:`register_model` by the code that needs it. A process s
 ``VFINFER_MODEL_PLUGINS`` (comma-separated, imported on the first look-up), so the product itself never
 imports them.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -46,8 +47,14 @@ _lock = threading.Lock()
 _plugins_loaded = False
 
 
-def register_model(name: str, evaluator: Callable[[Any, Any], Callable], seconds_per_sim: Callable[[Any], float],
-                   options_type: type | None = None, *, test_double: bool = False) -> Model:
+def register_model(
+    name: str,
+    evaluator: Callable[[Any, Any], Callable],
+    seconds_per_sim: Callable[[Any], float],
+    options_type: type | None = None,
+    *,
+    test_double: bool = False,
+) -> Model:
     """Make ``name`` a valid ``JobSpec.model`` (see :class:`Model` for the arguments); registering a name
     again replaces its entry, so a module imported twice (pytest and a plugin list) stays harmless."""
     model = Model(name, evaluator, seconds_per_sim, options_type, test_double)
@@ -92,8 +99,10 @@ def fe_evaluator(spec, problem):
     """vfcore's finite-element model on the job's device."""
     if job_device(spec) != "cpu":
         from vfcore.inference.device_eval import DeviceEvaluator
+
         return DeviceEvaluator(problem, job_device(spec))
     from vfcore.inference.scoring import ProblemEvaluator
+
     return ProblemEvaluator(problem)
 
 

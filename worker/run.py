@@ -10,6 +10,7 @@ the same bytes.  On resume (service restart) every batch whose ``done`` mask is 
 read from the store instead of recomputed, and only missing chunks are submitted; the SMC
 sampler is replayed deterministically from the stored log-likelihoods.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,10 +45,12 @@ def warm_up() -> None:
     """Import and JIT-compile what a reducer needs (arviz, matplotlib, numba ufuncs: ~2 s per process)
     once, when a worker starts, instead of inside the first job's critical path."""
     import matplotlib
+
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot  # noqa: F401
 
     from vfcore.inference.diagnostics import pareto_k
+
     pareto_k(np.log(np.linspace(1.0, 2.0, 64)))
     from . import reduce  # noqa: F401
 
@@ -66,6 +69,7 @@ class WarmUpPlugin(WorkerPlugin):
     async def setup(self, worker) -> None:
         # compiling takes seconds: off the worker's event loop, which must keep answering the scheduler
         import asyncio
+
         try:
             await asyncio.to_thread(warm_up)
         except Exception:  # noqa: BLE001 - warming is an optimisation only
@@ -101,6 +105,7 @@ def probe_seconds_per_sim(spec: JobSpec, n: int = 32, seconds: float = 0.1) -> f
     if spec.model != "fe":
         return estimated_seconds_per_sim(spec)
     from vfcore.batch import probe_seconds_per_sim as probe
+
     problem_prior = spec.to_prior()
     rows = problem_prior.full_array(draw_prior(problem_prior, n, spec.seed))
     return probe(rows, spec.sim_config(), seconds)
@@ -212,8 +217,8 @@ class JobControl:
 
 @dataclass
 class Progress:
-    n_done: int = 0          # simulations finished (this run + already in the store)
-    n_total: int = 0         # simulations known so far (IS: N; SMC: grows per generation)
+    n_done: int = 0  # simulations finished (this run + already in the store)
+    n_total: int = 0  # simulations known so far (IS: N; SMC: grows per generation)
     ess: float = float("nan")
     chunks_computed: int = 0
     chunks_skipped: int = 0
@@ -221,9 +226,20 @@ class Progress:
     phase: str = "simulating"
 
 
-def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.ndarray, evaluator,
-               prog: Progress, report: Callable[[Progress], None], control: JobControl,
-               seen_ll: RunningESS | None = None, chunk_size: int | None = None) -> Evaluation:
+def _run_batch(
+    client,
+    root,
+    store_path: str,
+    job_id: str,
+    b: int,
+    thetas: np.ndarray,
+    evaluator,
+    prog: Progress,
+    report: Callable[[Progress], None],
+    control: JobControl,
+    seen_ll: RunningESS | None = None,
+    chunk_size: int | None = None,
+) -> Evaluation:
     from distributed import as_completed
 
     g = st.ensure_batch(root, b, thetas, chunk_size)
@@ -244,8 +260,17 @@ def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.nd
         if control.cancelled.is_set():
             raise JobCancelled()
         keys = [f"vfchunk-{job_id}-b{b}-c{c}" for c in todo]
-        futs = client.map(run_chunk, todo, [c * cs for c in todo], [thetas[c * cs:(c + 1) * cs] for c in todo],
-                          key=keys, pure=True, store_path=str(store_path), b=b, evaluator=evaluator)
+        futs = client.map(
+            run_chunk,
+            todo,
+            [c * cs for c in todo],
+            [thetas[c * cs : (c + 1) * cs] for c in todo],
+            key=keys,
+            pure=True,
+            store_path=str(store_path),
+            b=b,
+            evaluator=evaluator,
+        )
         with control.lock:
             control.futures = list(futs)
         try:
@@ -277,13 +302,21 @@ def _run_batch(client, root, store_path: str, job_id: str, b: int, thetas: np.nd
 def prepare(store_path: Path, job_id: str, spec: JobSpec):
     """Create the store (idempotent); return (root, problem)."""
     problem = spec.to_problem()
-    root = st.create_job_store(store_path, job_id, spec.to_json(), chunk_size_for(spec), problem.n_compare,
-                               problem.prior.ndim)
+    root = st.create_job_store(
+        store_path, job_id, spec.to_json(), chunk_size_for(spec), problem.n_compare, problem.prior.ndim
+    )
     return root, problem
 
 
-def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
-            report: Callable[[Progress], None] | None = None, control: JobControl | None = None) -> dict:
+def run_job(
+    client,
+    job_id: str,
+    store_path: Path,
+    spec: JobSpec,
+    *,
+    report: Callable[[Progress], None] | None = None,
+    control: JobControl | None = None,
+) -> dict:
     """Run (or resume) a job to completion; publish the posterior into the store.
 
     Returns timing and chunk statistics. Raises JobCancelled when cancelled.
@@ -304,32 +337,53 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
         prog.phase = "reducing"
         report(prog)
         from .reduce import reduce_is_job
+
         fut = client.submit(reduce_is_job, sp, key=f"vfreduce-{job_id}", pure=True)
     elif isinstance(spec.sampler, SMCSettings):
         from vfcore.inference.smc import SMCSampler
+
         s = spec.sampler
         screen = None
         if s.screen is not None:
             # the same problem on the screening model's mesh and step (same observation and compared window)
             import dataclasses
+
             cheap = dataclasses.replace(problem, config=problem.config.replace(mesh=s.screen.mesh, dt=s.screen.dt))
             screen = evaluator_for(spec, cheap)
         from vfcore.inference.runs import pool_runs, run_seeds
         from vfcore.inference.symmetry import scale_group
+
         b, posts = 0, []
         # independent runs one after another; their batches are numbered on, so a resumed job reads them all back
         for seed in run_seeds(spec.seed, s.runs):
             # all six scaled parameters estimated: walk their log-ratios, draw the common scale exactly
-            sampler = SMCSampler(problem.prior, s.n_particles, seed, delayed=screen is not None,
-                                 symmetry=scale_group(problem), **s.sampler_options())
+            sampler = SMCSampler(
+                problem.prior,
+                s.n_particles,
+                seed,
+                delayed=screen is not None,
+                symmetry=scale_group(problem),
+                **s.sampler_options(),
+            )
             while (th := sampler.ask()) is not None:
                 if control.cancelled.is_set():
                     raise JobCancelled()
                 prog.n_total += th.shape[0]
                 prog.generation = sampler.generation
                 fn = screen if sampler.stage == "screen" else evaluator
-                ev = _run_batch(client, root, sp, job_id, b, th, fn, prog, report, control,
-                                chunk_size=generation_chunk(spec, th.shape[0], client))
+                ev = _run_batch(
+                    client,
+                    root,
+                    sp,
+                    job_id,
+                    b,
+                    th,
+                    fn,
+                    prog,
+                    report,
+                    control,
+                    chunk_size=generation_chunk(spec, th.shape[0], client),
+                )
                 sampler.tell(ev)
                 prog.ess = float(sampler.last_ess)
                 b += 1
@@ -339,6 +393,7 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
         report(prog)
         post = posts[0] if len(posts) == 1 else pool_runs(posts, seed=spec.seed)
         from .reduce import publish_posterior
+
         fut = client.submit(publish_posterior, sp, post, key=f"vfreduce-{job_id}", pure=True)
     else:  # pragma: no cover
         raise ValueError("unknown sampler")
@@ -355,6 +410,12 @@ def run_job(client, job_id: str, store_path: Path, spec: JobSpec, *,
     prog.ess = float(summary.get("ess", prog.ess))
     report(prog)
     t_total = time.perf_counter() - t0
-    return {"simulate_s": t_sim, "reduce_s": t_total - t_sim, "total_s": t_total,
-            "chunks_computed": prog.chunks_computed, "chunks_skipped": prog.chunks_skipped,
-            "n_simulations": prog.n_done, "ess": prog.ess}
+    return {
+        "simulate_s": t_sim,
+        "reduce_s": t_total - t_sim,
+        "total_s": t_total,
+        "chunks_computed": prog.chunks_computed,
+        "chunks_skipped": prog.chunks_skipped,
+        "n_simulations": prog.n_done,
+        "ess": prog.ess,
+    }

@@ -32,6 +32,7 @@ SMC generation's equal share per worker thread, fixed when the batch is created)
 owns whole Zarr chunks: concurrent tasks never write the same object, and a recomputed task
 overwrites its region with identical bytes.  ``done`` has one element per Zarr chunk.
 """
+
 from __future__ import annotations
 
 import json
@@ -45,11 +46,27 @@ from vfcore.inference.evaluation import Evaluation
 LAYOUT_VERSION = 1
 # zarr 3 raises its own error for a missing node; an older zarr, KeyError
 _NODE_NOT_FOUND = zarr.errors.NodeNotFoundError if hasattr(zarr, "errors") else KeyError
-EVAL_ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "contact_impulse",
-               "contact_pressure_in_contact")
+EVAL_ARRAYS = (
+    "loglik",
+    "ok",
+    "gaw",
+    "mean_flow",
+    "mean_contact",
+    "max_contact",
+    "contact_impulse",
+    "contact_pressure_in_contact",
+)
 SUMMARY_ARRAYS = ("mean_flow", "mean_contact", "max_contact", "contact_impulse", "contact_pressure_in_contact")
-PRODUCT_NAMES = ("gaw_fit", "corner", "contact_pressure", "samples_csv", "samples_meta", "posterior_nc",
-                 "diagnosis_json", "diagnosis_png")
+PRODUCT_NAMES = (
+    "gaw_fit",
+    "corner",
+    "contact_pressure",
+    "samples_csv",
+    "samples_meta",
+    "posterior_nc",
+    "diagnosis_json",
+    "diagnosis_png",
+)
 #: The folder of a diagnosis store that keeps its finished simulations while it runs.
 RESUME_DIR = "resume"
 
@@ -60,8 +77,16 @@ def create_job_store(path: Path, job_id: str, spec_json: str, chunk_size: int, n
     if (path / "zarr.json").exists():
         return zarr.open_group(str(path), mode="r+")
     root = zarr.open_group(str(path), mode="w")
-    root.attrs.update({"layout": LAYOUT_VERSION, "job_id": job_id, "jobspec": json.loads(spec_json),
-                       "chunk_size": int(chunk_size), "n_compare": int(n_compare), "ndim": int(ndim)})
+    root.attrs.update(
+        {
+            "layout": LAYOUT_VERSION,
+            "job_id": job_id,
+            "jobspec": json.loads(spec_json),
+            "chunk_size": int(chunk_size),
+            "n_compare": int(n_compare),
+            "ndim": int(ndim),
+        }
+    )
     root.create_group("batches")
     return root
 
@@ -72,8 +97,9 @@ def create_diagnosis_store(path: Path, job_id: str, spec_json: str):
     if (path / "zarr.json").exists():
         return zarr.open_group(str(path), mode="r+")
     root = zarr.open_group(str(path), mode="w")
-    root.attrs.update({"layout": LAYOUT_VERSION, "kind": "diagnosis", "job_id": job_id,
-                       "diagnosis": json.loads(spec_json)})
+    root.attrs.update(
+        {"layout": LAYOUT_VERSION, "kind": "diagnosis", "job_id": job_id, "diagnosis": json.loads(spec_json)}
+    )
     return root
 
 

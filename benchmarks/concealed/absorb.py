@@ -30,6 +30,7 @@ never a claim that the effect cannot be absorbed.
 This module reads only the clean waveform and the forward model; it knows nothing of the fitting
 code (``vfcore.diagnose``), like the rest of the generator.
 """
+
 from __future__ import annotations
 
 import json
@@ -45,8 +46,17 @@ from vfcore.result import HR_OVERSAMPLE
 
 from .config import BASE_CONFIG, MATERIAL_SETS, PRESENCE_SIGMA, TRUTH_BOUNDS
 
-__all__ = ["MaterialSpace", "unabsorbed_rms", "CONTINUATION_SEARCH", "continued_unabsorbed_rms", "windows",
-           "AUDIT_SEARCH", "audit_presence", "CERTIFY_MAXFEV", "certify_absorption"]
+__all__ = [
+    "MaterialSpace",
+    "unabsorbed_rms",
+    "CONTINUATION_SEARCH",
+    "continued_unabsorbed_rms",
+    "windows",
+    "AUDIT_SEARCH",
+    "audit_presence",
+    "CERTIFY_MAXFEV",
+    "certify_absorption",
+]
 
 
 def _aligned_sse(y: np.ndarray, gaw_hr: np.ndarray) -> float:
@@ -95,14 +105,23 @@ class MaterialSpace:
         import warnings
 
         from scipy.stats import qmc
+
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             return qmc.Sobol(len(self.names), scramble=True, seed=seed).random(n)
 
 
-def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimConfig = BASE_CONFIG,
-                   n_sobol: int = 64, n_starts: int = 1, maxfev: int = 80, seed: int = 0,
-                   starts: list[dict] | None = None, bounds: dict | None = None) -> tuple[float, dict]:
+def unabsorbed_rms(
+    clean: np.ndarray,
+    truth: Params | None = None,
+    config: SimConfig = BASE_CONFIG,
+    n_sobol: int = 64,
+    n_starts: int = 1,
+    maxfev: int = 80,
+    seed: int = 0,
+    starts: list[dict] | None = None,
+    bounds: dict | None = None,
+) -> tuple[float, dict]:
     """RMS (mm^2) of what the BASE model cannot absorb of a clean waveform: the minimum over the
     material parameters (E_body, E_cover, p_sub in ``TRUTH_BOUNDS``, the rest at TABLE3) and over
     the sub-frame lag of ``RMS(clean - base)`` (``bounds``: another material box, :class:`MaterialSpace`). A scrambled-Sobol design of ``n_sobol`` points
@@ -113,6 +132,7 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
     from scipy.optimize import minimize
 
     from vfcore.batch import simulate_many
+
     space = MaterialSpace(bounds)
     names, params_of = space.names, space.params_of
     y = np.asarray(clean, dtype=float)
@@ -131,20 +151,28 @@ def unabsorbed_rms(clean: np.ndarray, truth: Params | None = None, config: SimCo
     best_u, best = U[int(np.argmin(sse))], float(np.min(sse))
     polish = [int(j) for j in np.argsort(sse[:n_ranked], kind="stable")[:n_starts]]
     if truth is not None and n_ranked - 1 not in polish:
-        polish.insert(0, n_ranked - 1)     # the truth: usually next to the absorbing optimum
-    polish += list(range(n_ranked, len(U)))    # and every given start
+        polish.insert(0, n_ranked - 1)  # the truth: usually next to the absorbing optimum
+    polish += list(range(n_ranked, len(U)))  # and every given start
     for j in polish:
         if not math.isfinite(sse[j]):
             continue
-        r = minimize(lambda u: sse_of(simulate(params_of(u), config)), U[j], method="Nelder-Mead",
-                     bounds=[(0.0, 1.0)] * len(names),
-                     options={"maxfev": maxfev, "xatol": 1e-3, "fatol": 1e-6 * max(sse[j], 1e-12),
-                              "initial_simplex": np.vstack([U[j]] + [np.clip(U[j] + 0.05 * e, 0, 1)
-                                                                     for e in np.eye(len(names))])})
+        r = minimize(
+            lambda u: sse_of(simulate(params_of(u), config)),
+            U[j],
+            method="Nelder-Mead",
+            bounds=[(0.0, 1.0)] * len(names),
+            options={
+                "maxfev": maxfev,
+                "xatol": 1e-3,
+                "fatol": 1e-6 * max(sse[j], 1e-12),
+                "initial_simplex": np.vstack([U[j]] + [np.clip(U[j] + 0.05 * e, 0, 1) for e in np.eye(len(names))]),
+            },
+        )
         if r.fun < best:
             best, best_u = float(r.fun), np.clip(r.x, 0.0, 1.0)
     bp = params_of(best_u)
     return math.sqrt(best / y.size), {n: float(getattr(bp, n)) for n in names}
+
 
 #: default continuation search of the presence audit: design points, how many of them (best on the
 #: first window) are continued, the cycles of the first window, Nelder–Mead evaluations per window
@@ -171,9 +199,18 @@ def windows(n: int, frames_per_cycle: float, cycles0: float) -> list[int]:
     return out + [n]
 
 
-def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list[dict] | tuple = (),
-                             n_sobol: int = 256, n_keep: int = 3, cycles0: float = 3.0, maxfev: int = 30,
-                             seed: int = 0, bounds: dict | None = None) -> tuple[float, dict, int]:
+def continued_unabsorbed_rms(
+    clean: np.ndarray,
+    config,
+    fps: float,
+    starts: list[dict] | tuple = (),
+    n_sobol: int = 256,
+    n_keep: int = 3,
+    cycles0: float = 3.0,
+    maxfev: int = 30,
+    seed: int = 0,
+    bounds: dict | None = None,
+) -> tuple[float, dict, int]:
     """RMS (mm²) of what the base model cannot absorb of ``clean`` (frames at ``fps``), found by
     window continuation (module docstring).
 
@@ -224,15 +261,21 @@ def continued_unabsorbed_rms(clean: np.ndarray, config, fps: float, starts: list
         def f(u):
             count[0] += 1
             return score(u, simulate(params_of(u), config), w)
+
         return f
 
     for u0 in chosen:
         u = np.asarray(u0, dtype=float)
         for k, w in enumerate(ws):
-            step = max(0.05 / 2 ** k, 0.005)     # the ridge narrows as the window grows
+            step = max(0.05 / 2**k, 0.005)  # the ridge narrows as the window grows
             simplex = np.vstack([u] + [np.clip(u + step * e, 0.0, 1.0) for e in np.eye(len(names))])
-            r = minimize(objective(w), u, method="Nelder-Mead", bounds=[(0.0, 1.0)] * len(names),
-                         options={"maxfev": maxfev, "xatol": 1e-4, "fatol": 1e-9, "initial_simplex": simplex})
+            r = minimize(
+                objective(w),
+                u,
+                method="Nelder-Mead",
+                bounds=[(0.0, 1.0)] * len(names),
+                options={"maxfev": maxfev, "xatol": 1e-4, "fatol": 1e-9, "initial_simplex": simplex},
+            )
             if math.isfinite(r.fun):
                 u = np.clip(r.x, 0.0, 1.0)
     if best["u"] is None:
@@ -258,8 +301,9 @@ def _audit_one(args):
     clean = np.asarray(t["clean"], dtype=float)
     u, fit, n_sim, by = math.inf, {}, 0, None
     if method in ("continuation", "both"):
-        u, fit, n_sim = continued_unabsorbed_rms(clean, config, config.fps, starts=starts, bounds=bounds,
-                                                 **search.get("continuation", search))
+        u, fit, n_sim = continued_unabsorbed_rms(
+            clean, config, config.fps, starts=starts, bounds=bounds, **search.get("continuation", search)
+        )
         by = "continuation"
     # "both": the design search too, unless the continuation already decided the case
     if method == "design" or (method == "both" and u >= PRESENCE_SIGMA * float(t["sigma_mm2"])):
@@ -267,24 +311,31 @@ def _audit_one(args):
         if ud < u:
             u, fit, by = ud, fitd, "design"
     before = float(t.get("unabsorbed_rms_mm2", math.nan))
-    if math.isfinite(before) and before < u:       # never report a worse search than the generator's
+    if math.isfinite(before) and before < u:  # never report a worse search than the generator's
         u, fit, by = before, t.get("absorbing_fit", {}), "generator"
-    return cid, {"unabsorbed_rms_mm2": u, "generated_unabsorbed_rms_mm2": before, "sigma_mm2": t["sigma_mm2"],
-                 "present": bool(u >= PRESENCE_SIGMA * float(t["sigma_mm2"])), "absorbing_fit": fit,
-                 "n_simulations_continuation": n_sim, "smallest_from": by}
+    return cid, {
+        "unabsorbed_rms_mm2": u,
+        "generated_unabsorbed_rms_mm2": before,
+        "sigma_mm2": t["sigma_mm2"],
+        "present": bool(u >= PRESENCE_SIGMA * float(t["sigma_mm2"])),
+        "absorbing_fit": fit,
+        "n_simulations_continuation": n_sim,
+        "smallest_from": by,
+    }
 
 
 def _check_search(search: dict, method: str) -> None:
     """Refuse a search whose keys the method's function does not take (before any simulation)."""
     import inspect
+
     fns = {"continuation": continued_unabsorbed_rms, "design": unabsorbed_rms}
     own = {"clean", "truth", "config", "fps", "starts"}
-    parts = ({m: search.get(m) for m in fns} if method == "both"
-             else {method: search.get(method, search)})
+    parts = {m: search.get(m) for m in fns} if method == "both" else {method: search.get(method, search)}
     for m, d in parts.items():
         if not isinstance(d, dict):
-            raise ValueError(f"method 'both' needs search={{'continuation': {{...}}, 'design': {{...}}}}; "
-                             f"the {m!r} entry is {d!r}")
+            raise ValueError(
+                f"method 'both' needs search={{'continuation': {{...}}, 'design': {{...}}}}; the {m!r} entry is {d!r}"
+            )
         allowed = set(inspect.signature(fns[m]).parameters) - own
         bad = sorted(set(d) - allowed)
         if bad:
@@ -297,8 +348,13 @@ def suite_bounds(public: dict) -> dict:
     return MATERIAL_SETS[public.get("material", "three")]
 
 
-def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig = BASE_CONFIG,
-                   search: dict | None = None, method: str = "both") -> dict:
+def audit_presence(
+    suite: str | os.PathLike,
+    workers: int = 1,
+    config: SimConfig = BASE_CONFIG,
+    search: dict | None = None,
+    method: str = "both",
+) -> dict:
     """Re-test the presence rule of an existing suite with a stronger absorption search and
     write ``audit.json`` beside ``truth.json``. ``method``: ``"continuation"``
     (:func:`.absorb.continued_unabsorbed_rms` with :data:`.absorb.CONTINUATION_SEARCH`),
@@ -313,14 +369,21 @@ def audit_presence(suite: str | os.PathLike, workers: int = 1, config: SimConfig
     if method not in ("continuation", "design", "both"):
         raise ValueError(f"method must be 'continuation', 'design' or 'both', got {method!r}")
     suite = Path(suite)
-    default = {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH,
-               "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH}}[method]
+    default = {
+        "continuation": CONTINUATION_SEARCH,
+        "design": AUDIT_SEARCH,
+        "both": {"continuation": CONTINUATION_SEARCH, "design": AUDIT_SEARCH},
+    }[method]
     search = dict(default if search is None else search)
     _check_search(search, method)
     hidden, bounds = _hidden_cases_and_box(suite)
     jobs = [(cid, t, config, search, method, bounds) for cid, t in sorted(hidden.items())]
-    doc = {"method": method, "search": search, "presence_sigma": PRESENCE_SIGMA,
-           "cases": _run_cases(_audit_one, jobs, workers)}
+    doc = {
+        "method": method,
+        "search": search,
+        "presence_sigma": PRESENCE_SIGMA,
+        "cases": _run_cases(_audit_one, jobs, workers),
+    }
     _write_whole(suite / "audit.json", doc)
     return doc
 
@@ -337,6 +400,7 @@ def _run_cases(fn, jobs: list, workers: int) -> dict:
     processes when more than one; the results do not depend on the number."""
     if workers > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
+
         with ProcessPoolExecutor(workers) as ex:
             return dict(ex.map(fn, jobs))
     return dict(map(fn, jobs))
@@ -355,14 +419,32 @@ CERTIFY_MAXFEV = 150
 
 def _certify_one(args):
     cid, clean, start, sigma, config, bounds, maxfev = args
-    u, fit = unabsorbed_rms(np.asarray(clean, dtype=float), None, config, n_sobol=1, n_starts=0, maxfev=maxfev,
-                            starts=[start], bounds=bounds)
-    return cid, {"unabsorbed_rms_mm2": u, "sigma_mm2": sigma, "absorbed": bool(u < PRESENCE_SIGMA * sigma),
-                 "start": start, "absorbing_fit": fit}
+    u, fit = unabsorbed_rms(
+        np.asarray(clean, dtype=float),
+        None,
+        config,
+        n_sobol=1,
+        n_starts=0,
+        maxfev=maxfev,
+        starts=[start],
+        bounds=bounds,
+    )
+    return cid, {
+        "unabsorbed_rms_mm2": u,
+        "sigma_mm2": sigma,
+        "absorbed": bool(u < PRESENCE_SIGMA * sigma),
+        "start": start,
+        "absorbing_fit": fit,
+    }
 
 
-def certify_absorption(suite: str | os.PathLike, reports: str | os.PathLike, workers: int = 1,
-                       config: SimConfig = BASE_CONFIG, maxfev: int = CERTIFY_MAXFEV) -> dict:
+def certify_absorption(
+    suite: str | os.PathLike,
+    reports: str | os.PathLike,
+    workers: int = 1,
+    config: SimConfig = BASE_CONFIG,
+    maxfev: int = CERTIFY_MAXFEV,
+) -> dict:
     """After a suite is diagnosed: how much of each effect the base model leaves when started where
     the diagnosis's own base fit ended. For every effect case with a report ``reports/case_XX.json``,
     the clean waveform is fitted by the audit's objective (:func:`unabsorbed_rms`: any sub-frame lag,

@@ -4,14 +4,23 @@ The forward-model settings of every case, the observation length, the material b
 drawn from (and the base model may move in when it tries to absorb an effect), and the presence
 threshold. Nothing here depends on the fitting code (``vfcore.diagnose``).
 """
+
 from __future__ import annotations
 
 import math
 
 from vfcore import SimConfig
 
-__all__ = ["BASE_CONFIG", "N_OBS", "N_Y", "TRUTH_BOUNDS", "FULL_BOUNDS", "MATERIAL_SETS", "SCALE_ANCHOR",
-           "PRESENCE_SIGMA"]
+__all__ = [
+    "BASE_CONFIG",
+    "N_OBS",
+    "N_Y",
+    "TRUTH_BOUNDS",
+    "FULL_BOUNDS",
+    "MATERIAL_SETS",
+    "SCALE_ANCHOR",
+    "PRESENCE_SIGMA",
+]
 
 #: Forward-model settings of every case (the fit is expected to use the same).
 BASE_CONFIG = SimConfig(mesh="coarse", dt=1e-4)
@@ -29,8 +38,13 @@ TRUTH_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.
 #: p_sub, rho and eta are multiplied by one factor (:ref:`inference-scale-the-common-scale-what-a`), so a
 #: truth drawn with rho elsewhere in Table 2's [950, 1200] kg/m^3 is the same recording as its
 #: rescaled copy with rho at the anchor; drawing the other five at the anchor keeps them in the box.
-FULL_BOUNDS = {"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "E_lig": (0.5, 3.0), "p_sub": (400.0, 1800.0),
-               "eta": (1.0, 7.0)}
+FULL_BOUNDS = {
+    "E_body": (9.0, 15.0),
+    "E_cover": (250.0, 950.0),
+    "E_lig": (0.5, 3.0),
+    "p_sub": (400.0, 1800.0),
+    "eta": (1.0, 7.0),
+}
 #: The scale anchor the diagnosis assumes for a full-material suite: rho at Table 3 (kg/m^3).
 SCALE_ANCHOR = {"rho": 1051.0}
 #: Material sets of a suite (``generate.py --material``): "three" draws E_body, E_cover and p_sub
@@ -44,4 +58,4 @@ MATERIAL_SETS = {"three": TRUTH_BOUNDS, "full": FULL_BOUNDS}
 #: ``sqrt(sigma^2 + e^2)`` to ``sigma``, a 30 % gain exactly when ``e = sigma * sqrt(1/0.7^2 - 1)``.
 #: Below it the effect is absorbed by the material parameters to within the noise (seed-0 scale
 #: and frame-rate cases drawn without the rule: base residual 0.52-0.74 mm^2 against sigma 0.52-0.69).
-PRESENCE_SIGMA = math.sqrt(1.0 / 0.7 ** 2 - 1.0)
+PRESENCE_SIGMA = math.sqrt(1.0 / 0.7**2 - 1.0)

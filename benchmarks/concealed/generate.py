@@ -23,6 +23,7 @@ Output of :func:`write_suite` / the CLI::
   the sub-frame offset, the clean waveform and the clean control-at-same-truth waveform;
 - ``truth.npz`` HIDDEN: the same arrays (``clean_XX``, ``base_XX``, ``noisy_XX``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -59,12 +60,41 @@ from .mechanisms import (
 )
 
 __all__ = [
-    "BASE_CONFIG", "N_OBS", "N_Y", "EFFECTS", "PHYSICAL", "CAMERA", "LABELS", "TRUTH_BOUNDS", "Case",
-    "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile", "zipper_area",
-    "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale", "oscillates",
-    "amplitude", "phonates", "MaterialSpace", "unabsorbed_rms", "PRESENCE_SIGMA", "AUDIT_SEARCH", "audit_presence",
+    "BASE_CONFIG",
+    "N_OBS",
+    "N_Y",
+    "EFFECTS",
+    "PHYSICAL",
+    "CAMERA",
+    "LABELS",
+    "TRUTH_BOUNDS",
+    "Case",
+    "frame_times",
+    "sample_hr",
+    "hr_times",
+    "boxcar_average",
+    "leak_area",
+    "gap_profile",
+    "zipper_area",
+    "asymmetric_area",
+    "epithelium_profile",
+    "subglottal_modes",
+    "quantise_scale",
+    "oscillates",
+    "amplitude",
+    "phonates",
+    "MaterialSpace",
+    "unabsorbed_rms",
+    "PRESENCE_SIGMA",
+    "AUDIT_SEARCH",
+    "audit_presence",
     "certify_absorption",
-    "forward_extensions_available", "draw_truth", "make_case", "generate_suite", "write_suite", "main",
+    "forward_extensions_available",
+    "draw_truth",
+    "make_case",
+    "generate_suite",
+    "write_suite",
+    "main",
 ]
 
 
@@ -112,18 +142,18 @@ SUITE_COUNTS = {**{e: 2 for e in EFFECTS}, "control": 4}
 SUITE_COUNTS_FULL = {**{e: 1 for e in EFFECTS + OUTSIDE + PAIRS}, "control": 4}
 
 # ------------------------------------------------------------------ effect ranges (README)
-LEAK_AREA_MM2 = (0.5, 3.0)          # total posterior chink area
-LEAK_START_FRAC = (0.4, 0.75)       # chink runs from y = frac*L to the posterior end y = L
+LEAK_AREA_MM2 = (0.5, 3.0)  # total posterior chink area
+LEAK_START_FRAC = (0.4, 0.75)  # chink runs from y = frac*L to the posterior end y = L
 SEP_RATIO_RANGES = ((1.05, 1.2), (1.45, 1.6))
 EPI_E_KPA = (8.0, 30.0)
 EPI_H_MM = (0.03, 0.08)
-EPI_MEDIAL_RATIO = (2.0, 4.0)       # medial / inferior-superior stiffness multiplier
-EPI_MEDIAL_WIDTH_MM = (0.8, 1.5)    # Gaussian half-width (arc length) of the medial thickening
+EPI_MEDIAL_RATIO = (2.0, 4.0)  # medial / inferior-superior stiffness multiplier
+EPI_MEDIAL_WIDTH_MM = (0.8, 1.5)  # Gaussian half-width (arc length) of the medial thickening
 ZIP_LAG_CYCLES = (0.1, 0.3)
 ZIP_POWER = (1.5, 3.0)
 ZIP_ENV_Q = (0.5, 1.5)
 SUB_TUBE_M = (0.15, 0.25)
-SUB_Z1 = (0.5e6, 2.0e6)             # Pa s/m^3, first-mode peak impedance
+SUB_Z1 = (0.5e6, 2.0e6)  # Pa s/m^3, first-mode peak impedance
 SUB_ZETA1 = (0.08, 0.15)
 ASYM_Q_RANGES = ((0.6, 0.8), (1.25, 1.5))
 ASYM_LAG_CYCLES = (0.05, 0.2)
@@ -132,10 +162,10 @@ ASYM_LAG_CYCLES = (0.05, 0.2)
 #: only in overall stiffness; the fitted lr_stiffness extension scales all three by one ratio.
 ASYM_LAYER_SPREAD = (0.85, 1.15)
 EXPOSURE_FRAC = (0.6, 1.0)
-EXPOSURE_JITTER = (0.02, 0.05)      # relative sd of the per-frame exposure time
+EXPOSURE_JITTER = (0.02, 0.05)  # relative sd of the per-frame exposure time
 RATE_RANGES = ((0.93, 0.97), (1.03, 1.07))
 SCALE_RANGES = ((0.8, 0.9), (1.1, 1.2))
-LEAK_SHAPE_POWER = (0.5, 2.0)       # gap profile exponent along the chink (1: linear wedge)
+LEAK_SHAPE_POWER = (0.5, 2.0)  # gap profile exponent along the chink (1: linear wedge)
 TREMOR_HZ = (3.0, 7.0)
 TREMOR_DEPTH = (0.15, 0.3)
 DIPLO_DEPTH = (0.15, 0.3)
@@ -153,8 +183,7 @@ def _two_sided(rng, ranges) -> float:
 # ------------------------------------------------------------------ cases
 def oscillates(gaw, fps: float) -> bool:
     g = np.asarray(gaw, dtype=float)
-    return bool(g.size > 0 and np.all(np.isfinite(g)) and g.max() > MIN_PEAK_MM2
-                and math.isfinite(estimate_f0(g, fps)))
+    return bool(g.size > 0 and np.all(np.isfinite(g)) and g.max() > MIN_PEAK_MM2 and math.isfinite(estimate_f0(g, fps)))
 
 
 def amplitude(gaw) -> float:
@@ -209,16 +238,26 @@ def _forward(label: str, truth: Params, rng, config: SimConfig, sim):
         wd = _uniform(rng, EPI_MEDIAL_WIDTH_MM)
         prof = epithelium_profile(mr, wd, config.mesh)
         res = sim(truth, config.replace(epithelium_E_kpa=E, epithelium_h_mm=h, epithelium_profile=prof))
-        eff = {"epithelium_E_kpa": E, "epithelium_h_mm": h, "medial_ratio": mr, "medial_width_mm": wd,
-               "epithelium_profile": list(prof)}
+        eff = {
+            "epithelium_E_kpa": E,
+            "epithelium_h_mm": h,
+            "medial_ratio": mr,
+            "medial_width_mm": wd,
+            "epithelium_profile": list(prof),
+        }
     elif label == "subglottal":
         tube = _uniform(rng, SUB_TUBE_M)
         z1 = _uniform(rng, SUB_Z1)
         zeta = _uniform(rng, SUB_ZETA1)
         modes = subglottal_modes(tube, z1, zeta)
         res = sim(truth, config.replace(subglottal_modes=modes))
-        eff = {"tube_length_m": tube, "c_m_s": SUB_C, "Z1_pa_s_m3": z1, "zeta1": zeta,
-               "subglottal_modes": [list(m) for m in modes]}
+        eff = {
+            "tube_length_m": tube,
+            "c_m_s": SUB_C,
+            "Z1_pa_s_m3": z1,
+            "zeta1": zeta,
+            "subglottal_modes": [list(m) for m in modes],
+        }
     else:
         raise ValueError(f"{label!r} is not a forward-level effect; known: {FORWARD}")
     if not _ok(res) or res.cycles is None:
@@ -241,11 +280,11 @@ class Case:
     sigma: float
     fps: float
     clean: np.ndarray
-    base: np.ndarray                 # clean control-at-same-truth (same offset, no effect)
-    gaw: np.ndarray                  # clean + noise: the public observation
+    base: np.ndarray  # clean control-at-same-truth (same offset, no effect)
+    gaw: np.ndarray  # clean + noise: the public observation
     attempts: int = 1
     notes: list = field(default_factory=list)
-    unabsorbed: float = math.nan     # unabsorbed_rms of the clean waveform (mm^2); nan for controls
+    unabsorbed: float = math.nan  # unabsorbed_rms of the clean waveform (mm^2); nan for controls
     absorbing_fit: dict = field(default_factory=dict)
 
     @property
@@ -261,11 +300,20 @@ class Case:
     def effect_loglik(self) -> float:
         """``sum (clean - base)^2 / (2 sigma^2)``: log-likelihood gap between the effect and the
         base model at the truth (an upper bound on what a fit could gain; the base fit absorbs part)."""
-        return float(np.sum((self.clean - self.base) ** 2) / (2.0 * self.sigma ** 2))
+        return float(np.sum((self.clean - self.base) ** 2) / (2.0 * self.sigma**2))
 
 
-def apply_effect(label: str, base, truth: Params, offset: float, rng, config: SimConfig = BASE_CONFIG,
-                 n_obs: int = N_OBS, sim=simulate, shapes: bool = True):
+def apply_effect(
+    label: str,
+    base,
+    truth: Params,
+    offset: float,
+    rng,
+    config: SimConfig = BASE_CONFIG,
+    n_obs: int = N_OBS,
+    sim=simulate,
+    shapes: bool = True,
+):
     """Draw the effect parameters and return ``(clean, effect_params)``; ``None`` when the
     effect's simulation does not oscillate (caller redraws). ``shapes``: draw the shape knobs
     that the suites of the "three" set held fixed (the leak's gap profile)."""
@@ -282,16 +330,27 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
         power = _uniform(rng, LEAK_SHAPE_POWER) if shapes else 1.0
         g = gap_profile(area, start, L, power=power)
         w = sample_hr(gaw_hr / L, t_hr, t)
-        return leak_area(w, g, length_mm=L), {"chink_area_mm2": area, "start_frac": start, "shape_power": power,
-                                               "posterior_gap_mm": float(g.max()), "n_y": N_Y,
-                                               "env": "uniform"}
+        return leak_area(w, g, length_mm=L), {
+            "chink_area_mm2": area,
+            "start_frac": start,
+            "shape_power": power,
+            "posterior_gap_mm": float(g.max()),
+            "n_y": N_Y,
+            "env": "uniform",
+        }
     if label == "zipper":
         lag = _uniform(rng, ZIP_LAG_CYCLES)
         pw = _uniform(rng, ZIP_POWER)
         q = _uniform(rng, ZIP_ENV_Q)
         clean = zipper_area(gaw_hr / L, t_hr, t, lag / base.f0, pw, q, L)
-        return clean, {"lag_cycles": lag, "lag_s": lag / base.f0, "power": pw, "env_q": q, "n_y": N_Y,
-                       "env_normalised": True}
+        return clean, {
+            "lag_cycles": lag,
+            "lag_s": lag / base.f0,
+            "power": pw,
+            "env_q": q,
+            "n_y": N_Y,
+            "env_normalised": True,
+        }
     if label == "exposure":
         e = _uniform(rng, EXPOSURE_FRAC)
         j = _uniform(rng, EXPOSURE_JITTER)
@@ -322,8 +381,11 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
     if label == "tremor":
         f_m, depth, phase = _uniform(rng, TREMOR_HZ), _uniform(rng, TREMOR_DEPTH), _uniform(rng, (0.0, 2 * math.pi))
         a = sample_hr(gaw_hr, t_hr, t)
-        return a * (1.0 + depth * np.sin(2 * math.pi * f_m * t + phase)), {"mod_hz": f_m, "depth": depth,
-                                                                            "phase_rad": phase}
+        return a * (1.0 + depth * np.sin(2 * math.pi * f_m * t + phase)), {
+            "mod_hz": f_m,
+            "depth": depth,
+            "phase_rad": phase,
+        }
     if label == "diplophonia":
         depth = _uniform(rng, DIPLO_DEPTH)
         a = sample_hr(gaw_hr, t_hr, t)
@@ -338,8 +400,11 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
     if label == "asymmetry":
         Q = _two_sided(rng, ASYM_Q_RANGES)
         lag = _uniform(rng, ASYM_LAG_CYCLES)
-        q_layer = {"E_body": Q, "E_cover": Q * _uniform(rng, ASYM_LAYER_SPREAD),
-                   "E_lig": Q * _uniform(rng, ASYM_LAYER_SPREAD)}
+        q_layer = {
+            "E_body": Q,
+            "E_cover": Q * _uniform(rng, ASYM_LAYER_SPREAD),
+            "E_lig": Q * _uniform(rng, ASYM_LAYER_SPREAD),
+        }
         d = truth.as_dict()
         for k, qk in q_layer.items():
             d[k] *= qk
@@ -351,15 +416,29 @@ def apply_effect(label: str, base, truth: Params, offset: float, rng, config: Si
             clean = asymmetric_area(base, right, t, lag, t_c)
         except ValueError:
             return None
-        return clean, {"Q": Q, "Q_layers": q_layer, "lag_cycles": lag, "f0_left_hz": base.f0,
-                       "f0_right_hz": right.f0,
-                       "right_params": d}
+        return clean, {
+            "Q": Q,
+            "Q_layers": q_layer,
+            "lag_cycles": lag,
+            "f0_left_hz": base.f0,
+            "f0_right_hz": right.f0,
+            "right_params": d,
+        }
     raise ValueError(f"unknown label {label!r}; known: {LABELS}")
 
 
-def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config: SimConfig = BASE_CONFIG,
-              n_obs: int = N_OBS, max_attempts: int = 20, sim=simulate, presence: bool = True,
-              presence_attempts: int = PRESENCE_ATTEMPTS, material: str = "three") -> Case:
+def make_case(
+    case_id: str,
+    label: str,
+    seed_seq: np.random.SeedSequence,
+    config: SimConfig = BASE_CONFIG,
+    n_obs: int = N_OBS,
+    max_attempts: int = 20,
+    sim=simulate,
+    presence: bool = True,
+    presence_attempts: int = PRESENCE_ATTEMPTS,
+    material: str = "three",
+) -> Case:
     """One case, deterministic in ``seed_seq``: draw truth until the base oscillates, draw the
     offset and the effect (redrawn when its simulation does not oscillate), add noise; the whole
     draw is repeated (same stream) when the recording does not phonate (:func:`phonates`) and,
@@ -381,8 +460,11 @@ def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config
         out = None
         for _ in range(3):
             out = apply_effect(label, base, truth, offset, rng, config, n_obs, sim, shapes=full)
-            if (out is not None and oscillates(out[0], config.fps)
-                    and np.sqrt(np.mean((out[0] - base_clean) ** 2)) >= floor):
+            if (
+                out is not None
+                and oscillates(out[0], config.fps)
+                and np.sqrt(np.mean((out[0] - base_clean) ** 2)) >= floor
+            ):
                 break
             out = None
         if out is None:
@@ -394,20 +476,23 @@ def make_case(case_id: str, label: str, seed_seq: np.random.SeedSequence, config
             # not a usable recording (no phonation, or an oscillation lost in the noise): redraw
             # from the same stream; a case that passes consumes exactly the draws it did before
             continue
-        case = Case(case_id, label, eff, truth.as_dict(), offset, sigma, config.fps, clean, base_clean, noisy,
-                    attempts=attempt)
+        case = Case(
+            case_id, label, eff, truth.as_dict(), offset, sigma, config.fps, clean, base_clean, noisy, attempts=attempt
+        )
         if not presence or label == "control":
             return case
-        case.unabsorbed, case.absorbing_fit = unabsorbed_rms(clean, truth, config, bounds=MATERIAL_SETS[material],
-                                                             **(FULL_PRESENCE_SEARCH if full else {}))
+        case.unabsorbed, case.absorbing_fit = unabsorbed_rms(
+            clean, truth, config, bounds=MATERIAL_SETS[material], **(FULL_PRESENCE_SEARCH if full else {})
+        )
         if case.present:
             return case
         n_absent += 1
         if best_absent is None or case.unabsorbed / case.sigma > best_absent.unabsorbed / best_absent.sigma:
             best_absent = case
         if n_absent >= presence_attempts:
-            best_absent.notes.append(f"not present: no draw in {n_absent} left >= {PRESENCE_SIGMA:.2f} sigma "
-                                     f"unabsorbed by the base model")
+            best_absent.notes.append(
+                f"not present: no draw in {n_absent} left >= {PRESENCE_SIGMA:.2f} sigma unabsorbed by the base model"
+            )
             return best_absent
     if best_absent is not None:
         best_absent.notes.append("not present (attempts exhausted)")
@@ -420,8 +505,10 @@ def suite_labels(counts: dict | None = None) -> list[str]:
     avail = forward_extensions_available()
     for k, ok in avail.items():
         if not ok and counts.get(k):
-            print(f"[concealed] skipping {k!r}: SimConfig lacks its fields (forward-model work not present)",
-                  file=sys.stderr)
+            print(
+                f"[concealed] skipping {k!r}: SimConfig lacks its fields (forward-model work not present)",
+                file=sys.stderr,
+            )
             counts[k] = 0
     return [lab for lab in LABELS for _ in range(counts.get(lab, 0))]
 
@@ -430,9 +517,16 @@ def _make_case_star(args):
     return make_case(*args[:5], sim=args[5], presence=args[6], material=args[7])
 
 
-def generate_suite(seed: int, counts: dict | None = None, config: SimConfig = BASE_CONFIG,
-                   n_obs: int = N_OBS, sim=simulate, presence: bool = True, workers: int = 1,
-                   material: str = "three") -> list[Case]:
+def generate_suite(
+    seed: int,
+    counts: dict | None = None,
+    config: SimConfig = BASE_CONFIG,
+    n_obs: int = N_OBS,
+    sim=simulate,
+    presence: bool = True,
+    workers: int = 1,
+    material: str = "three",
+) -> list[Case]:
     """The benchmark suite: each label ``counts[label]`` times (default :data:`SUITE_COUNTS`),
     in an order shuffled by ``seed`` (ids carry no label information). Case i uses the i-th
     child of ``SeedSequence(seed)`` (the last child shuffles the order). ``workers`` > 1 makes
@@ -442,10 +536,10 @@ def generate_suite(seed: int, counts: dict | None = None, config: SimConfig = BA
     labels = suite_labels(counts)
     children = np.random.SeedSequence(seed).spawn(len(labels) + 1)
     order = np.random.default_rng(children[-1]).permutation(len(labels))
-    jobs = [(f"{i:02d}", labels[j], children[i], config, n_obs, sim, presence, material)
-            for i, j in enumerate(order)]
+    jobs = [(f"{i:02d}", labels[j], children[i], config, n_obs, sim, presence, material) for i, j in enumerate(order)]
     if workers > 1:
         from concurrent.futures import ProcessPoolExecutor
+
         with ProcessPoolExecutor(workers) as ex:
             return list(ex.map(_make_case_star, jobs))
     return [_make_case_star(j) for j in jobs]
@@ -459,28 +553,49 @@ def public_fixed(material: str = "three") -> dict:
     return {k: v for k, v in d.items() if k not in MATERIAL_SETS[material]}
 
 
-def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = None,
-                config: SimConfig = BASE_CONFIG, material: str = "three") -> None:
+def write_suite(
+    cases: list[Case],
+    out: str | os.PathLike,
+    seed: int | None = None,
+    config: SimConfig = BASE_CONFIG,
+    material: str = "three",
+) -> None:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     public = {
         "description": "GAW observations (mm^2) for model diagnosis; fit the base model to each case",
-        "model": {"mesh": config.mesh, "dt": config.dt, "duration": config.duration,
-                  "discard": config.discard},
-        "material": material, "estimated": list(MATERIAL_SETS[material]), "fixed": public_fixed(material),
-        "cases": [{"id": c.id, "file": f"case_{c.id}.csv", "fps": c.fps, "n_frames": int(c.gaw.size)}
-                  for c in cases],
+        "model": {"mesh": config.mesh, "dt": config.dt, "duration": config.duration, "discard": config.discard},
+        "material": material,
+        "estimated": list(MATERIAL_SETS[material]),
+        "fixed": public_fixed(material),
+        "cases": [{"id": c.id, "file": f"case_{c.id}.csv", "fps": c.fps, "n_frames": int(c.gaw.size)} for c in cases],
     }
     (out / "cases.json").write_text(json.dumps(public, indent=1))
     for c in cases:
         np.savetxt(out / f"case_{c.id}.csv", c.gaw, fmt="%.6f", header="area_mm2", comments="")
-    hidden = {"seed": seed, "n_obs": int(cases[0].gaw.size) if cases else 0, "cases": {
-        c.id: {"label": c.label, "effect": c.effect, "truth": c.truth, "offset_frames": c.offset_frames,
-               "sigma_mm2": c.sigma, "effect_rms_mm2": c.effect_rms,
-               "effect_loglik": c.effect_loglik, "attempts": c.attempts,
-               "unabsorbed_rms_mm2": c.unabsorbed, "present": c.present, "absorbing_fit": c.absorbing_fit,
-               "notes": c.notes,
-               "clean": c.clean.tolist(), "base_clean": c.base.tolist()} for c in cases}}
+    hidden = {
+        "seed": seed,
+        "n_obs": int(cases[0].gaw.size) if cases else 0,
+        "cases": {
+            c.id: {
+                "label": c.label,
+                "effect": c.effect,
+                "truth": c.truth,
+                "offset_frames": c.offset_frames,
+                "sigma_mm2": c.sigma,
+                "effect_rms_mm2": c.effect_rms,
+                "effect_loglik": c.effect_loglik,
+                "attempts": c.attempts,
+                "unabsorbed_rms_mm2": c.unabsorbed,
+                "present": c.present,
+                "absorbing_fit": c.absorbing_fit,
+                "notes": c.notes,
+                "clean": c.clean.tolist(),
+                "base_clean": c.base.tolist(),
+            }
+            for c in cases
+        },
+    }
     (out / "truth.json").write_text(json.dumps(hidden, indent=1, default=float))
     arrays = {}
     for c in cases:
@@ -493,24 +608,41 @@ def write_suite(cases: list[Case], out: str | os.PathLike, seed: int | None = No
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", help="directory of the suite to write")
-    ap.add_argument("--audit", metavar="SUITE",
-                    help="re-test an existing suite's presence rule with a stronger absorption search "
-                         "(writes SUITE/audit.json; the recordings are unchanged)")
-    ap.add_argument("--audit-method", choices=("both", "continuation", "design"), default="both",
-                    help="absorption search of --audit: window continuation, a dense design, or both "
-                         "(default; the design only where the continuation left the effect present)")
-    ap.add_argument("--certify", metavar="SUITE",
-                    help="after a diagnosis of SUITE: polish the base model from each report's base posterior "
-                         "(--reports) and mark the effects it absorbs (writes REPORTS/absorption.json)")
+    ap.add_argument(
+        "--audit",
+        metavar="SUITE",
+        help="re-test an existing suite's presence rule with a stronger absorption search "
+        "(writes SUITE/audit.json; the recordings are unchanged)",
+    )
+    ap.add_argument(
+        "--audit-method",
+        choices=("both", "continuation", "design"),
+        default="both",
+        help="absorption search of --audit: window continuation, a dense design, or both "
+        "(default; the design only where the continuation left the effect present)",
+    )
+    ap.add_argument(
+        "--certify",
+        metavar="SUITE",
+        help="after a diagnosis of SUITE: polish the base model from each report's base posterior "
+        "(--reports) and mark the effects it absorbs (writes REPORTS/absorption.json)",
+    )
     ap.add_argument("--reports", metavar="DIR", help="the diagnosis reports of --certify (case_XX.json)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes (same cases for any number)")
-    ap.add_argument("--material", choices=tuple(MATERIAL_SETS), default="full",
-                    help="material truth: 'full' draws every combination a GAW determines (the common scale at "
-                         "the anchor) and adds effects outside the catalogue and two-effect cases; 'three' "
-                         "draws E_body, E_cover, p_sub with the rest at Table 3 (the suites of seeds 0-9)")
-    ap.add_argument("--no-presence", action="store_true",
-                    help="skip the presence rule (effects may then be absorbed by the base model)")
+    ap.add_argument(
+        "--material",
+        choices=tuple(MATERIAL_SETS),
+        default="full",
+        help="material truth: 'full' draws every combination a GAW determines (the common scale at "
+        "the anchor) and adds effects outside the catalogue and two-effect cases; 'three' "
+        "draws E_body, E_cover, p_sub with the rest at Table 3 (the suites of seeds 0-9)",
+    )
+    ap.add_argument(
+        "--no-presence",
+        action="store_true",
+        help="skip the presence rule (effects may then be absorbed by the base model)",
+    )
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     if a.audit:
@@ -521,9 +653,11 @@ def main(argv=None) -> int:
             if old[cid]["label"] == "control":
                 continue
             s_ = r["sigma_mm2"]
-            print(f"  {cid} {old[cid]['label']:11s} unabsorbed {r['generated_unabsorbed_rms_mm2'] / s_:5.2f} -> "
-                  f"{r['unabsorbed_rms_mm2'] / s_:5.2f} sigma  {'present' if r['present'] else 'NOT PRESENT'}"
-                  + ("  (changed)" if r["present"] != old[cid]["present"] else ""))
+            print(
+                f"  {cid} {old[cid]['label']:11s} unabsorbed {r['generated_unabsorbed_rms_mm2'] / s_:5.2f} -> "
+                f"{r['unabsorbed_rms_mm2'] / s_:5.2f} sigma  {'present' if r['present'] else 'NOT PRESENT'}"
+                + ("  (changed)" if r["present"] != old[cid]["present"] else "")
+            )
         return 0
     if a.certify:
         if not a.reports:
@@ -533,11 +667,15 @@ def main(argv=None) -> int:
         if not Path(a.reports).is_dir():
             ap.error(f"--reports: {a.reports} is not a directory")
         doc = certify_absorption(a.certify, a.reports, workers=a.workers)
-        print(f"absorption from the reports' base fits in {time.perf_counter() - t0:.1f} s "
-              f"({len(doc['cases'])} effect cases, Nelder-Mead {doc['maxfev']} simulations each)")
+        print(
+            f"absorption from the reports' base fits in {time.perf_counter() - t0:.1f} s "
+            f"({len(doc['cases'])} effect cases, Nelder-Mead {doc['maxfev']} simulations each)"
+        )
         for cid, r in doc["cases"].items():
-            print(f"  {cid} unabsorbed {r['unabsorbed_rms_mm2'] / r['sigma_mm2']:5.2f} sigma  "
-                  + ("ABSORBED" if r["absorbed"] else "not shown absorbed"))
+            print(
+                f"  {cid} unabsorbed {r['unabsorbed_rms_mm2'] / r['sigma_mm2']:5.2f} sigma  "
+                + ("ABSORBED" if r["absorbed"] else "not shown absorbed")
+            )
         return 0
     if not a.out:
         ap.error("--out is required (or --audit SUITE, or --certify SUITE)")
@@ -550,10 +688,12 @@ def main(argv=None) -> int:
     print(f"{len(cases)} cases in {dt:.1f} s -> {a.out}")
     print("labels:", counts)
     for c in sorted(cases, key=lambda c: c.label):
-        print(f"  {c.id} {c.label:11s} effect RMS {c.effect_rms:6.2f} mm^2  sigma {c.sigma:.2f}  "
-              f"loglik gap {c.effect_loglik:8.1f}  peak {c.clean.max():5.1f}  attempts {c.attempts}  "
-              f"unabsorbed {c.unabsorbed:5.2f} mm^2 ({c.unabsorbed / c.sigma:4.2f} sigma)"
-              + ("" if c.label in ("control",) + OUTSIDE else ("  present" if c.present else "  NOT PRESENT")))
+        print(
+            f"  {c.id} {c.label:11s} effect RMS {c.effect_rms:6.2f} mm^2  sigma {c.sigma:.2f}  "
+            f"loglik gap {c.effect_loglik:8.1f}  peak {c.clean.max():5.1f}  attempts {c.attempts}  "
+            f"unabsorbed {c.unabsorbed:5.2f} mm^2 ({c.unabsorbed / c.sigma:4.2f} sigma)"
+            + ("" if c.label in ("control",) + OUTSIDE else ("  present" if c.present else "  NOT PRESENT"))
+        )
     return 0
 
 

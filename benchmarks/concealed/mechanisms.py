@@ -6,6 +6,7 @@ taper, two folds of different layer balance entrained 1:1, a non-uniform epithel
 quarter-wave subglottal tube, exposure averaging, a time stretch, and a scale error quantised to
 pixels. Pure functions of simulated waveforms; the random draws are in ``generate.py``.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,13 +19,24 @@ from vfcore.result import HR_OVERSAMPLE
 from .config import BASE_CONFIG, N_Y
 
 __all__ = [
-    "SUB_C", "PIXEL_MM", "frame_times", "sample_hr", "hr_times", "boxcar_average", "leak_area", "gap_profile",
-    "zipper_area", "asymmetric_area", "epithelium_profile", "subglottal_modes", "quantise_scale",
+    "SUB_C",
+    "PIXEL_MM",
+    "frame_times",
+    "sample_hr",
+    "hr_times",
+    "boxcar_average",
+    "leak_area",
+    "gap_profile",
+    "zipper_area",
+    "asymmetric_area",
+    "epithelium_profile",
+    "subglottal_modes",
+    "quantise_scale",
     "forward_extensions_available",
 ]
 
-SUB_C = 350.0                       # m/s, speed of sound (warm humid air)
-PIXEL_MM = 0.02                     # width quantisation step
+SUB_C = 350.0  # m/s, speed of sound (warm humid air)
+PIXEL_MM = 0.02  # width quantisation step
 
 
 # ------------------------------------------------------------------ sampling helpers
@@ -42,8 +54,10 @@ def sample_hr(y_hr: np.ndarray, t_hr: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Linear interpolation of a high-rate signal at ``t``; ``t`` must lie inside ``t_hr``."""
     t = np.asarray(t, dtype=float)
     if t.min() < t_hr[0] - 1e-12 or t.max() > t_hr[-1] + 1e-12:
-        raise ValueError(f"sample times [{t.min():.4f}, {t.max():.4f}] s outside the simulated "
-                         f"window [{t_hr[0]:.4f}, {t_hr[-1]:.4f}] s")
+        raise ValueError(
+            f"sample times [{t.min():.4f}, {t.max():.4f}] s outside the simulated "
+            f"window [{t_hr[0]:.4f}, {t_hr[-1]:.4f}] s"
+        )
     return np.interp(t, t_hr, y_hr)
 
 
@@ -76,8 +90,9 @@ def _slices(length_mm: float, n_y: int = N_Y):
 
 
 # ------------------------------------------------------------------ leak
-def gap_profile(chink_area_mm2: float, start_frac: float, length_mm: float, n_y: int = N_Y,
-                power: float = 1.0) -> np.ndarray:
+def gap_profile(
+    chink_area_mm2: float, start_frac: float, length_mm: float, n_y: int = N_Y, power: float = 1.0
+) -> np.ndarray:
     """Posterior chink: full gap width g(y), mm, on ``n_y`` slices (y = 0 anterior, L posterior):
     zero anterior of ``start_frac * L``, rising as ``s^power`` (s from 0 there to 1 at the posterior
     end; 1 = a linear wedge, < 1 a blunt gap, > 1 a narrow slit that opens at the end), scaled so
@@ -89,8 +104,9 @@ def gap_profile(chink_area_mm2: float, start_frac: float, length_mm: float, n_y:
     return shape * chink_area_mm2 / (shape.sum() * dy)
 
 
-def leak_area(width_mm: np.ndarray, gap_mm: np.ndarray, env: np.ndarray | None = None,
-              length_mm: float = BASE_CONFIG.length_mm) -> np.ndarray:
+def leak_area(
+    width_mm: np.ndarray, gap_mm: np.ndarray, env: np.ndarray | None = None, length_mm: float = BASE_CONFIG.length_mm
+) -> np.ndarray:
     """Area of a glottis whose membranous width ``W(t) env(y)`` cannot close below the chink
     ``g(y)``: ``sum_y max(W(t) env(y), g(y)) dy`` (mm^2)."""
     gap_mm = np.asarray(gap_mm, dtype=float)
@@ -102,9 +118,17 @@ def leak_area(width_mm: np.ndarray, gap_mm: np.ndarray, env: np.ndarray | None =
 
 
 # ------------------------------------------------------------------ zipper
-def zipper_area(width_hr: np.ndarray, t_hr: np.ndarray, t_eval: np.ndarray, lag_s: float, power: float,
-                env_q: float, length_mm: float = BASE_CONFIG.length_mm, n_y: int = N_Y,
-                normalise: bool = True) -> np.ndarray:
+def zipper_area(
+    width_hr: np.ndarray,
+    t_hr: np.ndarray,
+    t_eval: np.ndarray,
+    lag_s: float,
+    power: float,
+    env_q: float,
+    length_mm: float = BASE_CONFIG.length_mm,
+    n_y: int = N_Y,
+    normalise: bool = True,
+) -> np.ndarray:
     """A-P stack: ``width(y, t) = env(y) W(t - tau(y))`` with ``tau(y) = lag_s (y/L)^power`` and
     ``env(y) = sin(pi y/L)^env_q`` (normalised to mean 1 when ``normalise``; env_q = 0 -> 1);
     area ``sum_y max(width, 0) dy`` at the times ``t_eval``."""
@@ -158,34 +182,40 @@ def asymmetric_area(left, right, t_eval: np.ndarray, lag_cycles: float, t_centre
 def forward_extensions_available() -> dict[str, bool]:
     """Whether this vfcore's SimConfig has the epithelium / subglottal fields (the forward-model extensions)."""
     names = {f.name for f in dataclasses.fields(SimConfig)}
-    return {"epithelium": {"epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile"} <= names,
-            "subglottal": "subglottal_modes" in names}
+    return {
+        "epithelium": {"epithelium_E_kpa", "epithelium_h_mm", "epithelium_profile"} <= names,
+        "subglottal": "subglottal_modes" in names,
+    }
 
 
 def epithelium_profile(medial_ratio: float, width_mm: float, mesh: str = BASE_CONFIG.mesh) -> tuple:
     """Per free-surface edge stiffness multipliers, 1 on the inferior/superior surfaces rising to
     ``medial_ratio`` on the medial surface (Gaussian in arc length about the most medial node)."""
     from vfcore.mesh import load_mesh
+
     m = load_mesh(mesh)
-    p = np.asarray(m.points)[np.asarray(m.surface)] * 1e3        # mm, (x, z)
+    p = np.asarray(m.points)[np.asarray(m.surface)] * 1e3  # mm, (x, z)
     seg = np.hypot(*np.diff(p, axis=0).T)
     s_node = np.concatenate([[0.0], np.cumsum(seg)])
     s_mid = 0.5 * (s_node[1:] + s_node[:-1])
     s_med = s_node[int(np.argmax(p[:, 0]))]
-    prof = 1.0 + (medial_ratio - 1.0) * np.exp(-((s_mid - s_med) / width_mm) ** 2)
+    prof = 1.0 + (medial_ratio - 1.0) * np.exp(-(((s_mid - s_med) / width_mm) ** 2))
     return tuple(float(x) for x in prof)
 
 
 def subglottal_modes(tube_m: float, z1: float, zeta1: float, n_modes: int = 3, c: float = SUB_C) -> tuple:
     """Modes of a uniform tube closed at the lung end and open at the glottis (quarter-wave):
     ``f_k = (2k-1) c / (4 L)``, ``Z_k = Z1 / (2k-1)``, ``zeta_k = zeta1 (1 + 0.5 (k-1))``."""
-    return tuple(((2 * k - 1) * c / (4.0 * tube_m), min(1.0, zeta1 * (1 + 0.5 * (k - 1))), z1 / (2 * k - 1))
-                 for k in range(1, n_modes + 1))
+    return tuple(
+        ((2 * k - 1) * c / (4.0 * tube_m), min(1.0, zeta1 * (1 + 0.5 * (k - 1))), z1 / (2 * k - 1))
+        for k in range(1, n_modes + 1)
+    )
 
 
 # ------------------------------------------------------------------ camera
-def quantise_scale(area_mm2: np.ndarray, scale: float, length_mm: float = BASE_CONFIG.length_mm,
-                   pixel_mm: float = PIXEL_MM) -> np.ndarray:
+def quantise_scale(
+    area_mm2: np.ndarray, scale: float, length_mm: float = BASE_CONFIG.length_mm, pixel_mm: float = PIXEL_MM
+) -> np.ndarray:
     """Scale error ``s`` on the area, then the width (area / L) quantised to ``pixel_mm``."""
     w = scale * np.asarray(area_mm2, dtype=float) / length_mm
     if pixel_mm > 0:

@@ -15,6 +15,7 @@ cover the truth's values.
 
     python benchmarks/studies/bench_anchor.py --particles 100 --workers 2
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,9 +36,11 @@ from vfcore.config import SimConfig  # noqa: E402
 from vfcore.inference import Prior, Problem, evaluate, identify, make_twin, smc  # noqa: E402
 from vfcore.params import TABLE3  # noqa: E402
 
-PRODUCTS = (("contact_pressure_in_contact", "contact pressure in contact", "Pa", 1.0),
-            ("contact_impulse", "contact impulse per cycle", "mN s/m", 1e3),
-            ("mean_flow", "flow rate Q", "mL/s", 1e6))
+PRODUCTS = (
+    ("contact_pressure_in_contact", "contact pressure in contact", "Pa", 1.0),
+    ("contact_impulse", "contact impulse per cycle", "mN s/m", 1e3),
+    ("mean_flow", "flow rate Q", "mL/s", 1e6),
+)
 
 
 def _interval(x: np.ndarray, level: float = 0.9) -> tuple[float, float, float]:
@@ -59,8 +62,7 @@ def main(argv=None) -> int:
     cfg = SimConfig(mesh=a.mesh, dt=a.dt, duration=0.55)
     six = Prior.default(fixed={"x0": TABLE3.x0})
     truth = None if a.truth_seed is not None else np.array([getattr(TABLE3, n) for n in six.names])
-    tw = make_twin(six, cfg, seed=a.truth_seed if a.truth_seed is not None else a.seed, sigma_e=a.sigma_e,
-                   truth=truth)
+    tw = make_twin(six, cfg, seed=a.truth_seed if a.truth_seed is not None else a.seed, sigma_e=a.sigma_e, truth=truth)
     t_true = dict(zip(six.names, tw.truth))
     ev_true = evaluate(tw.truth[None, :], tw.problem)
     rng = np.random.default_rng(a.seed)
@@ -68,21 +70,34 @@ def main(argv=None) -> int:
     for rel in (0.05, 0.01):
         sd = rel * t_true["p_sub"]
         m = t_true["p_sub"] + sd * rng.standard_normal()
-        runs.append((f"p_sub measured +-{rel:.0%} ({m:.0f} +- {sd:.0f} Pa)",
-                     Problem.from_dict({**tw.problem.to_dict(), "measurements": {"p_sub": [m, sd]}})))
+        runs.append(
+            (
+                f"p_sub measured +-{rel:.0%} ({m:.0f} +- {sd:.0f} Pa)",
+                Problem.from_dict({**tw.problem.to_dict(), "measurements": {"p_sub": [m, sd]}}),
+            )
+        )
     five = Prior.default(fixed={"x0": TABLE3.x0, "rho": t_true["rho"]})
-    runs.append((f"rho fixed at the truth ({t_true['rho']:.0f})",
-                 Problem.from_dict({**tw.problem.to_dict(), "prior": five.to_dict()})))
+    runs.append(
+        (
+            f"rho fixed at the truth ({t_true['rho']:.0f})",
+            Problem.from_dict({**tw.problem.to_dict(), "prior": five.to_dict()}),
+        )
+    )
 
     pool = None
     if a.workers > 1:
         import multiprocessing as mp
+
         pool = mp.get_context("spawn").Pool(a.workers)
     mapper = pool.imap if pool is not None else map
-    print(f"twin: {', '.join(f'{n} {v:.4g}' for n, v in t_true.items())}; mesh {a.mesh}, dt {a.dt:g} s, "
-          f"sigma_e {a.sigma_e} mm^2, {a.particles} particles, {a.workers} workers")
-    print("truth's products: " + "; ".join(f"{label} {getattr(ev_true, key)[0] * f:.4g} {u}"
-                                           for key, label, u, f in PRODUCTS))
+    print(
+        f"twin: {', '.join(f'{n} {v:.4g}' for n, v in t_true.items())}; mesh {a.mesh}, dt {a.dt:g} s, "
+        f"sigma_e {a.sigma_e} mm^2, {a.particles} particles, {a.workers} workers"
+    )
+    print(
+        "truth's products: "
+        + "; ".join(f"{label} {getattr(ev_true, key)[0] * f:.4g} {u}" for key, label, u, f in PRODUCTS)
+    )
     try:
         for name, prob in runs:
             t0 = time.perf_counter()
@@ -92,23 +107,32 @@ def main(argv=None) -> int:
             wall = time.perf_counter() - t0
             idt = identify(post, prob.prior, prob.measurements)
             s = idt.scale or {}
-            print(f"\n## anchor: {name}\n{post.n_simulations} simulations, {wall:.0f} s; "
-                  f"best particle log-likelihood {np.max(post.predictive.loglik):.1f} "
-                  f"(truth {ev_true.loglik[0]:.1f})")
+            print(
+                f"\n## anchor: {name}\n{post.n_simulations} simulations, {wall:.0f} s; "
+                f"best particle log-likelihood {np.max(post.predictive.loglik):.1f} "
+                f"(truth {ev_true.loglik[0]:.1f})"
+            )
             log_c = s.get("log_c_sd")
-            print(f"sd of the common factor (log): {log_c:.3g}" if log_c is not None else
-                  "no common scale left (one of the six fixed)")
+            print(
+                f"sd of the common factor (log): {log_c:.3g}"
+                if log_c is not None
+                else "no common scale left (one of the six fixed)"
+            )
             lead = idt.principal[0] if idt.principal else None
             if lead:
                 load = ", ".join(f"{n} {v:+.2f}" for n, v in lead["loadings"].items() if abs(v) >= 0.2)
-                print(f"least narrowed direction: sd {lead['sd']:.3g} / prior {lead['prior_sd']:.3g} "
-                      f"(ratio {lead['ratio']:.2f}): {load}")
+                print(
+                    f"least narrowed direction: sd {lead['sd']:.3g} / prior {lead['prior_sd']:.3g} "
+                    f"(ratio {lead['ratio']:.2f}): {load}"
+                )
             for key, label, unit, f in PRODUCTS:
                 x = getattr(post.predictive, key) * f
                 med, lo, hi = _interval(x[np.isfinite(x)])
                 tv = getattr(ev_true, key)[0] * f
-                print(f"{label:<28} {med:9.4g} {unit:<7} 90%: {lo:.4g} .. {hi:.4g}  (width {100 * (hi - lo) / med:5.1f} % "
-                      f"of the median; truth {tv:.4g} {'inside' if lo <= tv <= hi else 'OUTSIDE'})")
+                print(
+                    f"{label:<28} {med:9.4g} {unit:<7} 90%: {lo:.4g} .. {hi:.4g}  (width {100 * (hi - lo) / med:5.1f} % "
+                    f"of the median; truth {tv:.4g} {'inside' if lo <= tv <= hi else 'OUTSIDE'})"
+                )
     finally:
         if pool is not None:
             pool.close()

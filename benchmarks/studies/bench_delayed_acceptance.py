@@ -12,6 +12,7 @@ plain seed 0 in its posterior sds and of a posterior sd (relative), and the trut
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/studies/bench_delayed_acceptance.py --twins 3 --workers 2 --particles 100
 """
+
 from __future__ import annotations
 
 import argparse
@@ -82,10 +83,16 @@ def main(argv=None) -> int:
             for label, (post, t) in res.items():
                 m, s = combination_stats(post, w)
                 z = np.max(np.abs((m - c_true) / s))
-                extra = "— | —" if label == "plain" else \
-                    f"{np.max(np.abs(m - m0) / s0):.2f} | {np.max(np.abs(s / s0 - 1.0)):.2f}"
-                print(f"| {k} | {label} | {post.n_simulations} | {post.info.get('n_screened', 0)} | {t:.0f} | "
-                      f"{extra} | {z:.2f} |", flush=True)
+                extra = (
+                    "— | —"
+                    if label == "plain"
+                    else f"{np.max(np.abs(m - m0) / s0):.2f} | {np.max(np.abs(s / s0 - 1.0)):.2f}"
+                )
+                print(
+                    f"| {k} | {label} | {post.n_simulations} | {post.info.get('n_screened', 0)} | {t:.0f} | "
+                    f"{extra} | {z:.2f} |",
+                    flush=True,
+                )
     return 0
 
 

@@ -15,6 +15,7 @@ and ``cases.json``, never the truth. The suite of seed 8 (regenerated with
     python benchmarks/studies/bench_halving.py --cases runs/concealedS8 \
         --runs 00:frame_rate,06:leak,05:base [--seed 1] [--n-keep 4]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,7 +49,7 @@ def main(argv=None) -> int:
         if cid not in by_id:
             raise SystemExit(f"--runs: no case {cid!r} in {cases_dir / 'cases.json'}")
         if model != "base":
-            get(model)                                   # raises naming the unknown entry
+            get(model)  # raises naming the unknown entry
         runs.append((cid, None if model == "base" else model))
     extra = {} if a.n_keep is None else {"n_keep": a.n_keep}
     print(f"search settings: {dict(CONTINUATION, **extra)}; seed {a.seed}")
@@ -60,8 +61,11 @@ def main(argv=None) -> int:
             r = continuation_search(pb, ext, seed=a.seed, halving=halving, **extra)
             wall = time.perf_counter() - t0
             starts = ", ".join(f"{v:.1f}" for v in r.start_logliks) if not halving else ""
-            print(f"{cid:<5}{ext or 'base':<13}{'on' if halving else 'off':<9}{r.loglik:11.1f}{r.n_simulations:7d}"
-                  f"{wall:8.0f}  {starts}", flush=True)
+            print(
+                f"{cid:<5}{ext or 'base':<13}{'on' if halving else 'off':<9}{r.loglik:11.1f}{r.n_simulations:7d}"
+                f"{wall:8.0f}  {starts}",
+                flush=True,
+            )
     return 0
 
 

@@ -16,6 +16,7 @@ the runs' final particles, each run's particles sharing its weight equally:
 
     python benchmarks/studies/bench_independent_runs.py --ids 0,5,13 --runs 4 --workers 2      # ~30 min on 2 cores
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,8 +50,9 @@ def pooled_coverage(draws: list[np.ndarray], run_w: np.ndarray, truth: np.ndarra
     """Combinations (columns of each run's ``draws``) whose pooled 90 % interval covers ``truth``."""
     x = np.concatenate(draws)
     w = np.concatenate([np.full(len(d), wk / len(d)) for d, wk in zip(draws, run_w)])
-    return sum(int(lo <= t <= hi) for lo, hi, t in
-               (weighted_interval(x[:, j], w) + (truth[j],) for j in range(truth.size)))
+    return sum(
+        int(lo <= t <= hi) for lo, hi, t in (weighted_interval(x[:, j], w) + (truth[j],) for j in range(truth.size))
+    )
 
 
 def main(argv=None) -> int:
@@ -73,6 +75,7 @@ def main(argv=None) -> int:
     pool = None
     if a.workers > 1:
         import multiprocessing as mp
+
         pool = mp.get_context("spawn").Pool(a.workers)
     mapper = pool.imap if pool is not None else map
     print("| twin | run | log Z | best loglik (truth) | combinations covered | combination z | sims | wall (s) |")
@@ -88,28 +91,36 @@ def main(argv=None) -> int:
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    post = smc(tw.problem, n_particles=a.particles, seed=1000 + i + SEED_STRIDE * k, map=mapper,
-                               chunk_size=32)
+                    post = smc(
+                        tw.problem, n_particles=a.particles, seed=1000 + i + SEED_STRIDE * k, map=mapper, chunk_size=32
+                    )
                 lc = np.log(post.samples) @ W.T
                 z = (lc.mean(0) - truth) / lc.std(0)
                 cov = pooled_coverage([lc], np.ones(1), truth)
                 lz.append(post.log_evidence)
                 draws.append(lc)
-                print(f"| {i} | {k} | {post.log_evidence:.1f} | {np.max(post.predictive.loglik):.1f} ({ll_truth:.1f}) | "
-                      f"{cov}/6 | {', '.join(f'{v:.1f}' for v in z)} | {post.n_simulations} | "
-                      f"{time.perf_counter() - t0:.0f} |", flush=True)
+                print(
+                    f"| {i} | {k} | {post.log_evidence:.1f} | {np.max(post.predictive.loglik):.1f} ({ll_truth:.1f}) | "
+                    f"{cov}/6 | {', '.join(f'{v:.1f}' for v in z)} | {post.n_simulations} | "
+                    f"{time.perf_counter() - t0:.0f} |",
+                    flush=True,
+                )
             lz = np.array(lz)
             ev = np.exp(lz - lz.max())
             kept = (lz >= lz.max() - a.gap).astype(float)
-            row = {name: pooled_coverage(draws, w / w.sum(), truth)
-                   for name, w in (("evidence", ev), ("equal", np.ones(a.runs)), ("kept", kept))}
+            row = {
+                name: pooled_coverage(draws, w / w.sum(), truth)
+                for name, w in (("evidence", ev), ("equal", np.ones(a.runs)), ("kept", kept))
+            }
             row["first run"] = pooled_coverage(draws[:1], np.ones(1), truth)
             summary.append((i, row, int(kept.sum())))
     finally:
         if pool is not None:
             pool.close()
             pool.join()
-    print(f"\n| twin | first run alone | pooled by evidence | pooled equally | kept (within {a.gap:g} nats), runs kept |")
+    print(
+        f"\n| twin | first run alone | pooled by evidence | pooled equally | kept (within {a.gap:g} nats), runs kept |"
+    )
     print("|---|---|---|---|---|")
     for i, row, nk in summary:
         print(f"| {i} | {row['first run']}/6 | {row['evidence']}/6 | {row['equal']}/6 | {row['kept']}/6, {nk} |")

@@ -17,6 +17,7 @@ Prints ms per simulation for the simulation and both scorings (the fastest repea
 machine shows less), and checks that the two scorings give the same bytes (log-likelihoods, conditional
 means and sds, predictions). One process, one core.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", required=True, help="a suite's folder (benchmarks/concealed/generate.py)")
     ap.add_argument("--id", required=True, help="the case's id, e.g. 19")
-    ap.add_argument("--entries", default="", help="comma-separated entries (default: every one with integrated parameters)")
+    ap.add_argument(
+        "--entries", default="", help="comma-separated entries (default: every one with integrated parameters)"
+    )
     ap.add_argument("--rows", type=int, default=12, help="simulations per entry")
     ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args(argv)
@@ -65,7 +68,7 @@ def main(argv=None) -> int:
         ev = ExtendedEvaluator(pb, name, integrate=True)
         _, base, phis = ev._draws(ev.prior.sample(a.rows, np.random.default_rng(0)))
         pairs = bool(ev.integrated)
-        ev._simulate(base[:2], phis[:2], pairs=pairs)            # compiled kernels
+        ev._simulate(base[:2], phis[:2], pairs=pairs)  # compiled kernels
         t0 = time.perf_counter()
         res = ev._simulate(base, phis, pairs=pairs)
         t_sim = time.perf_counter() - t0
@@ -82,10 +85,13 @@ def main(argv=None) -> int:
                     scoring.aligned_logliks = batched
         x, y = outs["batched"], outs["one at a time"]
         same = all(np.array_equal(getattr(x, k), getattr(y, k), equal_nan=True) for k in ("loglik", "extra", "gaw"))
-        print(f"{name:12s} simulate {1e3 * t_sim / a.rows:6.1f} ms, score one at a time "
-              f"{1e3 * best['one at a time'] / a.rows:6.1f} ms, batched {1e3 * best['batched'] / a.rows:6.1f} ms "
-              f"per simulation ({best['one at a time'] / best['batched']:.2f}x); {int(x.ok.sum())}/{a.rows} scored; "
-              f"{'the same bytes' if same else 'DIFFERENT'}", flush=True)
+        print(
+            f"{name:12s} simulate {1e3 * t_sim / a.rows:6.1f} ms, score one at a time "
+            f"{1e3 * best['one at a time'] / a.rows:6.1f} ms, batched {1e3 * best['batched'] / a.rows:6.1f} ms "
+            f"per simulation ({best['one at a time'] / best['batched']:.2f}x); {int(x.ok.sum())}/{a.rows} scored; "
+            f"{'the same bytes' if same else 'DIFFERENT'}",
+            flush=True,
+        )
     return 0
 
 

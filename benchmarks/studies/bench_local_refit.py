@@ -12,6 +12,7 @@ constant), the largest log-distance from the fit to the truth, simulations and w
 
     OMP_NUM_THREADS=1 python benchmarks/bench_local_refit.py --twins 0,1,2,9,5,12
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,6 +40,7 @@ def main(argv=None) -> int:
     from vfcore.config import SimConfig
     from vfcore.inference import Prior, evaluate, make_twin
     from vfcore.params import TABLE3
+
     cfg = SimConfig(mesh="coarse", dt=5e-5, duration=0.55, contact=a.contact, flow=a.flow)
     prior = Prior.default(fixed={"x0": TABLE3.as_dict()["x0"]})
     print("| twin | half RSS: start | fit | truth | max abs log(fit / truth) | simulations | wall (s) |")
@@ -62,9 +64,12 @@ def main(argv=None) -> int:
             fit = least_squares(residual, z0, method="trf", diff_step=1e-3, max_nfev=a.max_nfev)
             wall = time.perf_counter() - t
             sims = n_sim[0]
-            half = [0.5 * float(np.sum(r ** 2)) for r in (residual(z0), fit.fun, residual(zt))]
-        print(f"| {i} | {half[0]:.1f} | {half[1]:.1f} | {half[2]:.1f} | {np.max(np.abs(fit.x - zt)):.3f} | {sims} | "
-              f"{wall:.0f} |", flush=True)
+            half = [0.5 * float(np.sum(r**2)) for r in (residual(z0), fit.fun, residual(zt))]
+        print(
+            f"| {i} | {half[0]:.1f} | {half[1]:.1f} | {half[2]:.1f} | {np.max(np.abs(fit.x - zt)):.3f} | {sims} | "
+            f"{wall:.0f} |",
+            flush=True,
+        )
     return 0
 
 

@@ -10,6 +10,7 @@ worker, as ``bench_diagnose.py`` runs them: first one fit after another (``fit_e
 samples and log-evidence are the same bytes both ways. The case's problem is the suite's base problem
 (``benchmarks.suite.case_problem``), without the diagnosis's material-first step.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
     try:
         mapper = BalancedMap(pool.imap, a.workers)
         rng = np.random.default_rng(0)
-        for n in names:                            # compile every kernel in every worker first
+        for n in names:  # compile every kernel in every worker first
             ev = ExtendedEvaluator(pb, n, integrate=o.integrate)
             list(mapper(ev, [ev.prior.sample(2 * a.workers, rng)]))
         with warnings.catch_warnings():
@@ -67,26 +68,41 @@ def main(argv=None) -> int:
             alone = []
             for n, k, s in jobs:
                 t1 = time.perf_counter()
-                alone.append(fit_extended(pb, n, n_particles=k, seed=s, map=mapper, chunk_size=o.chunk_size,
-                                          integrate=o.integrate))
-                print(f"  alone: {n:<13} {int(alone[-1].n_simulations):>6} simulations {time.perf_counter() - t1:7.1f} s",
-                      flush=True)
+                alone.append(
+                    fit_extended(
+                        pb, n, n_particles=k, seed=s, map=mapper, chunk_size=o.chunk_size, integrate=o.integrate
+                    )
+                )
+                print(
+                    f"  alone: {n:<13} {int(alone[-1].n_simulations):>6} simulations {time.perf_counter() - t1:7.1f} s",
+                    flush=True,
+                )
             t_alone = time.perf_counter() - t0
             t0 = time.perf_counter()
             ends: dict[int, float] = {}
-            together = fit_extended_many(pb, jobs, map=mapper, chunk_size=o.chunk_size, integrate=o.integrate,
-                                         on_done=lambda i, _: ends.setdefault(i, time.perf_counter() - t0))
+            together = fit_extended_many(
+                pb,
+                jobs,
+                map=mapper,
+                chunk_size=o.chunk_size,
+                integrate=o.integrate,
+                on_done=lambda i, _: ends.setdefault(i, time.perf_counter() - t0),
+            )
             t_together = time.perf_counter() - t0
     finally:
         pool.close()
         pool.join()
-    same = all(x.samples.tobytes() == y.samples.tobytes() and float(x.log_evidence) == float(y.log_evidence)
-               for x, y in zip(alone, together))
+    same = all(
+        x.samples.tobytes() == y.samples.tobytes() and float(x.log_evidence) == float(y.log_evidence)
+        for x, y in zip(alone, together)
+    )
     sims = sum(int(p.n_simulations) for p in alone)
     print(f"case {a.id}: {len(names)} entries, {o.refit_n} particles, {a.workers} workers, {sims} simulations")
     print(f"  one after another: {t_alone:8.1f} s ({1e3 * t_alone / sims:.1f} ms a simulation)")
-    print(f"  together:          {t_together:8.1f} s ({1e3 * t_together / sims:.1f} ms a simulation); "
-          f"the last fits ended at " + ", ".join(f"{names[i]} {ends[i]:.0f} s" for i in sorted(ends, key=ends.get)[-3:]))
+    print(
+        f"  together:          {t_together:8.1f} s ({1e3 * t_together / sims:.1f} ms a simulation); "
+        f"the last fits ended at " + ", ".join(f"{names[i]} {ends[i]:.0f} s" for i in sorted(ends, key=ends.get)[-3:])
+    )
     print(f"  speed-up {t_alone / t_together:.2f}x; every fit the same bytes both ways: {same}")
     return 0 if same else 1
 

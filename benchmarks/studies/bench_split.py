@@ -8,6 +8,7 @@ service and the command line cut without a balanced map) and in equal parts, one
 
     python benchmarks/studies/bench_split.py [--rows 24,48] [--workers 2] [--reps 5]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,8 +37,7 @@ def problem() -> Problem:
     cfg = SimConfig(mesh="coarse", dt=1e-4)
     y = simulate(TABLE3, cfg).gaw
     prior = Prior({"E_body": (9.0, 15.0), "E_cover": (250.0, 950.0), "p_sub": (400.0, 1800.0)})
-    return Problem(y + np.random.default_rng(0).normal(0.0, 0.5, y.size), cfg.fps, prior, sigma_e=1.0,
-                   config=cfg)
+    return Problem(y + np.random.default_rng(0).normal(0.0, 0.5, y.size), cfg.fps, prior, sigma_e=1.0, config=cfg)
 
 
 def main() -> None:
@@ -53,13 +53,15 @@ def main() -> None:
     centre = np.array([TABLE3.E_body, TABLE3.E_cover, TABLE3.p_sub])
     width = pb.prior.width
     with ProcessPoolExecutor(a.workers) as pool:
-        map_evaluate(ev, np.tile(centre, (a.workers, 1)), map=pool.map, chunk_size=1)      # compile in each
+        map_evaluate(ev, np.tile(centre, (a.workers, 1)), map=pool.map, chunk_size=1)  # compile in each
         print(f"{a.workers} workers; ms per generation (median of {a.reps}), same log-likelihoods in every split")
         for n in (int(x) for x in a.rows.split(",")):
             rows = centre + (rng.random((n, 3)) - 0.5) * 0.1 * width
-            splits = {f"chunks of {-(-40 // a.workers)}": (pool.map, -(-40 // a.workers)),
-                      f"chunks of {-(-40 // (2 * a.workers))}": (pool.map, -(-40 // (2 * a.workers))),
-                      "equal parts (BalancedMap)": (BalancedMap(pool.map, a.workers), 40)}
+            splits = {
+                f"chunks of {-(-40 // a.workers)}": (pool.map, -(-40 // a.workers)),
+                f"chunks of {-(-40 // (2 * a.workers))}": (pool.map, -(-40 // (2 * a.workers))),
+                "equal parts (BalancedMap)": (BalancedMap(pool.map, a.workers), 40),
+            }
             times = {k: [] for k in splits}
             ref = None
             for _ in range(a.reps):

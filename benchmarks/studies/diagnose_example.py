@@ -12,6 +12,7 @@ four candidate entries, no continuation search); the verdicts, residuals and cos
 
     python benchmarks/studies/diagnose_example.py [--workers 2]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,14 +31,22 @@ FPS = 2000.0
 TRUTH = {"eta": 1.5, "E_lig": 2.6, "E_cover": 520.0}
 LEAK_MM2 = 1.2
 NOISE = 0.3
-SETTINGS = dict(n_particles=16, refit_particles=None, seed=1, candidates=["leak", "scale", "frame_rate", "sep_ratio"],
-                base_runs=1, continuation=False, continuation_entries=None)
+SETTINGS = dict(
+    n_particles=16,
+    refit_particles=None,
+    seed=1,
+    candidates=["leak", "scale", "frame_rate", "sep_ratio"],
+    base_runs=1,
+    continuation=False,
+    continuation_entries=None,
+)
 
 
 def recording():
     from vfcore import SimConfig, simulate
     from vfcore.params import TABLE3, Params
     from vfcore.result import HR_OVERSAMPLE
+
     cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
     r = simulate(Params(**{**TABLE3.as_dict(), **TRUTH}), cfg)
     clean = np.asarray(r.gaw_hr[37::HR_OVERSAMPLE][:200])
@@ -48,6 +57,7 @@ def problem(y, cfg):
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
     from vfcore.params import PARAM_NAMES, TABLE3
+
     fixed = {n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_body", "E_cover", "p_sub")}
     return Problem(y, FPS, Prior.default(fixed=fixed), config=cfg)
 
@@ -55,16 +65,22 @@ def problem(y, cfg):
 def show(label: str, rep, wall: float) -> None:
     d = rep.to_dict()
     print(f"{label}: {rep.verdict}")
-    print(f"  base residual RMS {d['base']['residual_rms']:.3f} mm^2 (noise estimate "
-          f"{d['base']['predictive_noise_sd']:.3f}); {rep.n_simulations} simulations, {wall:.0f} s")
+    print(
+        f"  base residual RMS {d['base']['residual_rms']:.3f} mm^2 (noise estimate "
+        f"{d['base']['predictive_noise_sd']:.3f}); {rep.n_simulations} simulations, {wall:.0f} s"
+    )
     for r in d["ranking"]:
-        print(f"  {r['name']:10s} dlogZ {r['delta']:10.1f} +- {r['delta_se']:6.1f}  RMS {100 * r['rms_gain']:5.1f} % lower"
-              + ("  found" if r["found"] else f"  [{r['reason'].split(':')[0]}]"))
+        print(
+            f"  {r['name']:10s} dlogZ {r['delta']:10.1f} +- {r['delta_se']:6.1f}  RMS {100 * r['rms_gain']:5.1f} % lower"
+            + ("  found" if r["found"] else f"  [{r['reason'].split(':')[0]}]")
+        )
     if d.get("material"):
         m = d["material"]
-        print(f"  material: freed {m['freed']}, dlogZ {m['delta']:.1f} +- {m['delta_se']:.1f}, RMS "
-              f"{100 * m['rms_gain']:.0f} % lower, found={m['found']}; freed posterior "
-              + ", ".join(f"{k} {v['mean']:.3g} +- {v['sd']:.2g}" for k, v in m["free"]["params"].items()))
+        print(
+            f"  material: freed {m['freed']}, dlogZ {m['delta']:.1f} +- {m['delta_se']:.1f}, RMS "
+            f"{100 * m['rms_gain']:.0f} % lower, found={m['found']}; freed posterior "
+            + ", ".join(f"{k} {v['mean']:.3g} +- {v['sd']:.2g}" for k, v in m["free"]["params"].items())
+        )
     by = (d.get("cost") or {}).get("by_stage") or {}
     print("  time by stage: " + ", ".join(f"{k} {v['wall_s']:.0f} s" for k, v in by.items()))
 
@@ -76,6 +92,7 @@ def main(argv=None) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
     from vfcore.diagnose.pipeline import diagnose
+
     y, cfg = recording()
     pb = problem(y, cfg)
     print(f"truth: {TRUTH} (Table 3 elsewhere), leak {LEAK_MM2} mm^2, noise {NOISE} mm^2; estimated {pb.prior.names}")

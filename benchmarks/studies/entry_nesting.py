@@ -9,6 +9,7 @@ The last column moves each null 1 % of its box inwards: how far below the base t
 
 Reads only the public ``cases.json``, the recording and the report; prints one line per entry.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,29 +44,33 @@ def main() -> None:
     rep = json.loads(Path(a.report).read_text())
     mean = np.array([rep["base"]["params"][n]["mean"] for n in pb.prior.names])
     base = float(model_evaluator(pb, None)(mean[None]).loglik[0])
-    print(f"case {a.id}: base at its posterior mean {', '.join(f'{n}={v:.4g}' for n, v in zip(pb.prior.names, mean))}: "
-          f"log-likelihood {base:.1f}")
-    print(f"{'entry':<14} {'own parameters (null, or the best bound)':<48} {'log-lik':>10} {'below base':>11} "
-          f"{'1 % inside':>11}")
+    print(
+        f"case {a.id}: base at its posterior mean {', '.join(f'{n}={v:.4g}' for n, v in zip(pb.prior.names, mean))}: "
+        f"log-likelihood {base:.1f}"
+    )
+    print(
+        f"{'entry':<14} {'own parameters (null, or the best bound)':<48} {'log-lik':>10} {'below base':>11} "
+        f"{'1 % inside':>11}"
+    )
     for name, ext in CATALOGUE.items():
         prior = model_prior(pb, name, integrate=False)
-        own = prior.names[len(pb.prior.names):]
+        own = prior.names[len(pb.prior.names) :]
         by_name = {p.name: p for p in ext.params}
-        choices = [[by_name[n].null] if by_name[n].null is not None else [by_name[n].lo, by_name[n].hi]
-                   for n in own]
+        choices = [[by_name[n].null] if by_name[n].null is not None else [by_name[n].lo, by_name[n].hi] for n in own]
         ev = model_evaluator(pb, name, integrate=False)
         rows = np.array([np.concatenate([mean, c]) for c in itertools.product(*choices)])
         ll = np.asarray(ev(rows).loglik, dtype=float)
         j = int(np.argmax(ll))
-        where = ", ".join(f"{n}={v:g}" for n, v in zip(own, rows[j, len(mean):]))
+        where = ", ".join(f"{n}={v:g}" for n, v in zip(own, rows[j, len(mean) :]))
         # continuity: every parameter with a null moved 1 % of its box into the box (towards the far
         # bound); an entry the rescue can return through stays within a few nats of the base there
         near = rows[j].copy()
         for k, n in enumerate(own):
             p = by_name[n]
             if p.null is not None:
-                near[len(mean) + k] = p.null + 0.01 * ((p.hi - p.null) if p.hi - p.null >= p.null - p.lo
-                                                       else (p.lo - p.null))
+                near[len(mean) + k] = p.null + 0.01 * (
+                    (p.hi - p.null) if p.hi - p.null >= p.null - p.lo else (p.lo - p.null)
+                )
         ll_near = float(ev(near[None]).loglik[0])
         print(f"{name:<14} {where:<48} {ll[j]:10.1f} {base - ll[j]:11.1f} {base - ll_near:11.1f}", flush=True)
 

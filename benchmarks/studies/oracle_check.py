@@ -23,6 +23,7 @@ so ``--polish-materials`` lets the materials move too (a Nelder-Mead from the tr
 
 The truth is read here; nothing in ``vfcore`` reads it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,14 +53,16 @@ def _rms(ev, obs) -> float:
     return float(np.sqrt(np.mean((y - g) ** 2)))
 
 
-def entry_at(problem, name: str | None, theta_base: np.ndarray, *, polish_materials: bool = False,
-             maxfev: int = 40) -> dict:
+def entry_at(
+    problem, name: str | None, theta_base: np.ndarray, *, polish_materials: bool = False, maxfev: int = 40
+) -> dict:
     """Best log-likelihood (integrated over the entry's integrable parameters) and residual RMS
     of entry ``name`` (None: the base model) at base parameters ``theta_base``, over its sampled
     parameters (grid then Nelder-Mead); with ``polish_materials`` the base parameters move too."""
     from scipy.optimize import minimize
 
     from vfcore.diagnose.search import model_evaluator, model_prior
+
     fn = model_evaluator(problem, name)
     prior = model_prior(problem, name)
     nb = theta_base.size
@@ -95,24 +98,32 @@ def entry_at(problem, name: str | None, theta_base: np.ndarray, *, polish_materi
                 return 1e12
             v, _ = ll(x)
             return -v if math.isfinite(v) else 1e12
+
         span = (bhi - blo)[free]
         simplex = [best_x[free]] + [best_x[free] + np.eye(span.size)[i] * 0.02 * span[i] for i in range(span.size)]
-        r = minimize(neg, best_x[free], method="Nelder-Mead",
-                     options={"maxfev": int(maxfev), "initial_simplex": np.array(simplex), "xatol": 1e-6,
-                              "fatol": 1e-3})
+        r = minimize(
+            neg,
+            best_x[free],
+            method="Nelder-Mead",
+            options={"maxfev": int(maxfev), "initial_simplex": np.array(simplex), "xatol": 1e-6, "fatol": 1e-3},
+        )
         if -r.fun > best_ll:
             best_x = best_x.copy()
             best_x[free] = r.x
     best_ll, e = ll(best_x)
-    return {"loglik": best_ll, "rms": _rms(e, problem.obs_compared) if math.isfinite(best_ll) else math.nan,
-            "params": {n: float(v) for n, v in zip(tuple(problem.prior.names) + tuple(names), best_x)},
-            "n_evaluations": n_evals}
+    return {
+        "loglik": best_ll,
+        "rms": _rms(e, problem.obs_compared) if math.isfinite(best_ll) else math.nan,
+        "params": {n: float(v) for n, v in zip(tuple(problem.prior.names) + tuple(names), best_x)},
+        "n_evaluations": n_evals,
+    }
 
 
 def check_case(cases_dir: Path, out_dir: Path, cid: str, *, polish_materials: bool = False) -> dict:
     from benchmarks.scoring import load_suite, reference_rms
     from benchmarks.suite import case_problem
     from vfcore.diagnose.extensions import CATALOGUE, physics_of
+
     meta = json.loads((cases_dir / "cases.json").read_text())
     case = next(c for c in meta["cases"] if c["id"] == cid)
     rec = next(r for r in load_suite(cases_dir, out_dir) if r.case == cid)
@@ -121,23 +132,35 @@ def check_case(cases_dir: Path, out_dir: Path, cid: str, *, polish_materials: bo
     problem = case_problem(meta, case, cases_dir, None, 1.0)
     theta = np.array([truth["truth"][n] for n in problem.prior.names], dtype=float)
     rms_ref = reference_rms(rep)
-    out = {"case": cid, "label": rec.label, "named": rec.winner, "ok": rec.ok, "sigma": truth["sigma_mm2"],
-           "reference_rms": rms_ref, "entries": {}}
+    out = {
+        "case": cid,
+        "label": rec.label,
+        "named": rec.winner,
+        "ok": rec.ok,
+        "sigma": truth["sigma_mm2"],
+        "reference_rms": rms_ref,
+        "entries": {},
+    }
     out["base_at_truth"] = entry_at(problem, None, theta, polish_materials=polish_materials)
     right = [n for n in CATALOGUE if physics_of(n) == rec.label and CATALOGUE[n].implemented]
     for n in right + ([rec.winner] if rec.winner and rec.winner not in right and rec.winner != "rejected" else []):
         at = entry_at(problem, n, theta, polish_materials=polish_materials)
         fit = rep.get("refits", {}).get(n, {})
-        out["entries"][n] = {"at_truth": at, "fit_rms": fit.get("residual_rms", math.nan),
-                             "fit_log_evidence": fit.get("log_evidence", math.nan), "right": n in right}
-    win_rms = rep["refits"][rec.winner]["residual_rms"] if rec.winner and rec.winner in rep.get("refits", {}) \
-        else math.nan
+        out["entries"][n] = {
+            "at_truth": at,
+            "fit_rms": fit.get("residual_rms", math.nan),
+            "fit_log_evidence": fit.get("log_evidence", math.nan),
+            "right": n in right,
+        }
+    win_rms = (
+        rep["refits"][rec.winner]["residual_rms"] if rec.winner and rec.winner in rep.get("refits", {}) else math.nan
+    )
     best_right = min((out["entries"][n]["at_truth"]["rms"] for n in right), default=math.nan)
     fit_right = min((out["entries"][n]["fit_rms"] for n in right), default=math.nan)
     named_wrong = math.isfinite(win_rms) and not rec.ok
     target = win_rms if named_wrong else 0.7 * rms_ref
     # the log-likelihood those residuals are worth (fixed noise sd sigma_e over the compared frames)
-    dll = problem.n_compare / (2.0 * problem.sigma_e ** 2) * (target ** 2 - best_right ** 2)
+    dll = problem.n_compare / (2.0 * problem.sigma_e**2) * (target**2 - best_right**2)
     if rec.label == "control":
         verdict = "control"
     elif rec.ok:
@@ -148,8 +171,14 @@ def check_case(cases_dir: Path, out_dir: Path, cid: str, *, polish_materials: bo
         verdict = "search"
     else:
         verdict = "form"
-    out.update(winner_rms=win_rms, right_rms_at_truth=best_right, right_fit_rms=fit_right, target_rms=target,
-               dloglik_vs_target=dll, verdict=verdict)
+    out.update(
+        winner_rms=win_rms,
+        right_rms_at_truth=best_right,
+        right_fit_rms=fit_right,
+        target_rms=target,
+        dloglik_vs_target=dll,
+        verdict=verdict,
+    )
     return out
 
 
@@ -163,18 +192,23 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     cases_dir, out_dir = Path(a.cases), Path(a.out)
     from benchmarks.scoring import load_suite
-    ids = [i for i in a.ids.split(",") if i] or [r.case for r in load_suite(cases_dir, out_dir)
-                                                   if r.label != "control"]
+
+    ids = [i for i in a.ids.split(",") if i] or [r.case for r in load_suite(cases_dir, out_dir) if r.label != "control"]
     rows = []
-    print("case truth        named        verdict  sigma  ref   target  right@truth  dll    right fit  base@truth  "
-          "entries at truth (their fit)")
+    print(
+        "case truth        named        verdict  sigma  ref   target  right@truth  dll    right fit  base@truth  "
+        "entries at truth (their fit)"
+    )
     for cid in ids:
         r = check_case(cases_dir, out_dir, cid, polish_materials=a.polish_materials)
         rows.append(r)
         ent = "; ".join(f"{n} {e['at_truth']['rms']:.2f} (fit {e['fit_rms']:.2f})" for n, e in r["entries"].items())
-        print(f"{cid}   {r['label']:<12} {str(r['named']):<12} {r['verdict']:<8} {r['sigma']:.2f}  "
-              f"{r['reference_rms']:.2f}  {r['target_rms']:.2f}    {r['right_rms_at_truth']:.2f}         "
-              f"{r['dloglik_vs_target']:<6.0f} {r['right_fit_rms']:.2f}       {r['base_at_truth']['rms']:.2f}      {ent}", flush=True)
+        print(
+            f"{cid}   {r['label']:<12} {str(r['named']):<12} {r['verdict']:<8} {r['sigma']:.2f}  "
+            f"{r['reference_rms']:.2f}  {r['target_rms']:.2f}    {r['right_rms_at_truth']:.2f}         "
+            f"{r['dloglik_vs_target']:<6.0f} {r['right_fit_rms']:.2f}       {r['base_at_truth']['rms']:.2f}      {ent}",
+            flush=True,
+        )
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1, default=float))
     return 0

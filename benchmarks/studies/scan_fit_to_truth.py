@@ -12,6 +12,7 @@ not supported; the truth check below refuses them).
 
     python benchmarks/studies/scan_fit_to_truth.py DIR/calibration.json --dataset 0 --seed 2000 --dt 5e-5 --contact layer
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,6 +46,7 @@ def main(argv=None) -> int:
     from vfcore.inference import Prior, make_twin
     from vfcore.inference.scoring import aligned_loglik
     from vfcore.params import PARAM_NAMES, TABLE3
+
     data = json.loads(Path(a.calibration).read_text())
     rows = [r for r in data["rows"] if r["dataset"] == a.dataset]
     if not rows:
@@ -57,8 +59,10 @@ def main(argv=None) -> int:
     if not np.allclose(tw.truth, row["truth"]):
         ap.error("the rebuilt twin's truth differs from the row's: give the calibration's --seed, model and noise")
     lm, lt = np.log(np.asarray(row["mean"])), np.log(tw.truth)
-    print(f"twin {a.dataset}: loglik of the truth {row['loglik_truth']:.1f}, "
-          f"of the best particle {row['loglik_best']:.1f}")
+    print(
+        f"twin {a.dataset}: loglik of the truth {row['loglik_truth']:.1f}, "
+        f"of the best particle {row['loglik_best']:.1f}"
+    )
     print("| s (0 = posterior mean, 1 = truth) | log-likelihood | f0 (Hz) |")
     print("|---|---|---|")
     for s in np.linspace(-0.25, 1.25, a.points):

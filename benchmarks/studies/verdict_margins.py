@@ -12,6 +12,7 @@ Set ``VERDICT_MARGINS=path.jsonl`` to keep the records (one JSON object per diag
 suite on two installs (the lock and the oldest allowed versions) and comparing the files shows
 whether any verdict moved.
 """
+
 from __future__ import annotations
 
 import functools
@@ -27,15 +28,25 @@ def _record(rep) -> dict:
     rows = []
     for r in rk.rows:
         rms = r.rms_gain if math.isfinite(r.rms_gain) else None
-        rows.append({"name": r.name, "found": bool(r.found), "null_consistent": bool(r.null_consistent),
-                     "evidence_margin": float(r.delta - max(rk.min_gain, rk.k_se * r.delta_se)),
-                     "rms_margin": None if rms is None else float(rms - rk.min_rms_gain)})
-    return {"test": os.environ.get("PYTEST_CURRENT_TEST", "?").removesuffix(" (call)"),
-            "winner": rep.winner, "rows": rows}
+        rows.append(
+            {
+                "name": r.name,
+                "found": bool(r.found),
+                "null_consistent": bool(r.null_consistent),
+                "evidence_margin": float(r.delta - max(rk.min_gain, rk.k_se * r.delta_se)),
+                "rms_margin": None if rms is None else float(rms - rk.min_rms_gain),
+            }
+        )
+    return {
+        "test": os.environ.get("PYTEST_CURRENT_TEST", "?").removesuffix(" (call)"),
+        "winner": rep.winner,
+        "rows": rows,
+    }
 
 
 def pytest_configure(config):
     from vfcore.diagnose import pipeline
+
     real = pipeline.diagnose
 
     @functools.wraps(real)
@@ -62,4 +73,6 @@ def pytest_terminal_summary(terminalreporter):
         lead = r["rows"][0] if r["rows"] else None
         ev = f"{lead['evidence_margin']:+.1f}" if lead else "-"
         rms = f"{lead['rms_margin']:+.3f}" if lead and lead["rms_margin"] is not None else "-"
-        tr.write_line(f"{r['test'][-72:]:72s} {str(r['winner']):10s} {lead['name'] if lead else '-':12s} {ev:>12s} {rms:>10s}")
+        tr.write_line(
+            f"{r['test'][-72:]:72s} {str(r['winner']):10s} {lead['name'] if lead else '-':12s} {ev:>12s} {rms:>10s}"
+        )

@@ -7,6 +7,7 @@ it; ``GET /jobs/{id}/diagnosis/report`` shows it as an HTML page (bearer token, 
 Ownership rules are those of the other job endpoints (another user's job answers 404). One diagnosis per job at
 a time; a new one replaces the previous one.
 """
+
 from __future__ import annotations
 
 from fastapi import APIRouter, Body, HTTPException, Request, Response, status
@@ -45,29 +46,46 @@ def diagnosis_report_scope(job_id: str) -> str:
     return f"diagnosis-report/{job_id}"
 
 
-@router.post("/jobs/{job_id}/diagnose", status_code=status.HTTP_202_ACCEPTED, response_model=DiagnoseStarted,
-             summary="Start a diagnosis of a finished job: which physics is the model missing?")
-def start_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep,
-                    req: DiagnoseRequest | None = Body(default=None)) -> DiagnoseStarted:
+@router.post(
+    "/jobs/{job_id}/diagnose",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=DiagnoseStarted,
+    summary="Start a diagnosis of a finished job: which physics is the model missing?",
+)
+def start_diagnosis(
+    job_id: JobIdDep, user: UserDep, manager: ManagerDep, req: DiagnoseRequest | None = Body(default=None)
+) -> DiagnoseStarted:
     rec = done_job(manager, job_id, user)
     if rec["model"] != "fe":
-        raise HTTPException(422, [{"loc": ["path", "job_id"], "type": "value_error",
-                                   "msg": f"diagnosis needs a job of the finite-element model ('fe'), "
-                                          f"this one is {rec['model']!r}"}])
+        raise HTTPException(
+            422,
+            [
+                {
+                    "loc": ["path", "job_id"],
+                    "type": "value_error",
+                    "msg": f"diagnosis needs a job of the finite-element model ('fe'), this one is {rec['model']!r}",
+                }
+            ],
+        )
     req = req or DiagnoseRequest()
     c = expected(rec["spec"], manager.store_path(rec["id"]), req)
     try:
         diag_id = manager.submit_diagnosis(user, rec["id"], req)
     except DiagnosisRunning:
         raise HTTPException(status.HTTP_409_CONFLICT, "a diagnosis of this job is already running") from None
-    cost = ExpectedDiagnosis(floor_simulations=c.floor, catalogue_simulations=c.catalogue, base_fits=c.base_fits,
-                             scaled_for=list(c.guide))
-    return DiagnoseStarted(id=rec["id"], state="queued", status_url=f"/jobs/{rec['id']}/diagnosis",
-                           diagnosis_id=diag_id, expected=cost)
+    cost = ExpectedDiagnosis(
+        floor_simulations=c.floor, catalogue_simulations=c.catalogue, base_fits=c.base_fits, scaled_for=list(c.guide)
+    )
+    return DiagnoseStarted(
+        id=rec["id"], state="queued", status_url=f"/jobs/{rec['id']}/diagnosis", diagnosis_id=diag_id, expected=cost
+    )
 
 
-@router.get("/jobs/{job_id}/diagnosis", response_model=DiagnosisStatus,
-            summary="A diagnosis's state, current stage and, when done, its report")
+@router.get(
+    "/jobs/{job_id}/diagnosis",
+    response_model=DiagnosisStatus,
+    summary="A diagnosis's state, current stage and, when done, its report",
+)
 def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request: Request) -> DiagnosisStatus:
     # ``request`` is unused here; the jobs page calls this handler with it, to show what the API answers
     diag = _latest(manager, own_job(manager, job_id, user)["id"])
@@ -77,8 +95,13 @@ def get_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep, request:
     report = None
     if diag["state"] == "done":
         report = read_report(manager.store_path(diag["id"]), diag["stats"], _request(diag))
-    return DiagnosisStatus(state=diag["state"], error=diag["error"], report=report,
-                           progress=live.event if live is not None else None, diagnosis_id=diag["id"])
+    return DiagnosisStatus(
+        state=diag["state"],
+        error=diag["error"],
+        report=report,
+        progress=live.event if live is not None else None,
+        diagnosis_id=diag["id"],
+    )
 
 
 def _request(diag: dict) -> dict:
@@ -98,8 +121,11 @@ def cancel_diagnosis(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> di
     return {"id": jid, "state": "cancelling", "status_url": f"/jobs/{jid}/diagnosis", "diagnosis_id": diag["id"]}
 
 
-@router.get("/jobs/{job_id}/diagnosis/figure", responses={200: {"content": {"image/png": {}}}},
-            summary="A finished diagnosis's figure (PNG): base fit, located mismatch, named extension")
+@router.get(
+    "/jobs/{job_id}/diagnosis/figure",
+    responses={200: {"content": {"image/png": {}}}},
+    summary="A finished diagnosis's figure (PNG): base fit, located mismatch, named extension",
+)
 def get_diagnosis_figure(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -> Response:
     diag = _finished(manager, job_id, user)
     png = st.read_blob(manager.store_path(diag["id"]), "diagnosis_png")
@@ -108,33 +134,46 @@ def get_diagnosis_figure(job_id: JobIdDep, user: UserDep, manager: ManagerDep) -
     return Response(png, media_type="image/png")
 
 
-@router.get("/jobs/{job_id}/diagnosis/report", response_class=HTMLResponse,
-            summary="A finished diagnosis as one self-contained HTML page (figure embedded): verdict, located "
-                    "mismatch, ranked catalogue entries, cost; opens with the bearer token or with a signed link "
-                    "from POST /jobs/{id}/diagnosis/report-link",
-            responses={401: {"description": "neither a bearer token nor a signed link"},
-                       403: {"description": "a signed link that is expired, altered or made for another page"},
-                       404: {"description": "no such job of yours, or no finished diagnosis of it"}})
-def get_diagnosis_report(job_id: JobIdDep, manager: ManagerDep, signer: SignerDep, user: OptionalUserDep,
-                         exp: Exp = None, sig: Sig = None) -> HTMLResponse:
+@router.get(
+    "/jobs/{job_id}/diagnosis/report",
+    response_class=HTMLResponse,
+    summary="A finished diagnosis as one self-contained HTML page (figure embedded): verdict, located "
+    "mismatch, ranked catalogue entries, cost; opens with the bearer token or with a signed link "
+    "from POST /jobs/{id}/diagnosis/report-link",
+    responses={
+        401: {"description": "neither a bearer token nor a signed link"},
+        403: {"description": "a signed link that is expired, altered or made for another page"},
+        404: {"description": "no such job of yours, or no finished diagnosis of it"},
+    },
+)
+def get_diagnosis_report(
+    job_id: JobIdDep, manager: ManagerDep, signer: SignerDep, user: OptionalUserDep, exp: Exp = None, sig: Sig = None
+) -> HTMLResponse:
     from ..report import PAGE_HEADERS, data_uri
     from ..report_diagnose import render_diagnosis_report
-    user = page_reader(manager, job_id, user, signer, diagnosis_report_scope(job_id), exp, sig,
-                       "POST /jobs/{id}/diagnosis/report-link")
+
+    user = page_reader(
+        manager, job_id, user, signer, diagnosis_report_scope(job_id), exp, sig, "POST /jobs/{id}/diagnosis/report-link"
+    )
     diag = _finished(manager, job_id, user)
     path = manager.store_path(diag["id"])
     d = read_report(path, diag["stats"], _request(diag))
     png = st.read_blob(path, "diagnosis_png")
     fig = data_uri(png) if png is not None else None
     jid = diag["parent"]
-    return HTMLResponse(render_diagnosis_report(d, fig, f"vfinfer diagnosis of job {jid}", source={"job": jid}),
-                        headers=PAGE_HEADERS)
+    return HTMLResponse(
+        render_diagnosis_report(d, fig, f"vfinfer diagnosis of job {jid}", source={"job": jid}), headers=PAGE_HEADERS
+    )
 
 
-@router.post("/jobs/{job_id}/diagnosis/report-link", response_model=LinkOut,
-             summary="A short-lived signed link to a finished diagnosis's HTML page that a browser opens without "
-                     "the bearer token")
-def diagnosis_report_link(job_id: JobIdDep, user: UserDep, manager: ManagerDep, signer: SignerDep,
-                          request: Request) -> LinkOut:
+@router.post(
+    "/jobs/{job_id}/diagnosis/report-link",
+    response_model=LinkOut,
+    summary="A short-lived signed link to a finished diagnosis's HTML page that a browser opens without "
+    "the bearer token",
+)
+def diagnosis_report_link(
+    job_id: JobIdDep, user: UserDep, manager: ManagerDep, signer: SignerDep, request: Request
+) -> LinkOut:
     jid = _finished(manager, job_id, user)["parent"]
     return link_out(request, signer.sign(diagnosis_report_scope(jid), f"/jobs/{jid}/diagnosis/report"))

@@ -5,6 +5,7 @@ client can submit it to POST /jobs as is. Upload size is bounded by the app's bo
 limit; the file is written to a server-chosen temporary name (no path from user input)
 and deleted afterwards.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -34,8 +35,11 @@ def _extract(path: Path, fps: float, px_per_mm: float, segment_s: float) -> dict
         "n_frames": int(ex.area.size),
         "n_flagged_frames": int((~ex.ok).sum()),
         "segment": [int(ex.segment[0]), int(ex.segment[1])],
-        "measures": {k: (float(v) if isinstance(v, (int, float)) and math.isfinite(float(v)) else None)
-                     for k, v in ex.measures.items() if isinstance(v, (int, float))},
+        "measures": {
+            k: (float(v) if isinstance(v, (int, float)) and math.isfinite(float(v)) else None)
+            for k, v in ex.measures.items()
+            if isinstance(v, (int, float))
+        },
         "notes": s.get("notes", []),
     }
 
@@ -50,8 +54,7 @@ async def gaw_from_video(
 ) -> dict:
     suffix = Path(video.filename or "").suffix.lower()
     if suffix not in SUFFIXES:
-        raise HTTPException(422,
-                            f"video: unsupported file type {suffix!r}; use one of {sorted(SUFFIXES)}")
+        raise HTTPException(422, f"video: unsupported file type {suffix!r}; use one of {sorted(SUFFIXES)}")
     del user  # authenticated; extraction stores nothing per user
     with tempfile.TemporaryDirectory(prefix="vfinfer-gaw-") as tmp:
         path = Path(tmp) / f"upload{suffix}"

@@ -1,4 +1,5 @@
 """GET /health: liveness plus a view of the cluster (no authentication, no job data)."""
+
 from __future__ import annotations
 
 from fastapi import APIRouter, Response

@@ -2,6 +2,7 @@
 signed link, and the diagnoses of those jobs, each finished one linked to its diagnosis report; without
 credentials, a page that says how to get in. Nothing on it loads from another host
 and nothing runs a script (``report.PAGE_HEADERS``)."""
+
 from __future__ import annotations
 
 import json
@@ -101,7 +102,7 @@ def diagnoses_of(jobs: list[dict], user: str, manager, request: Request) -> list
     kept."""
     out = []
     for r in sorted(jobs, key=lambda r: -r["created"]):
-        if r["state"] != "done" or _sampler(r["spec"])[1] != "FE":      # only such jobs can be diagnosed
+        if r["state"] != "done" or _sampler(r["spec"])[1] != "FE":  # only such jobs can be diagnosed
             continue
         st = get_diagnosis(r["id"], user, manager, request)
         if st.state != "none":
@@ -128,12 +129,20 @@ def _diagnosis_row(jid: str, st, signer: Signer, now: float) -> str:
         link = f"<a href='{escape(signer.sign(diagnosis_report_scope(jid), path, now=now).path)}'>diagnosis report</a>"
     sims = f"{sims:,}" if isinstance(sims, int) else "–"
     run = _duration(float(run_s)) if isinstance(run_s, (int, float)) else "–"
-    return (f"<tr><td><code>{escape(jid)}</code></td><td>{state}</td><td>{verdict}</td><td class='n'>{sims}</td>"
-            f"<td class='n'>{run}</td><td>{link}</td></tr>")
+    return (
+        f"<tr><td><code>{escape(jid)}</code></td><td>{state}</td><td>{verdict}</td><td class='n'>{sims}</td>"
+        f"<td class='n'>{run}</td><td>{link}</td></tr>"
+    )
 
 
-def jobs_page(user: str, jobs: list[dict], signer: Signer, now: float, link_expires: int | None,
-              diagnoses: list[tuple[str, object]] = ()) -> HTMLResponse:
+def jobs_page(
+    user: str,
+    jobs: list[dict],
+    signer: Signer,
+    now: float,
+    link_expires: int | None,
+    diagnoses: list[tuple[str, object]] = (),
+) -> HTMLResponse:
     rows = []
     for r in sorted(jobs, key=lambda r: -r["created"]):
         sampler, model = _sampler(r["spec"])
@@ -147,43 +156,70 @@ def jobs_page(user: str, jobs: list[dict], signer: Signer, now: float, link_expi
             report = f"<a href='{escape(link.path)}'>report</a>"
         else:
             report = "–"
-        rows.append(f"<tr><td><code>{escape(r['id'])}</code></td><td>{state}</td><td>{escape(when(r['created'], now))}"
-                    f"</td><td>{escape(sampler)}</td><td>{escape(model)}</td><td class='n'>{progress}</td>"
-                    f"<td class='n'>{_duration(run_s)}</td><td>{report}</td></tr>")
-    head = "".join(f"<th>{h}</th>" for h in ("job", "state", "submitted", "sampler", "model", "simulations",
-                                             "run time", ""))
-    table = (f"<table><tr>{head}</tr>{''.join(rows)}</table>" if rows else
-             "<p>No jobs yet: <code>vfinfer submit GAW.csv</code> or <code>POST /jobs</code> starts one.</p>")
+        rows.append(
+            f"<tr><td><code>{escape(r['id'])}</code></td><td>{state}</td><td>{escape(when(r['created'], now))}"
+            f"</td><td>{escape(sampler)}</td><td>{escape(model)}</td><td class='n'>{progress}</td>"
+            f"<td class='n'>{_duration(run_s)}</td><td>{report}</td></tr>"
+        )
+    head = "".join(
+        f"<th>{h}</th>" for h in ("job", "state", "submitted", "sampler", "model", "simulations", "run time", "")
+    )
+    table = (
+        f"<table><tr>{head}</tr>{''.join(rows)}</table>"
+        if rows
+        else "<p>No jobs yet: <code>vfinfer submit GAW.csv</code> or <code>POST /jobs</code> starts one.</p>"
+    )
     if diagnoses:
         dhead = "".join(f"<th>{h}</th>" for h in ("job", "diagnosis", "verdict", "simulations", "run time", ""))
-        table += ("<h2>Diagnoses</h2><p class='muted'>Which physics the model misses, per diagnosed job "
-                  "(<code>vfinfer diagnosis</code>, <code>POST /jobs/{id}/diagnose</code>).</p>"
-                  f"<table><tr>{dhead}</tr>{''.join(_diagnosis_row(j, st, signer, now) for j, st in diagnoses)}"
-                  "</table>")
+        table += (
+            "<h2>Diagnoses</h2><p class='muted'>Which physics the model misses, per diagnosed job "
+            "(<code>vfinfer diagnosis</code>, <code>POST /jobs/{id}/diagnose</code>).</p>"
+            f"<table><tr>{dhead}</tr>{''.join(_diagnosis_row(j, st, signer, now) for j, st in diagnoses)}"
+            "</table>"
+        )
     done = sum(r["state"] == "done" for r in jobs) + sum(st.state == "done" for _, st in diagnoses)
     notes = []
     if done:
-        notes.append(f"The report links are valid for {_duration(signer.ttl_s)}, until "
-                     f"{utc(now + signer.ttl_s, '%H:%M:%S UTC')}; reloading the page makes new ones.")
+        notes.append(
+            f"The report links are valid for {_duration(signer.ttl_s)}, until "
+            f"{utc(now + signer.ttl_s, '%H:%M:%S UTC')}; reloading the page makes new ones."
+        )
     if link_expires is not None:
-        notes.append(f"This page's own link expires at {utc(link_expires, '%H:%M:%S UTC')}; "
-                     "<code>vfinfer report</code> or <code>POST /page-link</code> makes a new one.")
-    body = (f"<p class='muted'>{len(jobs)} job(s) of <strong>{escape(user)}</strong>, newest first; times in UTC."
-            f"</p>{table}<p class='muted'>{' '.join(notes)}</p>"
-            "<p class='muted'>API: <a href='/docs'>/docs</a>, <a href='/redoc'>/redoc</a>.</p>")
+        notes.append(
+            f"This page's own link expires at {utc(link_expires, '%H:%M:%S UTC')}; "
+            "<code>vfinfer report</code> or <code>POST /page-link</code> makes a new one."
+        )
+    body = (
+        f"<p class='muted'>{len(jobs)} job(s) of <strong>{escape(user)}</strong>, newest first; times in UTC."
+        f"</p>{table}<p class='muted'>{' '.join(notes)}</p>"
+        "<p class='muted'>API: <a href='/docs'>/docs</a>, <a href='/redoc'>/redoc</a>.</p>"
+    )
     return _page("vfinfer jobs", body)
 
 
-@router.get("/", response_class=HTMLResponse,
-            summary="Your jobs and their diagnoses as an HTML page, with signed links to the finished jobs' and "
-                    "diagnoses' reports (bearer token or a signed link from POST /page-link); without either, a page "
-                    "saying how to sign in",
-            responses={401: {"description": "a wrong bearer token"},
-                       403: {"description": "a signed link that is expired, altered or made for another user"}})
-def home(manager: ManagerDep, settings: SettingsDep, signer: SignerDep, user: OptionalUserDep, request: Request,
-         link_user: Annotated[str | None, Query(alias="user", max_length=200,
-                                                description="signed link: whose jobs (with exp and sig)")] = None,
-         exp: Exp = None, sig: Sig = None) -> HTMLResponse:
+@router.get(
+    "/",
+    response_class=HTMLResponse,
+    summary="Your jobs and their diagnoses as an HTML page, with signed links to the finished jobs' and "
+    "diagnoses' reports (bearer token or a signed link from POST /page-link); without either, a page "
+    "saying how to sign in",
+    responses={
+        401: {"description": "a wrong bearer token"},
+        403: {"description": "a signed link that is expired, altered or made for another user"},
+    },
+)
+def home(
+    manager: ManagerDep,
+    settings: SettingsDep,
+    signer: SignerDep,
+    user: OptionalUserDep,
+    request: Request,
+    link_user: Annotated[
+        str | None, Query(alias="user", max_length=200, description="signed link: whose jobs (with exp and sig)")
+    ] = None,
+    exp: Exp = None,
+    sig: Sig = None,
+) -> HTMLResponse:
     now = time.time()
     link_expires = None
     if user is None:
@@ -195,14 +231,17 @@ def home(manager: ManagerDep, settings: SettingsDep, signer: SignerDep, user: Op
             signer.verify(jobs_scope(link_user), exp, sig, now=now)
         except LinkError as exc:
             return sign_in_page(str(exc), status.HTTP_403_FORBIDDEN)
-        if link_user not in settings.users:       # a user removed from the service loses its links too
+        if link_user not in settings.users:  # a user removed from the service loses its links too
             return sign_in_page("this link's user has no access to this service", status.HTTP_403_FORBIDDEN)
         user, link_expires = link_user, exp
     jobs = manager.db.list(owner=user)
     return jobs_page(user, jobs, signer, now, link_expires, diagnoses_of(jobs, user, manager, request))
 
 
-@router.post("/page-link", response_model=LinkOut,
-             summary="A short-lived signed link to your jobs page (/) that a browser opens without the bearer token")
+@router.post(
+    "/page-link",
+    response_model=LinkOut,
+    summary="A short-lived signed link to your jobs page (/) that a browser opens without the bearer token",
+)
 def page_link(user: UserDep, signer: SignerDep, request: Request) -> LinkOut:
     return link_out(request, signer.sign(jobs_scope(user), "/", {"user": user}))

@@ -1,4 +1,5 @@
 """Concealed-effect benchmark generator (benchmarks/concealed/generate.py)."""
+
 from __future__ import annotations
 
 import json
@@ -63,6 +64,7 @@ def test_full_suite_covers_outside_effects_pairs_and_controls():
 
 def test_full_truth_draws_five_combinations_at_the_anchor():
     from benchmarks.concealed.config import FULL_BOUNDS, SCALE_ANCHOR
+
     rng = np.random.default_rng(0)
     draws = [G.draw_truth(rng, "full") for _ in range(200)]
     for name, (lo, hi) in FULL_BOUNDS.items():
@@ -89,10 +91,10 @@ def test_outside_effects_have_their_shapes(base):
     k = G._cycle_index(base, t)
     ratio = clean[a > 1.0] / a[a > 1.0]
     gains = {1.0 + eff["depth"], 1.0 - eff["depth"]}
-    assert all(min(abs(r - g) for g in gains) < 1e-12 for r in ratio)       # alternate cycles, two gains
+    assert all(min(abs(r - g) for g in gains) < 1e-12 for r in ratio)  # alternate cycles, two gains
     assert len(set(k % 2)) == 2
     clean, eff = G.apply_effect("gamma", base, TABLE3, 77.3, np.random.default_rng(2))
-    assert np.all(np.diff(clean[np.argsort(a)]) >= -1e-12)                  # a monotone read-out of the area
+    assert np.all(np.diff(clean[np.argsort(a)]) >= -1e-12)  # a monotone read-out of the area
     i = np.argmin(abs(a - eff["ref_mm2"]))
     assert clean[i] == pytest.approx(a[i] * (a[i] / eff["ref_mm2"]) ** (eff["gamma"] - 1.0), rel=1e-12)
     clean, eff = G.apply_effect("tremor", base, TABLE3, 77.3, np.random.default_rng(3))
@@ -111,7 +113,7 @@ def test_leak_shape_power_moves_the_gap_posteriorly():
 SMALL = {"leak": 1, "sep_ratio": 1, "control": 1}
 
 
-@pytest.mark.slow   # a whole small suite generated twice (about a minute on 2 cores)
+@pytest.mark.slow  # a whole small suite generated twice (about a minute on 2 cores)
 def test_determinism_and_public_files(tmp_path):
     a = G.generate_suite(5, counts=SMALL)
     b = G.generate_suite(5, counts=SMALL)
@@ -160,7 +162,7 @@ def test_control_is_base_window_plus_noise():
     assert 0.8 * c.sigma < res.std() < 1.2 * c.sigma and abs(res.mean()) < 4 * c.sigma / np.sqrt(G.N_OBS)
     # an integer offset reproduces the camera-rate GAW itself
     t_int = G.frame_times(G.N_OBS, 100, CFG.fps)
-    assert np.allclose(G.sample_hr(r.gaw_hr, G.hr_times(r), t_int), r.gaw[100:100 + G.N_OBS], atol=1e-9)
+    assert np.allclose(G.sample_hr(r.gaw_hr, G.hr_times(r), t_int), r.gaw[100 : 100 + G.N_OBS], atol=1e-9)
 
 
 def test_leak_identity_and_floor(base):
@@ -187,7 +189,7 @@ def test_zipper_identity(base):
 
 def test_asymmetry_identity(base):
     t_hr, t, a = _window(base)
-    twin = simulate(TABLE3, CFG)                      # a separate but identical right fold
+    twin = simulate(TABLE3, CFG)  # a separate but identical right fold
     tc = t[G.N_OBS // 2]
     assert np.max(np.abs(G.asymmetric_area(base, twin, t, 0.0, tc) - a)) < 1e-9
     assert np.max(np.abs(G.asymmetric_area(base, base, t, 0.0, tc) - a)) < 1e-9
@@ -225,12 +227,13 @@ def test_forward_extension_inputs():
     if not avail["epithelium"]:
         pytest.skip("SimConfig has no epithelium fields")
     from vfcore.mesh import load_mesh
+
     prof = np.array(G.epithelium_profile(3.0, 1.0))
     m = load_mesh(CFG.mesh)
     assert prof.size == len(m.surface) - 1 and prof.min() >= 1.0 - 1e-12 and prof.max() > 2.5
     x_mid = 0.5 * (m.points[m.surface][1:, 0] + m.points[m.surface][:-1, 0])
-    assert x_mid[np.argmax(prof)] > np.percentile(x_mid, 75)       # thickest on the medial surface
-    CFG.replace(epithelium_E_kpa=10.0, epithelium_profile=tuple(prof))   # accepted by SimConfig
+    assert x_mid[np.argmax(prof)] > np.percentile(x_mid, 75)  # thickest on the medial surface
+    CFG.replace(epithelium_E_kpa=10.0, epithelium_profile=tuple(prof))  # accepted by SimConfig
 
 
 @pytest.mark.parametrize("label", G.EFFECTS + G.OUTSIDE + G.PAIRS)
@@ -239,18 +242,27 @@ def test_each_effect_changes_the_waveform(label):
     if label in avail and not avail[label]:
         pytest.skip(f"{label}: SimConfig lacks the forward-model fields")
     full = label not in G.EFFECTS
-    c = G.make_case("e", label, np.random.SeedSequence([3, G.LABELS.index(label)]), presence=False,
-                    material="full" if full else "three")
+    c = G.make_case(
+        "e",
+        label,
+        np.random.SeedSequence([3, G.LABELS.index(label)]),
+        presence=False,
+        material="full" if full else "three",
+    )
     assert c.label == label and c.effect
     assert G.oscillates(c.clean, CFG.fps)
     # exposure at 2000 fps on a ~60-150 Hz GAW is a weak low-pass (documented in the README)
     assert c.effect_rms > (0.02 if label == "exposure" else 0.3), c.effect_rms
-    ranges = {"sep_ratio": ("sep_ratio", G.SEP_RATIO_RANGES), "asymmetry": ("Q", G.ASYM_Q_RANGES),
-              "frame_rate": ("rate_ratio", G.RATE_RANGES), "scale": ("scale", G.SCALE_RANGES)}
+    ranges = {
+        "sep_ratio": ("sep_ratio", G.SEP_RATIO_RANGES),
+        "asymmetry": ("Q", G.ASYM_Q_RANGES),
+        "frame_rate": ("rate_ratio", G.RATE_RANGES),
+        "scale": ("scale", G.SCALE_RANGES),
+    }
     if label in ranges:
         k, rr = ranges[label]
         assert any(lo <= c.effect[k] <= hi for lo, hi in rr)
-    if label == "asymmetry":          # the right fold's layers are not scaled alike (richer than the fit)
+    if label == "asymmetry":  # the right fold's layers are not scaled alike (richer than the fit)
         q = c.effect["Q_layers"]
         assert q["E_body"] == c.effect["Q"] and q["E_cover"] != q["E_body"] and q["E_lig"] != q["E_body"]
         for k in ("E_cover", "E_lig"):
@@ -258,21 +270,21 @@ def test_each_effect_changes_the_waveform(label):
     if label == "leak":
         assert G.LEAK_AREA_MM2[0] <= c.effect["chink_area_mm2"] <= G.LEAK_AREA_MM2[1]
         assert c.clean.min() >= c.effect["chink_area_mm2"] - 1e-9
-    if "+" in label:                  # both effects drawn, each with its own parameters
+    if "+" in label:  # both effects drawn, each with its own parameters
         assert set(c.effect) == set(label.split("+")) and all(c.effect.values())
 
 
 def test_aligned_sse_finds_any_subframe_lag(base):
     g = np.asarray(base.gaw_hr, dtype=float)
-    for start in (0.0, 123.0, 377.37, 1000.5):          # high-rate samples, fractional included
+    for start in (0.0, 123.0, 377.37, 1000.5):  # high-rate samples, fractional included
         t = start + 10 * np.arange(G.N_OBS)
         y = np.interp(t, np.arange(g.size), g)
         # The closed-form minimum rr + 2u rd + u^2 dd cancels terms of size sum(y^2): its round-off
         # is a few machine epsilons of that (1e-20 of it passed by luck and failed with a newer numpy).
-        assert A._aligned_sse(y, g) < 64 * np.finfo(float).eps * np.sum(y ** 2), start
+        assert A._aligned_sse(y, g) < 64 * np.finfo(float).eps * np.sum(y**2), start
     y = np.interp(377.37 + 10 * np.arange(G.N_OBS), np.arange(g.size), g)
-    assert A._aligned_sse(y + 0.5, g) > 0.5 * G.N_OBS * 0.25      # an offset is not a lag
-    assert A._aligned_sse(y, g[:100]) == np.inf                      # window shorter than the record
+    assert A._aligned_sse(y + 0.5, g) > 0.5 * G.N_OBS * 0.25  # an offset is not a lag
+    assert A._aligned_sse(y, g[:100]) == np.inf  # window shorter than the record
 
 
 def test_presence_threshold_is_the_30_percent_bound():
@@ -282,7 +294,7 @@ def test_presence_threshold_is_the_30_percent_bound():
     assert np.isclose(1 - s / np.hypot(s, e), 0.30)
 
 
-@pytest.mark.slow      # 20 s on 2 cores; make test-all runs it
+@pytest.mark.slow  # 20 s on 2 cores; make test-all runs it
 def test_unabsorbed_rms_control_and_scale(base):
     """The base model absorbs its own waveform exactly and most of a 15 % scale error (p_sub and
     the moduli trade amplitude for shape): the unabsorbed part is far below the effect itself."""
@@ -296,7 +308,7 @@ def test_unabsorbed_rms_control_and_scale(base):
     effect = np.sqrt(np.mean((scaled - clean) ** 2))
     u1, fit1 = G.unabsorbed_rms(scaled, truth, n_sobol=16, maxfev=60)
     assert 0.0 < u1 < 0.5 * effect, (u1, effect)
-    assert fit1["p_sub"] < truth.p_sub          # the amplitude loss is absorbed by a lower pressure
+    assert fit1["p_sub"] < truth.p_sub  # the amplitude loss is absorbed by a lower pressure
 
 
 def test_case_presence_flag():
@@ -312,9 +324,11 @@ def test_asymmetry_is_entrained(base):
     """A right fold of another f0 is entrained 1:1: the combined GAW has the LEFT fold's f0 and
     repeats every left cycle (a generator that inverts the warp produces beating instead)."""
     from vfcore.measures import estimate_f0
-    right = simulate(TABLE3.replace(E_body=1.3 * TABLE3.E_body, E_cover=1.3 * TABLE3.E_cover,
-                                    E_lig=1.3 * TABLE3.E_lig), CFG)
-    assert right.ok and abs(right.f0 / base.f0 - 1) > 0.08          # a clearly different fold
+
+    right = simulate(
+        TABLE3.replace(E_body=1.3 * TABLE3.E_body, E_cover=1.3 * TABLE3.E_cover, E_lig=1.3 * TABLE3.E_lig), CFG
+    )
+    assert right.ok and abs(right.f0 / base.f0 - 1) > 0.08  # a clearly different fold
     t = G.frame_times(G.N_OBS, 77.3, CFG.fps)
     a = G.asymmetric_area(base, right, t, 0.1, t[G.N_OBS // 2])
     assert abs(estimate_f0(a, CFG.fps) / base.f0 - 1) < 0.01
@@ -332,6 +346,7 @@ def test_audit_polishes_the_given_starts_and_can_only_lower_the_unabsorbed_rms(t
     absorbed (not present) even when the recorded truth and the design are elsewhere; a control
     stays a control; audit.json is written, truth.json untouched."""
     import json
+
     absorbing = {"E_body": 12.0, "E_cover": 600.0, "p_sub": 1000.0}
     r = simulate(Params(**{**TABLE3.as_dict(), **absorbing}), CFG)
     clean = G.sample_hr(np.asarray(r.gaw_hr), G.hr_times(r), G.frame_times(G.N_OBS, 97.3, CFG.fps))
@@ -339,11 +354,30 @@ def test_audit_polishes_the_given_starts_and_can_only_lower_the_unabsorbed_rms(t
     # the start alone finds it with a design of 2 points and 4 Nelder-Mead steps
     u, fit = G.unabsorbed_rms(clean, None, CFG, n_sobol=2, n_starts=1, maxfev=4, starts=[absorbing])
     assert u < 1e-6 and fit == pytest.approx(absorbing)
-    hidden = {"seed": 0, "n_obs": G.N_OBS, "cases": {
-        "00": {"label": "frame_rate", "truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": 3.0,
-               "present": True, "absorbing_fit": absorbing, "clean": clean.tolist()},
-        "01": {"label": "control", "truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": float("nan"),
-               "present": False, "absorbing_fit": {}, "clean": clean.tolist()}}}
+    hidden = {
+        "seed": 0,
+        "n_obs": G.N_OBS,
+        "cases": {
+            "00": {
+                "label": "frame_rate",
+                "truth": far,
+                "sigma_mm2": 0.5,
+                "unabsorbed_rms_mm2": 3.0,
+                "present": True,
+                "absorbing_fit": absorbing,
+                "clean": clean.tolist(),
+            },
+            "01": {
+                "label": "control",
+                "truth": far,
+                "sigma_mm2": 0.5,
+                "unabsorbed_rms_mm2": float("nan"),
+                "present": False,
+                "absorbing_fit": {},
+                "clean": clean.tolist(),
+            },
+        },
+    }
     (tmp_path / "truth.json").write_text(json.dumps(hidden))
     before = (tmp_path / "truth.json").read_text()
     doc = G.audit_presence(tmp_path, config=CFG, search={"n_sobol": 2, "n_starts": 1, "maxfev": 4}, method="design")
@@ -360,16 +394,22 @@ def test_certificate_marks_an_effect_the_base_fit_absorbs_and_never_one_it_does_
     (the same waveform scaled by 1.5) is not; controls and cases without a report are skipped; the
     suite's files are untouched and absorption.json appears beside the reports."""
     import json
+
     absorbing = {"E_body": 12.0, "E_cover": 600.0, "p_sub": 1000.0}
     r = simulate(Params(**{**TABLE3.as_dict(), **absorbing}), CFG)
     clean = G.sample_hr(np.asarray(r.gaw_hr), G.hr_times(r), G.frame_times(G.N_OBS, 97.3, CFG.fps))
     far = {**TABLE3.as_dict(), "E_body": 9.5, "E_cover": 900.0, "p_sub": 1700.0}
     t = {"truth": far, "sigma_mm2": 0.5, "unabsorbed_rms_mm2": 3.0, "present": True, "absorbing_fit": {}}
-    hidden = {"seed": 0, "n_obs": G.N_OBS, "cases": {
-        "00": {**t, "label": "frame_rate", "clean": clean.tolist()},
-        "01": {**t, "label": "scale", "clean": (1.5 * clean).tolist()},
-        "02": {**t, "label": "control", "clean": clean.tolist()},
-        "03": {**t, "label": "leak", "clean": clean.tolist()}}}
+    hidden = {
+        "seed": 0,
+        "n_obs": G.N_OBS,
+        "cases": {
+            "00": {**t, "label": "frame_rate", "clean": clean.tolist()},
+            "01": {**t, "label": "scale", "clean": (1.5 * clean).tolist()},
+            "02": {**t, "label": "control", "clean": clean.tolist()},
+            "03": {**t, "label": "leak", "clean": clean.tolist()},
+        },
+    }
     suite, reps = tmp_path / "suite", tmp_path / "reports"
     suite.mkdir()
     reps.mkdir()

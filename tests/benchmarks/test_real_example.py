@@ -1,5 +1,6 @@
 """The real clip's path before a fit (benchmarks/real_example.py): video -> GAW -> the reach of the human prior
 set, at the assumed 1000 fps and the system's typical 4000 fps, calibrated and with the area scale unknown."""
+
 from __future__ import annotations
 
 import pytest
@@ -11,7 +12,7 @@ pytestmark = pytest.mark.skipif(not rx.CLIP.is_file(), reason=f"the shared clip 
 
 def test_video_to_gaw_to_reach_on_the_real_clip():
     ex = rx.extract(rx.CLIP, 1000.0)
-    assert ex.area.size == 47 and 140.0 < ex.f0 < 155.0           # 6.7 frames per cycle at 1000 fps
+    assert ex.area.size == 47 and 140.0 < ex.f0 < 155.0  # 6.7 frames per cycle at 1000 fps
     v = {(r["fps"], r["area_scale"] is not None): r for r in rx.reach_verdicts(ex.area, [1000.0, 4000.0])}
     # 4000 fps: f0 ~594 Hz, beyond every draw of the human set, whatever the area scale
     for unknown in (False, True):

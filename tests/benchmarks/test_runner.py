@@ -1,4 +1,5 @@
 """The benchmark runner (benchmarks/runner.py) and the index (benchmarks/README.md) agree with the folder."""
+
 import sys
 from pathlib import Path
 

@@ -1,4 +1,5 @@
 """Scoring of concealed-effect benchmark runs (benchmarks/scoring.py, bench_diagnose.py --score)."""
+
 from __future__ import annotations
 
 import json
@@ -13,18 +14,30 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from benchmarks import bench_diagnose  # noqa: E402
 from benchmarks.scoring import format_summary, load_suite, summarise, wilson  # noqa: E402
 
-BOX_NOTE = ("rescue: the leak refit ended at log Z -900.0, below the base's -500.0; refitted around the base's "
-            "material mode: log Z >= -480.0 +- 0.5")
-REF_NOTE = ("rescue: the epithelium refit ended at log Z -1275.9, below the base's -616.0; refitted from the base "
-            "posterior (reference-started SMC): log Z = -700.1 +- 0.8 (not higher; the first refit is kept)")
+BOX_NOTE = (
+    "rescue: the leak refit ended at log Z -900.0, below the base's -500.0; refitted around the base's "
+    "material mode: log Z >= -480.0 +- 0.5"
+)
+REF_NOTE = (
+    "rescue: the epithelium refit ended at log Z -1275.9, below the base's -616.0; refitted from the base "
+    "posterior (reference-started SMC): log Z = -700.1 +- 0.8 (not higher; the first refit is kept)"
+)
 
 
-def _report(winner, *, physics=None, gain=50.0, rms=0.5, notes=(), irregular=None, sims=1000, wall=10.0,
-            rivals=()):
-    d = {"verdict": "...", "winner": winner, "physics": physics,
-         "rivals": [{"physics": p, "gap": 1.0, "se": 2.0} for p in rivals],
-         "base": {"log_evidence": -500.0}, "refits": {}, "ranking": [], "reference": "base",
-         "n_simulations": sims, "wall_s": wall, "notes": list(notes)}
+def _report(winner, *, physics=None, gain=50.0, rms=0.5, notes=(), irregular=None, sims=1000, wall=10.0, rivals=()):
+    d = {
+        "verdict": "...",
+        "winner": winner,
+        "physics": physics,
+        "rivals": [{"physics": p, "gap": 1.0, "se": 2.0} for p in rivals],
+        "base": {"log_evidence": -500.0},
+        "refits": {},
+        "ranking": [],
+        "reference": "base",
+        "n_simulations": sims,
+        "wall_s": wall,
+        "notes": list(notes),
+    }
     if irregular is not None:
         d["base"]["regularity"] = {"irregular": irregular}
     if winner:
@@ -34,8 +47,7 @@ def _report(winner, *, physics=None, gain=50.0, rms=0.5, notes=(), irregular=Non
 
 
 def _truth(label, *, present=True, unabs=3.0, sigma=1.0):
-    return {"label": label, "present": present, "unabsorbed_rms_mm2": unabs, "sigma_mm2": sigma,
-            "effect_loglik": 100.0}
+    return {"label": label, "present": present, "unabsorbed_rms_mm2": unabs, "sigma_mm2": sigma, "effect_loglik": 100.0}
 
 
 def _suite(tmp_path: Path, name: str, cases: dict) -> tuple[Path, Path]:
@@ -51,22 +63,42 @@ def _suite(tmp_path: Path, name: str, cases: dict) -> tuple[Path, Path]:
 
 @pytest.fixture
 def suite(tmp_path):
-    return _suite(tmp_path, "s1", {
-        "00": (_truth("leak", unabs=3.0), {**_report("leak", irregular=False, notes=[BOX_NOTE]), "cost": {
-            "by_stage": {"base fit": {"wall_s": 100.0}, "refit": {"wall_s": 200.0}, "continuation": {"wall_s": 600.0}}}}),
-        # lr_stiffness is an asymmetry model: a zipper named as it is a miss
-        "01": (_truth("zipper", unabs=1.5), _report("lr_stiffness", physics="asymmetry", irregular=True)),
-        "02": (_truth("control"), _report(None, notes=[REF_NOTE])),
-        "03": (_truth("control"), _report("scale", rms=0.2, gain=-1.0)),
-        "04": (_truth("scale", present=False, unabs=0.5), _report(None)),
-        # the physics field is absent: the scorer maps lr_stiffness to asymmetry itself
-        "05": (_truth("asymmetry", unabs=1.0), {**_report("lr_stiffness", irregular=False), "cost": {
-            "by_stage": {"base fit": {"wall_s": 20.0}, "refit": {"wall_s": 100.0}}}}),
-        # named wrong, but the truth is listed as a rival the evidence does not separate
-        "08": (_truth("scale", unabs=2.5), _report("zipper", rivals=["scale", "sep_ratio"])),
-        "06": (_truth("subglottal", unabs=5.0), {"error": "GAW has NaN at frame 3", "winner": None}),
-        "07": (_truth("epithelium", unabs=4.0), None),          # not diagnosed yet: skipped
-    })
+    return _suite(
+        tmp_path,
+        "s1",
+        {
+            "00": (
+                _truth("leak", unabs=3.0),
+                {
+                    **_report("leak", irregular=False, notes=[BOX_NOTE]),
+                    "cost": {
+                        "by_stage": {
+                            "base fit": {"wall_s": 100.0},
+                            "refit": {"wall_s": 200.0},
+                            "continuation": {"wall_s": 600.0},
+                        }
+                    },
+                },
+            ),
+            # lr_stiffness is an asymmetry model: a zipper named as it is a miss
+            "01": (_truth("zipper", unabs=1.5), _report("lr_stiffness", physics="asymmetry", irregular=True)),
+            "02": (_truth("control"), _report(None, notes=[REF_NOTE])),
+            "03": (_truth("control"), _report("scale", rms=0.2, gain=-1.0)),
+            "04": (_truth("scale", present=False, unabs=0.5), _report(None)),
+            # the physics field is absent: the scorer maps lr_stiffness to asymmetry itself
+            "05": (
+                _truth("asymmetry", unabs=1.0),
+                {
+                    **_report("lr_stiffness", irregular=False),
+                    "cost": {"by_stage": {"base fit": {"wall_s": 20.0}, "refit": {"wall_s": 100.0}}},
+                },
+            ),
+            # named wrong, but the truth is listed as a rival the evidence does not separate
+            "08": (_truth("scale", unabs=2.5), _report("zipper", rivals=["scale", "sep_ratio"])),
+            "06": (_truth("subglottal", unabs=5.0), {"error": "GAW has NaN at frame 3", "winner": None}),
+            "07": (_truth("epithelium", unabs=4.0), None),  # not diagnosed yet: skipped
+        },
+    )
 
 
 def test_wilson_matches_the_closed_form():
@@ -86,7 +118,7 @@ def test_records_join_reports_and_truth(suite):
     assert recs["00"].ok and recs["00"].irregular is False and recs["00"].rescues == [("leak", "box", True)]
     assert not recs["01"].ok and recs["01"].physics == "asymmetry"
     assert recs["02"].ok and recs["02"].rescues == [("epithelium", "reference", False)]
-    assert not recs["03"].ok                                  # a false alarm
+    assert not recs["03"].ok  # a false alarm
     assert recs["05"].ok and recs["05"].physics == "asymmetry"
     assert recs["06"].winner == "rejected" and not recs["06"].ok
     assert recs["01"].strength_sd == pytest.approx(1.5) and math.isnan(recs["02"].strength_sd)
@@ -110,13 +142,14 @@ def test_summary_counts(suite):
     assert "2/5 (40 %" in format_summary(s)
     # time by stage: only the reports that carry their cost (00 and 05), a stage absent from one counts 0 s
     assert s["wall_by_stage"] == {"cases": 2, "mean_s": {"continuation": 300.0, "refit": 150.0, "base fit": 60.0}}
-    assert "wall per case by stage (2 reports with their cost): continuation 300 s, refit 150 s, base fit 60 s" \
+    assert (
+        "wall per case by stage (2 reports with their cost): continuation 300 s, refit 150 s, base fit 60 s"
         in format_summary(s)
+    )
 
 
 def test_suites_pool(tmp_path, suite):
-    other = _suite(tmp_path, "s2", {"00": (_truth("leak"), _report("leak")),
-                                    "01": (_truth("control"), _report(None))})
+    other = _suite(tmp_path, "s2", {"00": (_truth("leak"), _report("leak")), "01": (_truth("control"), _report(None))})
     s = summarise(load_suite(*suite) + load_suite(*other))
     assert (s["present"]["named"], s["present"]["of"]) == (3, 6)
     assert (s["false_alarms"]["count"], s["false_alarms"]["of"]) == (1, 3)
@@ -157,20 +190,34 @@ def test_reference_floor_and_presence_audit(tmp_path):
     r_near = rep(None, "base near scale", base_rms=2.0, near=("scale", 1.25))
     r_null = rep("leak", "exposure", base_rms=2.0, null_refit=("exposure", 1.6))
     assert reference_rms(r_base) == 2.0 and reference_rms(r_near) == 1.25 and reference_rms(r_null) == 1.6
-    cdir, odir = _suite(tmp_path, "s", {
-        "00": (_truth("scale", unabs=3.0, sigma=1.0), r_base),     # missed, floor 50 %
-        "01": (_truth("frame_rate", unabs=3.0, sigma=1.0), r_near),  # missed, floor 20 %
-        "02": (_truth("leak", unabs=2.0, sigma=0.8), r_null),      # named right, floor 50 %
-        "03": (_truth("control"), rep(None, "base")),
-    })
-    (cdir / "audit.json").write_text(json.dumps({"cases": {
-        "00": {"present": True}, "01": {"present": False}, "02": {"present": True}, "03": {"present": False}}}))
+    cdir, odir = _suite(
+        tmp_path,
+        "s",
+        {
+            "00": (_truth("scale", unabs=3.0, sigma=1.0), r_base),  # missed, floor 50 %
+            "01": (_truth("frame_rate", unabs=3.0, sigma=1.0), r_near),  # missed, floor 20 %
+            "02": (_truth("leak", unabs=2.0, sigma=0.8), r_null),  # named right, floor 50 %
+            "03": (_truth("control"), rep(None, "base")),
+        },
+    )
+    (cdir / "audit.json").write_text(
+        json.dumps(
+            {
+                "cases": {
+                    "00": {"present": True},
+                    "01": {"present": False},
+                    "02": {"present": True},
+                    "03": {"present": False},
+                }
+            }
+        )
+    )
     recs = {r.case: r for r in load_suite(cdir, odir)}
     assert recs["00"].floor_gain == pytest.approx(0.5) and recs["01"].floor_gain == pytest.approx(0.2)
     assert recs["02"].floor_gain == pytest.approx(0.5)
     assert recs["01"].audit_present is False and recs["03"].audit_present is None
     s = summarise(list(recs.values()))
-    assert (s["present"]["named"], s["present"]["of"]) == (1, 3)             # the generator's rule
+    assert (s["present"]["named"], s["present"]["of"]) == (1, 3)  # the generator's rule
     assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 2)
     assert s["audited_cases"] == 3 and s["misses_floor_below_30pct"] == [1, 2]
     out = format_summary(s)
@@ -191,18 +238,31 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
     their effect log-likelihood), a row that does not is scored as tabled without it, and a table
     of another suite is refused by name."""
     from benchmarks.scoring import load_table
-    cases = {"00": {"label": "control", "effect_loglik": 0.0, "sigma_mm2": 0.5},
-             "04": {"label": "asymmetry", "effect_loglik": 10031.66, "unabsorbed_rms_mm2": 1.86, "sigma_mm2": 1.0,
-                    "present": True},
-             "10": {"label": "frame_rate", "effect_loglik": 431015.94, "unabsorbed_rms_mm2": 9.66, "sigma_mm2": 1.0,
-                    "present": True},
-             "14": {"label": "scale", "effect_loglik": 4438.7, "unabsorbed_rms_mm2": 1.4, "sigma_mm2": 1.0,
-                    "present": True}}
+
+    cases = {
+        "00": {"label": "control", "effect_loglik": 0.0, "sigma_mm2": 0.5},
+        "04": {
+            "label": "asymmetry",
+            "effect_loglik": 10031.66,
+            "unabsorbed_rms_mm2": 1.86,
+            "sigma_mm2": 1.0,
+            "present": True,
+        },
+        "10": {
+            "label": "frame_rate",
+            "effect_loglik": 431015.94,
+            "unabsorbed_rms_mm2": 9.66,
+            "sigma_mm2": 1.0,
+            "present": True,
+        },
+        "14": {"label": "scale", "effect_loglik": 4438.7, "unabsorbed_rms_mm2": 1.4, "sigma_mm2": 1.0, "present": True},
+    }
     cdir = tmp_path / "s"
     cdir.mkdir()
     (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
-    (cdir / "audit.json").write_text(json.dumps({"cases": {"04": {"present": True}, "10": {"present": True},
-                                                           "14": {"present": False}}}))
+    (cdir / "audit.json").write_text(
+        json.dumps({"cases": {"04": {"present": True}, "10": {"present": True}, "14": {"present": False}}})
+    )
     table = tmp_path / "score_table.txt"
     table.write_text(TABLE)
     recs = {r.case: r for r in load_table(cdir, table)}
@@ -213,8 +273,8 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
     assert recs["00"].ok and recs["00"].label == "control" and math.isnan(recs["00"].gain)
     s = summarise(list(recs.values()))
     assert (s["present"]["named"], s["present"]["of"]) == (1, 3)
-    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 2)   # 14 absorbed
-    assert s["not_regenerated"] == [] and s["misses_floor_below_30pct"] == [0, 0]     # no floor in a table
+    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 2)  # 14 absorbed
+    assert s["not_regenerated"] == [] and s["misses_floor_below_30pct"] == [0, 0]  # no floor in a table
     # a last-digit change of the forward model is the same recording (1e-4 relative)...
     cases["10"]["effect_loglik"] = 431016.2
     cases["14"]["effect_loglik"] = 4438.7 + 0.4
@@ -222,13 +282,13 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
     assert all(r.regenerated for r in load_table(cdir, table))
     # ...a changed mechanism is not: the row is scored as tabled, without the audit
     cases["14"]["effect_loglik"] = 4438.7 + 2.0
-    cases["14"]["unabsorbed_rms_mm2"] = 0.5             # the regenerated truth's strength is not used
+    cases["14"]["unabsorbed_rms_mm2"] = 0.5  # the regenerated truth's strength is not used
     (cdir / "truth.json").write_text(json.dumps({"cases": cases}))
     recs = {r.case: r for r in load_table(cdir, table)}
     assert not recs["14"].regenerated and recs["14"].audit_present is None and recs["14"].present
     assert recs["14"].strength_sd == 1.40 and recs["10"].regenerated and recs["10"].audit_present is True
     s = summarise(list(recs.values()))
-    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 3)   # 14 as tabled
+    assert (s["present_under_audit"]["named"], s["present_under_audit"]["of"]) == (1, 3)  # 14 as tabled
     assert s["not_regenerated"] == ["s/14"] and "not regenerated" in format_summary(s)
     # another suite (a label differs) or no effect row reproduced: refused by name
     cases["04"]["label"] = "leak"
@@ -246,23 +306,32 @@ def test_kept_table_is_scored_against_the_regenerated_suite(tmp_path):
 @pytest.mark.parametrize("search", ["window", "periods"])
 def test_problem_carries_lag_search(tmp_path, search):
     """--lag-search reaches the fitting problem (a controlled comparison of the two lag rules depends on it)."""
-    meta = {"model": {"mesh": "coarse", "dt": 1e-4, "duration": 0.55, "discard": 0.25},
-            "fixed": {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4}}
+    meta = {
+        "model": {"mesh": "coarse", "dt": 1e-4, "duration": 0.55, "discard": 0.25},
+        "fixed": {"E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+    }
     import numpy as np
+
     t = np.arange(400) / 2000.0
-    np.savetxt(tmp_path / "c.csv", 5.0 * np.clip(np.sin(2 * np.pi * 120 * t), 0, None)[:, None],
-               delimiter=",", header="area", comments="")
+    np.savetxt(
+        tmp_path / "c.csv",
+        5.0 * np.clip(np.sin(2 * np.pi * 120 * t), 0, None)[:, None],
+        delimiter=",",
+        header="area",
+        comments="",
+    )
     from benchmarks.suite import case_problem
+
     pb = case_problem(meta, {"file": "c.csv", "fps": 2000.0}, tmp_path, None, 1.0, None, "fixed", search)
     assert pb.lag_search == search
     assert type(pb).from_dict(pb.to_dict()).lag_search == search
-
 
 
 def test_one_case_reads_the_asked_case_and_names_a_missing_one(tmp_path):
     import json
 
     from benchmarks.suite import one_case
+
     meta = {"model": {}, "cases": [{"id": "00", "file": "a.csv"}, {"id": "07", "file": "b.csv"}]}
     (tmp_path / "cases.json").write_text(json.dumps(meta))
     got, case = one_case(tmp_path, "07")
@@ -270,15 +339,21 @@ def test_one_case_reads_the_asked_case_and_names_a_missing_one(tmp_path):
     with pytest.raises(ValueError, match="no case '7' in"):
         one_case(tmp_path, "7")
 
+
 def test_pairs_outside_effects_and_no_fit_verdicts_are_scored_apart(tmp_path):
     no_fit = {"fit_check": {"fits": False}}
-    cdir, odir = _suite(tmp_path, "full", {
-        "00": (_truth("sep_ratio+leak"), _report("leak", physics="leak")),          # either effect is right
-        "01": (_truth("epithelium+scale"), _report("zipper", physics="zipper")),    # a wrong name
-        "02": (_truth("tremor"), _report(None) | no_fit),                          # silent, by "no fit"
-        "03": (_truth("gamma"), _report("scale", physics="scale")),                # a name where none is right
-        "04": (_truth("leak"), _report(None) | no_fit),
-        "05": (_truth("control"), _report(None) | {"material": {"found": True}})})
+    cdir, odir = _suite(
+        tmp_path,
+        "full",
+        {
+            "00": (_truth("sep_ratio+leak"), _report("leak", physics="leak")),  # either effect is right
+            "01": (_truth("epithelium+scale"), _report("zipper", physics="zipper")),  # a wrong name
+            "02": (_truth("tremor"), _report(None) | no_fit),  # silent, by "no fit"
+            "03": (_truth("gamma"), _report("scale", physics="scale")),  # a name where none is right
+            "04": (_truth("leak"), _report(None) | no_fit),
+            "05": (_truth("control"), _report(None) | {"material": {"found": True}}),
+        },
+    )
     recs = {r.case: r for r in load_suite(cdir, odir)}
     assert recs["00"].ok and not recs["01"].ok and recs["02"].ok and not recs["03"].ok
     assert recs["02"].outside and recs["02"].no_fit and recs["05"].material and recs["05"].ok
@@ -296,16 +371,29 @@ def test_absorption_certificate_only_removes_cases_from_the_secondary_rate(tmp_p
     """absorption.json (generate.py --certify) takes an effect the diagnosis's base fit absorbed out of
     the secondary rate "present under the audit and not absorbed"; a case it does not show absorbed
     stays, a control is never certified, and the protocol's own rates do not move."""
-    cdir, odir = _suite(tmp_path, "s", {
-        "00": (_truth("scale"), _report(None)),                       # missed, absorbed from the base
-        "01": (_truth("leak"), _report("leak")),                      # named right, not shown absorbed
-        "02": (_truth("zipper"), _report(None)),                      # missed, not certified
-        "03": (_truth("frame_rate", present=False), _report(None)),  # absent already: never added back
-        "04": (_truth("control"), _report(None)),
-    })
-    (odir / "absorption.json").write_text(json.dumps({"cases": {
-        "00": {"absorbed": True}, "01": {"absorbed": False}, "03": {"absorbed": False},
-        "04": {"absorbed": True}}}))
+    cdir, odir = _suite(
+        tmp_path,
+        "s",
+        {
+            "00": (_truth("scale"), _report(None)),  # missed, absorbed from the base
+            "01": (_truth("leak"), _report("leak")),  # named right, not shown absorbed
+            "02": (_truth("zipper"), _report(None)),  # missed, not certified
+            "03": (_truth("frame_rate", present=False), _report(None)),  # absent already: never added back
+            "04": (_truth("control"), _report(None)),
+        },
+    )
+    (odir / "absorption.json").write_text(
+        json.dumps(
+            {
+                "cases": {
+                    "00": {"absorbed": True},
+                    "01": {"absorbed": False},
+                    "03": {"absorbed": False},
+                    "04": {"absorbed": True},
+                }
+            }
+        )
+    )
     recs = {r.case: r for r in load_suite(cdir, odir)}
     assert recs["00"].base_absorbed is True and recs["01"].base_absorbed is False
     assert recs["02"].base_absorbed is None and recs["04"].base_absorbed is None

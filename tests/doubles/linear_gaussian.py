@@ -9,6 +9,7 @@ compared with the posterior, the posterior is ``N(m, C)`` with ``C = (A^T A / s^
 
 up to the (checked, negligible) prior mass of the posterior outside the box.
 """
+
 from __future__ import annotations
 
 import math
@@ -30,19 +31,24 @@ class LinearGaussianToy:
         self.noise = float(noise)
         self.u_true = rng.uniform(0.35, 0.65, size=d)
         self.y = self.A @ self.u_true + noise * rng.normal(size=n_obs)
-        prec = self.A.T @ self.A / noise ** 2
+        prec = self.A.T @ self.A / noise**2
         self.cov_u = np.linalg.inv(prec)
-        self.mean_u = self.cov_u @ (self.A.T @ self.y / noise ** 2)
+        self.mean_u = self.cov_u @ (self.A.T @ self.y / noise**2)
         self.mean = self.lo + self.width * self.mean_u
         self.cov = self.cov_u * np.outer(self.width, self.width)
         self.sd = np.sqrt(np.diag(self.cov))
         r = self.y - self.A @ self.mean_u
-        self.log_evidence = float(-(n_obs - d) / 2 * math.log(2 * math.pi) - n_obs * math.log(noise)
-                                  - 0.5 * np.linalg.slogdet(prec)[1] - 0.5 * r @ r / noise ** 2)
+        self.log_evidence = float(
+            -(n_obs - d) / 2 * math.log(2 * math.pi)
+            - n_obs * math.log(noise)
+            - 0.5 * np.linalg.slogdet(prec)[1]
+            - 0.5 * r @ r / noise**2
+        )
         sd_u = np.sqrt(np.diag(self.cov_u))
         # posterior mass outside the unit box (marginal bound): must be negligible for exactness
-        self.truncation_mass = float(np.sum(stats.norm.cdf(-self.mean_u / sd_u)
-                                            + stats.norm.sf((1 - self.mean_u) / sd_u)))
+        self.truncation_mass = float(
+            np.sum(stats.norm.cdf(-self.mean_u / sd_u) + stats.norm.sf((1 - self.mean_u) / sd_u))
+        )
 
     def __call__(self, thetas) -> np.ndarray:
         u = (np.atleast_2d(np.asarray(thetas, dtype=float)) - self.lo) / self.width

@@ -9,6 +9,7 @@ GAW) so the queue, store, fault-tolerance and resume logic can be exercised in m
 per simulation.  Scoring (alignment window, Gaussian log-likelihood) is vfcore's, so the
 worker code path is identical to the FE one apart from the function that makes a GAW.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,9 +29,10 @@ _HERE = Path(__file__).resolve().parent
 #: Environment of a process of its own (``vfinfer serve``, a Dask worker) that must know this model: the
 #: registry imports ``toy_model`` on its first look-up, and unpickling the evaluator imports it too. The
 #: repository comes first on the path so that the test folders never shadow the packages.
-PLUGIN_ENV = {"PYTHONPATH": os.pathsep.join(p for p in (str(_HERE.parents[1]), str(_HERE),
-                                                         os.environ.get("PYTHONPATH")) if p),
-              "VFINFER_MODEL_PLUGINS": "toy_model"}
+PLUGIN_ENV = {
+    "PYTHONPATH": os.pathsep.join(p for p in (str(_HERE.parents[1]), str(_HERE), os.environ.get("PYTHONPATH")) if p),
+    "VFINFER_MODEL_PLUGINS": "toy_model",
+}
 
 
 class ToyOptions(BaseModel):
@@ -48,8 +50,13 @@ def toy_gaw(full_params: np.ndarray, fps: float, n_frames: int) -> tuple[np.ndar
     """
     p = dict(zip(PARAM_NAMES, np.asarray(full_params, dtype=float)))
     ref = TABLE3.as_dict()
-    f0 = 110.0 * math.sqrt(p["E_cover"] / ref["E_cover"]) * (p["E_body"] / ref["E_body"]) ** 0.25 \
-        * math.sqrt(ref["rho"] / p["rho"]) * (p["E_lig"] / ref["E_lig"]) ** 0.1
+    f0 = (
+        110.0
+        * math.sqrt(p["E_cover"] / ref["E_cover"])
+        * (p["E_body"] / ref["E_body"]) ** 0.25
+        * math.sqrt(ref["rho"] / p["rho"])
+        * (p["E_lig"] / ref["E_lig"]) ** 0.1
+    )
     amp = 12.0 * math.sqrt(max(p["p_sub"], 0.0) / ref["p_sub"]) * (1.0 + 0.5 * (8.4 - p["x0"]))
     tau = 0.02 * p["eta"] / ref["eta"]
     t = np.arange(n_frames) / fps
@@ -89,8 +96,9 @@ class ToyEvaluator:
         return Evaluation(loglik=ll, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax)
 
 
-def toy_observation(params: dict | None = None, fps: float = 4000.0, duration: float = 0.1,
-                    noise: float = 0.0, seed: int = 0) -> list[float]:
+def toy_observation(
+    params: dict | None = None, fps: float = 4000.0, duration: float = 0.1, noise: float = 0.0, seed: int = 0
+) -> list[float]:
     """A GAW made by the toy model (for tests), optionally with Gaussian noise (mm^2)."""
     full = TABLE3.as_array().copy()
     for k, v in (params or {}).items():

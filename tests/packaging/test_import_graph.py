@@ -4,6 +4,7 @@ library imports none of the packages built on it, and no module reads another mo
 Read from the source with ``ast`` (no imports run), counting every import statement, those inside
 functions included: a deferred import hides a loop from the interpreter but not from a reader.
 """
+
 import ast
 from pathlib import Path
 
@@ -115,17 +116,21 @@ def test_the_command_line_and_the_routes_never_import_each_other():
     edges = _graph(("service",))
     cli = {m for m in edges if m.split(".")[-1].startswith("cli")}
     routes = {m for m in edges if m.startswith("service.routers")}
-    bad = sorted(f"{a} imports {b}" for a in edges for b in edges[a]
-                 if (a in cli and b in routes) or (a in routes and b in cli))
+    bad = sorted(
+        f"{a} imports {b}" for a in edges for b in edges[a] if (a in cli and b in routes) or (a in routes and b in cli)
+    )
     assert not bad, bad
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))
 def test_a_package_imports_only_the_layers_below_it(package):
     others = set(PRODUCT) - {package} - ALLOWED[package]
-    bad = [f"{path.relative_to(ROOT)}:{line} imports {module}"
-           for m, path in _modules([package]).items() for line, module, _ in _imports(m, path)
-           if module and module.split(".")[0] in others]
+    bad = [
+        f"{path.relative_to(ROOT)}:{line} imports {module}"
+        for m, path in _modules([package]).items()
+        for line, module, _ in _imports(m, path)
+        if module and module.split(".")[0] in others
+    ]
     assert not bad, bad
 
 
@@ -153,11 +158,20 @@ def test_the_product_ships_no_test_doubles():
     through ``worker.models``, so no product module imports them and the only model the product registers is
     the finite-element one."""
     mods = _modules(PRODUCT)
-    users = [f"{path.relative_to(ROOT)}:{line}" for m, path in mods.items()
-             for line, module, _ in _imports(m, path) if module.split(".")[0] in DOUBLES]
+    users = [
+        f"{path.relative_to(ROOT)}:{line}"
+        for m, path in mods.items()
+        for line, module, _ in _imports(m, path)
+        if module.split(".")[0] in DOUBLES
+    ]
     assert not users, users
-    registered = {node.args[0].value for path in mods.values() for node in ast.walk(ast.parse(path.read_text()))
-                  if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "register_model"
-                  and node.args and isinstance(node.args[0], ast.Constant)}
+    registered = {
+        node.args[0].value
+        for path in mods.values()
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Call)
+        and getattr(node.func, "id", None) == "register_model"
+        and node.args
+        and isinstance(node.args[0], ast.Constant)
+    }
     assert registered == {"fe"}, registered
-

@@ -1,5 +1,6 @@
 """The install is what was tested: the committed lock satisfies pyproject.toml's ranges, and the
 library's core does not pull in the service or video stacks."""
+
 import re
 import subprocess
 import sys
@@ -43,17 +44,26 @@ def _direct_requirements():
 
 def test_the_lock_pins_every_direct_dependency_inside_its_range():
     pins, n_hash = _lock()
-    env = {"python_version": "3.11", "python_full_version": "3.11.7", "sys_platform": "linux",
-           "platform_system": "Linux", "platform_machine": "x86_64", "implementation_name": "cpython",
-           "platform_python_implementation": "CPython", "os_name": "posix", "extra": ""}
+    env = {
+        "python_version": "3.11",
+        "python_full_version": "3.11.7",
+        "sys_platform": "linux",
+        "platform_system": "Linux",
+        "platform_machine": "x86_64",
+        "implementation_name": "cpython",
+        "platform_python_implementation": "CPython",
+        "os_name": "posix",
+        "extra": "",
+    }
     for req in _direct_requirements():
         name = canonicalize_name(req.name)
         assert name in pins, f"{req.name} is in pyproject.toml but not in requirements.lock: run `make lock`"
         chosen = [v for v, marker in pins[name] if marker is None or marker.evaluate(env)]
         assert len(chosen) == 1, f"{req.name}: {len(chosen)} pins apply on CPython 3.11 / Linux"
-        assert req.specifier.contains(chosen[0], prereleases=True), \
+        assert req.specifier.contains(chosen[0], prereleases=True), (
             f"requirements.lock pins {req.name}=={chosen[0]} outside pyproject.toml's {req.specifier}: run `make lock`"
-        for extra in req.extras:                          # dask[distributed] -> distributed pinned too
+        )
+        for extra in req.extras:  # dask[distributed] -> distributed pinned too
             if extra == "distributed":
                 assert "distributed" in pins
     # every pin carries hashes (pip --require-hashes refuses anything else)
@@ -98,12 +108,19 @@ print(sorted(m for m in sys.modules if m.split(".")[0] in BLOCKED))
     assert out.stdout.strip().splitlines()[-1] == "[]"
 
 
-@pytest.mark.parametrize("extra,modules", [("service", ["fastapi", "dask.distributed", "zarr", "typer"]),
-                                          ("video", ["skimage", "imageio"])])
+@pytest.mark.parametrize(
+    "extra,modules", [("service", ["fastapi", "dask.distributed", "zarr", "typer"]), ("video", ["skimage", "imageio"])]
+)
 def test_each_extra_is_declared(extra, modules):
     """The optional stacks a user opts into are the ones the code imports."""
     names = {canonicalize_name(Requirement(r).name) for r in _pyproject()["project"]["optional-dependencies"][extra]}
-    dist = {"fastapi": "fastapi", "dask.distributed": "dask", "zarr": "zarr", "typer": "typer",
-            "skimage": "scikit-image", "imageio": "imageio"}
+    dist = {
+        "fastapi": "fastapi",
+        "dask.distributed": "dask",
+        "zarr": "zarr",
+        "typer": "typer",
+        "skimage": "scikit-image",
+        "imageio": "imageio",
+    }
     for m in modules:
         assert canonicalize_name(dist[m]) in names

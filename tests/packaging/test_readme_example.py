@@ -1,5 +1,6 @@
 """The README's Python example runs as written and recovers the truth it was simulated at (a README command
 that does not run is a bug)."""
+
 import re
 from pathlib import Path
 

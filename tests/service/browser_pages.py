@@ -5,6 +5,7 @@ reads what a person would see and writes a screenshot.
 Shared by ``tests/service/test_browser.py`` (every page loads, every image loads, no console error) and
 ``scripts/screenshots.py`` (the pictures in docs/img/), so the README shows what the test checked.
 """
+
 from __future__ import annotations
 
 import os
@@ -40,11 +41,12 @@ def chromium_path() -> str | None:
 @dataclass
 class PageView:
     """What the browser saw of one page."""
+
     name: str
     url: str
     status: int
     title: str
-    images: list[dict]                       # {"src": first 60 characters, "width": naturalWidth, "complete": bool}
+    images: list[dict]  # {"src": first 60 characters, "width": naturalWidth, "complete": bool}
     console_errors: list[str] = field(default_factory=list)
     failed_requests: list[str] = field(default_factory=list)
     screenshot: Path | None = None
@@ -68,6 +70,7 @@ class PageView:
 @dataclass
 class Site:
     """A running service with one finished job and one finished diagnosis of ``OWNER``."""
+
     url: str
     http: object
     job_id: str
@@ -76,18 +79,28 @@ class Site:
     def page_urls(self) -> dict[str, str]:
         """Each page's address; the two reports by a fresh signed link, as a person opens them (a browser sends
         no bearer token)."""
+
         def link(path: str) -> str:
             r = self.http.post(path, headers=auth(OWNER))
             r.raise_for_status()
             return self.url + r.json()["url"]
-        return {"job_report": link(f"/jobs/{self.job_id}/report-link"),
-                "diagnosis_report": link(f"/jobs/{self.diagnosis_job_id}/diagnosis/report-link"),
-                "docs": self.url + "/docs"}
+
+        return {
+            "job_report": link(f"/jobs/{self.job_id}/report-link"),
+            "diagnosis_report": link(f"/jobs/{self.diagnosis_job_id}/diagnosis/report-link"),
+            "docs": self.url + "/docs",
+        }
 
 
 @contextmanager
-def pages_service(data_dir: Path, client, job_spec: dict, diagnosis: dict | None = None,
-                  diagnosis_png: bytes | None = None, job_timeout_s: float = 600.0) -> Iterator[Site]:
+def pages_service(
+    data_dir: Path,
+    client,
+    job_spec: dict,
+    diagnosis: dict | None = None,
+    diagnosis_png: bytes | None = None,
+    job_timeout_s: float = 600.0,
+) -> Iterator[Site]:
     """The service on 127.0.0.1 with ``client``'s Dask cluster, ``job_spec`` run to the end as ``OWNER``'s job
     and a finished diagnosis stored beside a finished FE job: ``diagnosis`` (a report as ``vfinfer diagnose``
     writes ``diagnosis.json``; default: the sample of tests/service/test_report_diagnose.py) with its figure
@@ -96,9 +109,9 @@ def pages_service(data_dir: Path, client, job_spec: dict, diagnosis: dict | None
 
     from service.main import create_app
     from service.settings import Settings
+
     settings = Settings(data_dir=Path(data_dir), users=TOKENS, allow_toy_model=True, link_secret=LINK_SECRET)
-    with ServerThread(create_app(settings, client=client)) as srv, \
-            httpx.Client(base_url=srv.url, timeout=60) as http:
+    with ServerThread(create_app(settings, client=client)) as srv, httpx.Client(base_url=srv.url, timeout=60) as http:
         r = http.post("/jobs", json=job_spec, headers=auth(OWNER))
         assert r.status_code == 202, r.text
         job_id = r.json()["id"]
@@ -106,21 +119,24 @@ def pages_service(data_dir: Path, client, job_spec: dict, diagnosis: dict | None
         assert st["state"] == "done", st
         if diagnosis is None:
             from test_report_diagnose import REPORT
+
             diagnosis = REPORT
         if diagnosis_png is None:
             fig = http.get(f"/jobs/{job_id}/figures/gaw_fit", headers=auth(OWNER))
             fig.raise_for_status()
             diagnosis_png = fig.content
         diag_job = done_fe_job(settings, owner=OWNER)
-        store_diagnosis(settings, diag_job, report=diagnosis, png=diagnosis_png)   # as a finished diagnosis leaves it
+        store_diagnosis(settings, diag_job, report=diagnosis, png=diagnosis_png)  # as a finished diagnosis leaves it
         yield Site(srv.url, http, job_id, diag_job)
 
 
-def open_pages(urls: dict[str, str], out_dir: Path, chromium: str, width: int = 1280,
-               timeout_ms: int = 20_000) -> dict[str, PageView]:
+def open_pages(
+    urls: dict[str, str], out_dir: Path, chromium: str, width: int = 1280, timeout_ms: int = 20_000
+) -> dict[str, PageView]:
     """Open each page in one headless Chromium, wait until it is shown, and write ``out_dir/<name>.png`` (the
     whole page). Console errors, uncaught exceptions and failed or refused requests are collected per page."""
     from playwright.sync_api import sync_playwright
+
     out_dir.mkdir(parents=True, exist_ok=True)
     views = {}
     with sync_playwright() as pw:
@@ -133,17 +149,32 @@ def open_pages(urls: dict[str, str], out_dir: Path, chromium: str, width: int = 
                 page.on("console", lambda m, errors=errors: errors.append(m.text) if m.type == "error" else None)
                 page.on("pageerror", lambda e, errors=errors: errors.append(f"uncaught: {e}"))
                 page.on("requestfailed", lambda r, failed=failed: failed.append(f"{r.url[:100]} ({r.failure})"))
-                page.on("response", lambda r, failed=failed: failed.append(f"{r.url[:100]} (HTTP {r.status})")
-                        if r.status >= 400 else None)
+                page.on(
+                    "response",
+                    lambda r, failed=failed: (
+                        failed.append(f"{r.url[:100]} (HTTP {r.status})") if r.status >= 400 else None
+                    ),
+                )
                 resp = page.goto(url, wait_until="load", timeout=timeout_ms)
                 page.wait_for_selector(PAGES.get(name, "body"), timeout=timeout_ms)
                 page.wait_for_load_state("networkidle", timeout=timeout_ms)
-                images = page.evaluate("() => Array.from(document.images).map(i => ({src: i.src.slice(0, 60), "
-                                       "width: i.naturalWidth, complete: i.complete}))")
+                images = page.evaluate(
+                    "() => Array.from(document.images).map(i => ({src: i.src.slice(0, 60), "
+                    "width: i.naturalWidth, complete: i.complete}))"
+                )
                 shot = out_dir / f"{name}.png"
                 page.screenshot(path=str(shot), full_page=True)
-                views[name] = PageView(name, url, resp.status if resp else 0, page.title(), images, errors, failed,
-                                       shot, page.evaluate("() => document.documentElement.scrollHeight"))
+                views[name] = PageView(
+                    name,
+                    url,
+                    resp.status if resp else 0,
+                    page.title(),
+                    images,
+                    errors,
+                    failed,
+                    shot,
+                    page.evaluate("() => document.documentElement.scrollHeight"),
+                )
                 page.close()
         finally:
             browser.close()

@@ -1,5 +1,6 @@
 """Fixtures: one in-process LocalCluster (2 worker processes x 1 thread) and a real uvicorn
 server on 127.0.0.1 running the app against it."""
+
 from __future__ import annotations
 
 import os
@@ -19,6 +20,7 @@ from service.settings import Settings  # noqa: E402
 @pytest.fixture(scope="session")
 def dask_client():
     from distributed import Client, LocalCluster
+
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
     client = Client(cluster)
     yield client
@@ -28,8 +30,9 @@ def dask_client():
 
 @pytest.fixture
 def settings(tmp_path) -> Settings:
-    return Settings(data_dir=tmp_path / "data", users=TOKENS, allow_toy_model=True, max_running_jobs=4,
-                    max_body_bytes=2_000_000)
+    return Settings(
+        data_dir=tmp_path / "data", users=TOKENS, allow_toy_model=True, max_running_jobs=4, max_body_bytes=2_000_000
+    )
 
 
 @pytest.fixture
@@ -41,5 +44,3 @@ def service(settings, dask_client):
         with httpx.Client(base_url=srv.url, timeout=60) as http:
             srv.http = http
             yield srv
-
-

@@ -2,6 +2,7 @@
 a process of its own and kills it: the stand-in is deterministic given its seed, evaluates batch after batch
 through the service's map (so the diagnosis's store keeps every finished part), and takes a few seconds, so a
 kill lands in the middle of it. Its figure is bytes made from its report."""
+
 from __future__ import annotations
 
 import functools
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 BATCHES, PARTS, PAUSE_S = 24, 4, 0.25
-ROW_SUM = functools.partial(np.sum, axis=1)       # picklable without this script on the workers' path
+ROW_SUM = functools.partial(np.sum, axis=1)  # picklable without this script on the workers' path
 
 
 class _Report:
@@ -33,14 +34,29 @@ def diagnose(problem, *, map, seed: int = 0, progress=None, **settings):
         total += float(sum(np.sum(getattr(o, "loglik", o)) for o in out))
         n += 3 * PARTS
         if progress is not None:
-            progress({"stage": "base fit", "entry": None, "step": b + 1, "steps": BATCHES, "simulations": n,
-                      "elapsed_s": time.perf_counter() - t0})
+            progress(
+                {
+                    "stage": "base fit",
+                    "entry": None,
+                    "step": b + 1,
+                    "steps": BATCHES,
+                    "simulations": n,
+                    "elapsed_s": time.perf_counter() - t0,
+                }
+            )
         time.sleep(PAUSE_S)
     wall = time.perf_counter() - t0
-    return _Report({"verdict": f"stand-in sum {total!r}", "winner": None, "n_simulations": n, "wall_s": wall,
-                    "base": {"sum": total, "n_observed": int(problem.obs_gaw.size), "wall_s": wall},
-                    "settings": {k: v for k, v in sorted(settings.items()) if k != "chunk_size"},
-                    "cost": {"by_stage": {"base fit": {"wall_s": wall, "simulations": n}}}})
+    return _Report(
+        {
+            "verdict": f"stand-in sum {total!r}",
+            "winner": None,
+            "n_simulations": n,
+            "wall_s": wall,
+            "base": {"sum": total, "n_observed": int(problem.obs_gaw.size), "wall_s": wall},
+            "settings": {k: v for k, v in sorted(settings.items()) if k != "chunk_size"},
+            "cost": {"by_stage": {"base fit": {"wall_s": wall, "simulations": n}}},
+        }
+    )
 
 
 def plot_diagnosis(report, problem, path) -> None:
@@ -50,6 +66,8 @@ def plot_diagnosis(report, problem, path) -> None:
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
     import vfcore.diagnose.pipeline as P
+
     P.diagnose, P.plot_diagnosis = diagnose, plot_diagnosis
     from service.cli import main
+
     sys.exit(main())

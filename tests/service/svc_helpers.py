@@ -1,4 +1,5 @@
 """Helpers shared by the service tests (imported by name: the test folders are not packages)."""
+
 from __future__ import annotations
 
 import os
@@ -13,7 +14,7 @@ from pathlib import Path
 import uvicorn
 
 _DOUBLES = str(Path(__file__).resolve().parents[1] / "doubles")
-if _DOUBLES not in sys.path:        # benchmarks/bench_service.py imports this module by name, outside pytest
+if _DOUBLES not in sys.path:  # benchmarks/bench_service.py imports this module by name, outside pytest
     sys.path.insert(0, _DOUBLES)
 from toy_model import PLUGIN_ENV, toy_observation  # noqa: E402
 
@@ -26,12 +27,18 @@ def auth(user: str) -> dict:
 
 def toy_spec(n: int = 400, seed: int = 1, delay: float = 0.0, sampler: dict | None = None, **kw) -> dict:
     """A valid toy-model job (the analytic test double; see tests/doubles/toy_model.py)."""
-    spec = {"model": "toy", "model_options": {"delay_s": delay},
-            "gaw": {"areas": toy_observation(noise=0.5, seed=7), "fps": 4000.0, "units": "mm2"},
-            "priors": {"E_cover": [450.0, 850.0], "p_sub": [700.0, 1300.0]},
-            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
-            "sampler": sampler or {"kind": "is", "n_samples": n},
-            "duration": 0.35, "discard": 0.2, "sigma_e": 10.0, "seed": seed}
+    spec = {
+        "model": "toy",
+        "model_options": {"delay_s": delay},
+        "gaw": {"areas": toy_observation(noise=0.5, seed=7), "fps": 4000.0, "units": "mm2"},
+        "priors": {"E_cover": [450.0, 850.0], "p_sub": [700.0, 1300.0]},
+        "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+        "sampler": sampler or {"kind": "is", "n_samples": n},
+        "duration": 0.35,
+        "discard": 0.2,
+        "sigma_e": 10.0,
+        "seed": seed,
+    }
     spec.update(kw)
     return spec
 
@@ -39,18 +46,27 @@ def toy_spec(n: int = 400, seed: int = 1, delay: float = 0.0, sampler: dict | No
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def start_service(data_dir: Path, script: list[str] | None = None, env: dict | None = None
-                  ) -> tuple[subprocess.Popen, int]:
+def start_service(
+    data_dir: Path, script: list[str] | None = None, env: dict | None = None
+) -> tuple[subprocess.Popen, int]:
     """``vfinfer serve`` (or ``script``, a command line run with this Python that serves the same way) in its own
     process group, with a LocalCluster of 2 workers and the test tokens, on ``data_dir``; returns the process and
     its port once both workers answer. The service is given port 0 and binds before it starts anything else: the
     port is the system's pick, named on its ``listening on`` line, and no other process can take it in between
     (a port looked up free here and handed over would be free only until something else bound it)."""
-    env = {**os.environ, "VFINFER_DATA_DIR": str(data_dir), "VFINFER_ALLOW_TOY": "1", "VFINFER_N_WORKERS": "2",
-           "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()), "OMP_NUM_THREADS": "1", **PLUGIN_ENV,
-           **(env or {})}
+    env = {
+        **os.environ,
+        "VFINFER_DATA_DIR": str(data_dir),
+        "VFINFER_ALLOW_TOY": "1",
+        "VFINFER_N_WORKERS": "2",
+        "VFINFER_TOKENS": ",".join(f"{u}:{t}" for u, t in TOKENS.items()),
+        "OMP_NUM_THREADS": "1",
+        **PLUGIN_ENV,
+        **(env or {}),
+    }
     import httpx
-    log = data_dir.parent / f"serve_{time.time_ns()}.log"       # kept for the error message
+
+    log = data_dir.parent / f"serve_{time.time_ns()}.log"  # kept for the error message
     argv = [sys.executable, *(script or ["-m", "service.cli"]), "serve", "--port", "0"]
     with open(log, "wb") as fh:
         p = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
@@ -68,8 +84,10 @@ def start_service(data_dir: Path, script: list[str] | None = None, env: dict | N
         if time.time() - t0 > 180 or p.poll() is not None:
             rc = p.poll()
             kill_service(p)
-            raise RuntimeError(f"service did not start (port {port}) within {time.time() - t0:.0f} s "
-                               f"(exit code {rc}); its output:\n{log.read_text(errors='replace')[-3000:]}")
+            raise RuntimeError(
+                f"service did not start (port {port}) within {time.time() - t0:.0f} s "
+                f"(exit code {rc}); its output:\n{log.read_text(errors='replace')[-3000:]}"
+            )
         time.sleep(0.2)
 
 
@@ -77,6 +95,7 @@ def listening_port(log: str, prefix: str) -> int | None:
     """The port in the first ``<prefix><port>`` of a process's output (``prefix`` a regular expression), or None
     before it is written."""
     import re
+
     m = re.search(prefix + r"(\d+)", log)
     return int(m.group(1)) if m else None
 
@@ -100,8 +119,9 @@ class ServerThread:
         self.sock.listen(2048)
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}"
-        self.server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning",
-                                                    lifespan="on"))
+        self.server = uvicorn.Server(
+            uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning", lifespan="on")
+        )
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
     def __enter__(self):
@@ -139,6 +159,7 @@ class HalfSquare:
         import numpy as np
 
         from vfcore.inference.problem import Evaluation
+
         return Evaluation.from_loglik(-0.5 * np.sum(np.asarray(rows) ** 2, axis=1))
 
 
@@ -151,6 +172,7 @@ def dying_diagnosis(seen: list, message: str, n_parts: int = 3):
         seen.append(map)
         list(map(HalfSquare(), [np.full((2, 1), float(k)) for k in range(n_parts)]))
         raise RuntimeError(message)
+
     return diagnose
 
 
@@ -163,13 +185,22 @@ def done_fe_job(settings, owner: str = "alice", spec: dict | None = None) -> str
 
     from service.db import JobDB
     from service.manager import new_job_id
+
     if spec is None:
         t = np.arange(800) / 4000.0
         areas = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0) + 0.5
-        spec = {"model": "fe", "gaw": {"areas": [float(a) for a in areas], "fps": 4000.0, "units": "mm2"},
-                "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
-                "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1, "mesh": "coarse",
-                "dt": 1e-4, "duration": 0.35, "discard": 0.15}
+        spec = {
+            "model": "fe",
+            "gaw": {"areas": [float(a) for a in areas], "fps": 4000.0, "units": "mm2"},
+            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4, "p_sub": 1000.0},
+            "sampler": {"kind": "is", "n_samples": 16},
+            "sigma_e": 1.0,
+            "seed": 1,
+            "mesh": "coarse",
+            "dt": 1e-4,
+            "duration": 0.35,
+            "discard": 0.15,
+        }
     settings.stores_dir.mkdir(parents=True, exist_ok=True)
     db = JobDB(settings.db_path)
     jid = new_job_id()
@@ -185,18 +216,32 @@ def leaky_fe_spec(fps: float = 4000.0) -> dict:
     import numpy as np
 
     from vfcore import TABLE3, SimConfig, simulate
+
     cfg = dict(mesh="coarse", dt=1e-4, duration=0.35, discard=0.15)
     r = simulate(TABLE3, SimConfig(fps=fps, **cfg))
     assert r.ok, r.message
     y = np.clip(r.gaw + 1.5 + np.random.default_rng(3).normal(0.0, 0.3, r.gaw.size), 0.0, None)
     fixed = {k: v for k, v in TABLE3.as_dict().items() if k != "E_cover"}
-    return {"model": "fe", "gaw": {"areas": [float(a) for a in y], "fps": fps, "units": "mm2"},
-            "fixed": fixed, "sampler": {"kind": "is", "n_samples": 16}, "sigma_e": 1.0, "seed": 1,
-            "chunk_size": 8, **cfg}
+    return {
+        "model": "fe",
+        "gaw": {"areas": [float(a) for a in y], "fps": fps, "units": "mm2"},
+        "fixed": fixed,
+        "sampler": {"kind": "is", "n_samples": 16},
+        "sigma_e": 1.0,
+        "seed": 1,
+        "chunk_size": 8,
+        **cfg,
+    }
 
 
-def store_diagnosis(settings, job_id: str, state: str = "done", report: dict | None = None, png: bytes | None = None,
-                    error: str | None = None) -> str:
+def store_diagnosis(
+    settings,
+    job_id: str,
+    state: str = "done",
+    report: dict | None = None,
+    png: bytes | None = None,
+    error: str | None = None,
+) -> str:
     """A diagnosis of the finished job ``job_id`` put straight into the job table and its store, as the service
     leaves one in ``state`` (``report``: as ``DiagnoseReport.to_dict()`` after ``jsonable``, its ``request`` the
     settings); returns the diagnosis's id."""
@@ -205,6 +250,7 @@ def store_diagnosis(settings, job_id: str, state: str = "done", report: dict | N
     from service.api_models import DiagnoseRequest, DiagnosisSpec
     from service.db import JobDB, new_job_id
     from service.diagnosis import write_report
+
     db = JobDB(settings.db_path)
     try:
         owner = db.get(job_id)["owner"]
@@ -232,8 +278,12 @@ def show_running(manager, diag_id: str, event: dict):
 
     @contextmanager
     def _cm():
-        live = Live(progress=Progress(n_done=event.get("simulations", 0), phase=event["stage"]),
-                    control=JobControl(), started=0.0, event=event)
+        live = Live(
+            progress=Progress(n_done=event.get("simulations", 0), phase=event["stage"]),
+            control=JobControl(),
+            started=0.0,
+            event=event,
+        )
         with manager._lock:
             manager._live[diag_id] = live
         try:
@@ -241,4 +291,5 @@ def show_running(manager, diag_id: str, event: dict):
         finally:
             with manager._lock:
                 manager._live.pop(diag_id, None)
+
     return _cm()

@@ -1,4 +1,5 @@
 """Submit -> poll -> fetch through a real uvicorn server; equality with vfcore called directly."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -10,6 +11,7 @@ from worker.jobspec import JobSpec
 
 def _direct_is(spec_dict):
     from vfcore.inference.importance import importance_sample
+
     spec = JobSpec.model_validate(spec_dict)
     problem = spec.to_problem()
     return importance_sample(ToyEvaluator(problem), problem.prior, spec.sampler.n_samples, spec.seed, chunk_size=37)
@@ -21,6 +23,7 @@ def _check_netcdf(blob: bytes, direct) -> None:
     import tempfile
 
     import arviz as az
+
     with tempfile.NamedTemporaryFile(suffix=".nc") as fh:
         fh.write(blob)
         fh.flush()
@@ -40,7 +43,7 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     assert r.status_code == 202, r.text
     job_id = r.json()["id"]
     assert len(job_id) == 32
-    assert r.json()["expected_simulations"] == [600, 600]        # importance sampling: exactly its draws
+    assert r.json()["expected_simulations"] == [600, 600]  # importance sampling: exactly its draws
     st = wait_done(http, job_id, "alice")
     assert st["state"] == "done", st
     assert st["progress"]["simulations_done"] == st["progress"]["simulations_total"] == 600
@@ -55,12 +58,12 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     assert post["ess"] == direct.ess
     assert [row["mean"] for row in post["table"]] == [float(m) for m in direct.mean]
     assert post["predictive"]["mean_contact"]["mean"] > 0
-    ident = post["identifiability"]                      # what the data determined, stored with the job
+    ident = post["identifiability"]  # what the data determined, stored with the job
     assert [r["name"] for r in ident["parameters"]] == ["E_cover", "p_sub"]
-    assert abs(ident["parameters"][0]["prior_sd"] - 400.0 / 12 ** 0.5) < 1e-9
+    assert abs(ident["parameters"][0]["prior_sd"] - 400.0 / 12**0.5) < 1e-9
     csv = http.get(f"/jobs/{job_id}/samples", headers=auth("alice"))
     assert csv.headers["content-type"].startswith("text/csv")
-    assert csv.text.splitlines()[0] == "E_cover,p_sub,log_weight,weight,n_resampled"   # plain CSV, no comment line
+    assert csv.text.splitlines()[0] == "E_cover,p_sub,log_weight,weight,n_resampled"  # plain CSV, no comment line
     rows = list(__import__("csv").DictReader(csv.text.splitlines()))
     assert len(rows) == 600 and sum(int(r["n_resampled"]) for r in rows) == direct.resampled.size
     meta = http.get(f"/jobs/{job_id}/samples", params={"format": "meta"}, headers=auth("alice")).json()
@@ -71,7 +74,7 @@ def test_submit_poll_fetch_same_posterior_as_direct(service):
     page = http.get(f"/jobs/{job_id}/report", headers=auth("alice"))
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
     assert page.text.count("data:image/png;base64,") == 3 and "90 % interval" in page.text
-    assert "http://" not in page.text and "https://" not in page.text          # readable offline
+    assert "http://" not in page.text and "https://" not in page.text  # readable offline
     assert http.get(f"/jobs/{job_id}/report", headers=auth("bob")).status_code == 404
     assert http.get(f"/jobs/{job_id}/report").status_code == 401
     for name in ("gaw_fit", "corner", "contact_pressure"):
@@ -97,13 +100,16 @@ def _smc_job(http, spec):
 
 def test_smc_generation_by_generation_matches_direct(service):
     from vfcore.inference.smc import smc
+
     http = service.http
     spec = toy_spec(seed=5, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3})
     job_id, st, js, s, pb = _smc_job(http, spec)
     direct = smc(ToyEvaluator(pb), pb.prior, 60, s.seed, **s.sampler.sampler_options())
     np.testing.assert_array_equal(np.array(js["samples"]), direct.samples)
     post = http.get(f"/jobs/{job_id}/posterior", headers=auth("bob")).json()
-    assert post["method"] == "smc" and post["n_simulations"] == direct.n_simulations == st["progress"]["simulations_done"]
+    assert (
+        post["method"] == "smc" and post["n_simulations"] == direct.n_simulations == st["progress"]["simulations_done"]
+    )
 
 
 def test_smc_with_delayed_acceptance_matches_direct(service):
@@ -112,9 +118,11 @@ def test_smc_with_delayed_acceptance_matches_direct(service):
     import dataclasses
 
     from vfcore.inference.smc import smc
+
     http = service.http
-    spec = toy_spec(seed=6, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3,
-                                     "screen": {"mesh": "coarse", "dt": 1e-4}})
+    spec = toy_spec(
+        seed=6, sampler={"kind": "smc", "n_particles": 60, "max_moves": 3, "screen": {"mesh": "coarse", "dt": 1e-4}}
+    )
     job_id, st, js, s, pb = _smc_job(http, spec)
     cheap = dataclasses.replace(pb, config=pb.config.replace(mesh="coarse", dt=1e-4))
     direct = smc(ToyEvaluator(pb), pb.prior, 60, s.seed, screen=ToyEvaluator(cheap), **s.sampler.sampler_options())
@@ -127,6 +135,7 @@ def test_smc_with_delayed_acceptance_matches_direct(service):
 
 def test_cancel_frees_cluster(service):
     import time
+
     http = service.http
     job_id = http.post("/jobs", json=toy_spec(n=400, delay=0.02, chunk_size=10), headers=auth("carol")).json()["id"]
     wait_done(http, job_id, "carol", states=("running",))
@@ -159,6 +168,7 @@ def test_smc_independent_runs_match_direct(service):
     pools them as vfcore's smc(..., runs=K) does in one process."""
     from vfcore.inference.runs import run_seeds
     from vfcore.inference.smc import smc
+
     http = service.http
     spec = toy_spec(seed=7, sampler={"kind": "smc", "n_particles": 40, "max_moves": 3, "runs": 2})
     job_id, st, js, s, pb = _smc_job(http, spec)

@@ -5,6 +5,7 @@ no console error and request nothing that fails. A screenshot of each page is wr
 
 The browser is the system's Chromium (Debian's ``chromium``, installed by .ci/run), driven by Playwright;
 without one the test is skipped and says so."""
+
 from __future__ import annotations
 
 import os
@@ -16,8 +17,10 @@ from browser_pages import PAGES, chromium_path, open_pages, pages_service
 from svc_helpers import toy_spec
 
 CHROMIUM = chromium_path()
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium, "
-                                                         "or VFINFER_CHROMIUM=/path/to/chrome)")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None,
+    reason="no Chromium on this machine (apt-get install chromium, or VFINFER_CHROMIUM=/path/to/chrome)",
+)
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +40,7 @@ def test_page_loads_with_every_image_and_no_console_error(views, name):
     v = views[name]
     assert not v.problems(), (v.url, v.problems())
     assert v.title and v.height_px > 300, (v.title, v.height_px)
-    assert v.screenshot.stat().st_size > 10_000, v.screenshot          # a page was drawn, not a blank
+    assert v.screenshot.stat().st_size > 10_000, v.screenshot  # a page was drawn, not a blank
     print(f"{name}: {v.screenshot} ({v.height_px} px high)")
 
 

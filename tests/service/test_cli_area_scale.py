@@ -1,5 +1,6 @@
 """An unknown area scale on the command line and in the job spec (`vfinfer infer --area-scale LO:HI`,
 `--uncalibrated`; JobSpec.area_scale, the REST body): carried into the job, its posterior reported."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,9 +13,30 @@ from service.cli import app
 from worker.jobspec import JobSpec
 
 TRUE_K = 1.7
-ARGS = ["--model", "toy", "--duration", "0.35", "--discard", "0.2", "--noise", "marginal", "--prior",
-        "E_cover=450:850", "--fix", "p_sub=989.9", "--fix", "E_body=12.15", "--fix", "E_lig=1.808", "--fix", "rho=1051",
-        "--fix", "eta=3.079", "--fix", "x0=8.4"]
+ARGS = [
+    "--model",
+    "toy",
+    "--duration",
+    "0.35",
+    "--discard",
+    "0.2",
+    "--noise",
+    "marginal",
+    "--prior",
+    "E_cover=450:850",
+    "--fix",
+    "p_sub=989.9",
+    "--fix",
+    "E_body=12.15",
+    "--fix",
+    "E_lig=1.808",
+    "--fix",
+    "rho=1051",
+    "--fix",
+    "eta=3.079",
+    "--fix",
+    "x0=8.4",
+]
 
 
 def _scaled_gaw_file(tmp_path):
@@ -22,6 +44,7 @@ def _scaled_gaw_file(tmp_path):
     from toy_model import toy_observation
 
     from vfvideo.io import write_gaw_csv
+
     a = TRUE_K * np.array(toy_observation()) + 0.3 * np.random.default_rng(3).standard_normal(400)
     return write_gaw_csv(tmp_path / "gaw.csv", np.arange(a.size) / 4000.0, a, 4000.0)
 
@@ -34,6 +57,7 @@ def test_infer_fits_the_area_scale_and_prints_it(tmp_path, monkeypatch, opts, bo
     import service.cli as cli
     from vfcore.inference import importance_sample
     from worker.reduce import area_scale_of, posterior_summary
+
     seen = {}
 
     def fake_run_local(spec, out, workers, job_id="local"):
@@ -45,14 +69,18 @@ def test_infer_fits_the_area_scale_and_prints_it(tmp_path, monkeypatch, opts, bo
         summary = posterior_summary(post)
         summary["area_scale"] = scale
         return summary
+
     monkeypatch.setattr(cli, "run_local", fake_run_local)
-    r = CliRunner().invoke(app, ["infer", str(_scaled_gaw_file(tmp_path)), *ARGS, *opts, "-o", str(tmp_path / "o")],
-                           env={"COLUMNS": "250"})
+    r = CliRunner().invoke(
+        app, ["infer", str(_scaled_gaw_file(tmp_path)), *ARGS, *opts, "-o", str(tmp_path / "o")], env={"COLUMNS": "250"}
+    )
     assert r.exit_code == 0, r.output
     assert seen["spec"].area_scale == box and seen["spec"].to_problem().area_scale == box
     s = seen["scale"]
     assert s["q05"] <= TRUE_K <= s["q95"] and s["sd"] < 0.05, s
-    assert "area scale k (recorded / true area)" in r.output and f"prior uniform on [{box[0]:g}, {box[1]:g}]" in r.output
+    assert (
+        "area scale k (recorded / true area)" in r.output and f"prior uniform on [{box[0]:g}, {box[1]:g}]" in r.output
+    )
     # the predictive is what the camera records: scaled, so it fits the recording
     y = seen["spec"].to_problem().obs_compared
     g = np.asarray(seen["pred"].gaw, dtype=float)

@@ -1,6 +1,7 @@
 """The command line's conventions: --version and -h, the README's `simulate -o`, a warning when the fold does
 not oscillate, negative GAW samples within noise kept as measured (deeper ones refused), output folders that appear whole
 (--overwrite to replace one), human times in `status`, and `list` / `cancel` against a running service."""
+
 from __future__ import annotations
 
 import json
@@ -15,9 +16,34 @@ from typer.testing import CliRunner
 from service.cli import app
 from service.cli_common import human_duration, human_time
 
-TOY = ["--model", "toy", "--sampler", "is", "--n", "40", "--duration", "0.35", "--discard", "0.2", "--sigma-e", "10",
-       "--prior", "E_cover=450:850", "--prior", "p_sub=700:1300", "--fix", "E_body=12.15", "--fix", "E_lig=1.808",
-       "--fix", "rho=1051", "--fix", "eta=3.079", "--fix", "x0=8.4"]
+TOY = [
+    "--model",
+    "toy",
+    "--sampler",
+    "is",
+    "--n",
+    "40",
+    "--duration",
+    "0.35",
+    "--discard",
+    "0.2",
+    "--sigma-e",
+    "10",
+    "--prior",
+    "E_cover=450:850",
+    "--prior",
+    "p_sub=700:1300",
+    "--fix",
+    "E_body=12.15",
+    "--fix",
+    "E_lig=1.808",
+    "--fix",
+    "rho=1051",
+    "--fix",
+    "eta=3.079",
+    "--fix",
+    "x0=8.4",
+]
 
 
 def _invoke(args, **env):
@@ -26,12 +52,14 @@ def _invoke(args, **env):
 
 def _toy_gaw(path, areas=None):
     from vfvideo.io import write_gaw_csv
+
     a = np.array(toy_spec()["gaw"]["areas"]) if areas is None else areas
     return write_gaw_csv(path, np.arange(a.size) / 4000.0, a, 4000.0)
 
 
 def test_version_and_short_help():
     from importlib.metadata import version
+
     r = _invoke(["--version"])
     assert r.exit_code == 0 and r.stdout.strip() == f"vfinfer {version('vfinfer')}"
     for args in ([], ["infer"], ["status"]):
@@ -42,9 +70,18 @@ def test_version_and_short_help():
 def test_every_option_says_its_unit_or_meaning():
     """No option of a command is left without help text; the physical ones name their unit."""
     import typer.main
+
     cmd = typer.main.get_command(app)
-    units = {"--dt": " s", "--duration": " s", "--discard": " s", "--sigma-e": "mm^2", "--fps": "frames/s",
-             "--px-per-mm": "mm", "--segment-s": " s", "--fmax": "Hz"}
+    units = {
+        "--dt": " s",
+        "--duration": " s",
+        "--discard": " s",
+        "--sigma-e": "mm^2",
+        "--fps": "frames/s",
+        "--px-per-mm": "mm",
+        "--segment-s": " s",
+        "--fmax": "Hz",
+    }
     for name, sub in cmd.commands.items():
         for p in sub.params:
             if getattr(p, "hidden", False) or not getattr(p, "opts", None) or p.opts[0] in ("--help",):
@@ -62,6 +99,7 @@ def test_the_command_lines_choices_are_the_models():
 
     from service import cli_options
     from vfcore.config import CONTACTS, ELEMENTS
+
     assert cli_options.CONTACTS == CONTACTS and cli_options.ELEMENTS == ELEMENTS
     for option, values in ((cli_options.Contact, CONTACTS), (cli_options.Element, ELEMENTS)):
         parse = option.__metadata__[0].parser
@@ -73,6 +111,7 @@ def test_the_command_lines_choices_are_the_models():
 def test_simulate_o_writes_the_readme_file(tmp_path):
     """README: `vfinfer simulate -o gaw.csv` (coarse mesh here, for speed)."""
     from vfvideo.io import read_gaw
+
     out = tmp_path / "gaw.csv"
     r = _invoke(["simulate", "--mesh", "coarse", "-o", str(out)])
     assert r.exit_code == 0, r.output
@@ -82,9 +121,13 @@ def test_simulate_o_writes_the_readme_file(tmp_path):
 
 def test_simulate_warns_when_the_fold_does_not_oscillate(tmp_path, monkeypatch):
     import vfcore.forward as forward
+
     t = np.arange(600) / 2000.0
-    monkeypatch.setattr(forward, "simulate", lambda p, c: SimpleNamespace(
-        ok=True, t=t, gaw=np.full(t.size, 2.1), fps=2000.0, f0=float("nan"), message=""))
+    monkeypatch.setattr(
+        forward,
+        "simulate",
+        lambda p, c: SimpleNamespace(ok=True, t=t, gaw=np.full(t.size, 2.1), fps=2000.0, f0=float("nan"), message=""),
+    )
     r = _invoke(["simulate", "--param", "p_sub=50", "-o", str(tmp_path / "g.csv")])
     assert r.exit_code == 0, r.output
     assert "nan" not in r.stdout.lower()
@@ -96,6 +139,7 @@ def test_simulate_warns_when_the_fold_does_not_oscillate(tmp_path, monkeypatch):
 def fake_run(monkeypatch):
     """``run_local`` stand-in: records the spec and writes one file, like a run's products."""
     import service.cli as cli
+
     seen = []
 
     def run_local(spec, out, workers, job_id="local"):
@@ -103,6 +147,7 @@ def fake_run(monkeypatch):
         out.mkdir(parents=True, exist_ok=True)
         (out / "posterior.json").write_text(f"run {len(seen)}")
         return {"table": [], "method": "importance", "n_simulations": 1, "n_failed": 0, "ess": 1.0}
+
     monkeypatch.setattr(cli, "run_local", run_local)
     return seen
 
@@ -114,17 +159,18 @@ def test_negative_samples_within_the_noise_are_kept_as_measured(tmp_path, fake_r
     from pydantic import ValidationError
 
     from worker.jobspec import JobSpec
+
     clean = np.array(toy_spec()["gaw"]["areas"])
     areas = clean + np.random.default_rng(3).normal(0.0, 0.5, clean.size)
-    assert areas.min() < -0.5                                   # noise sd 0.5 mm^2 around the closed phase
+    assert areas.min() < -0.5  # noise sd 0.5 mm^2 around the closed phase
     gaw = _toy_gaw(tmp_path / "neg.csv", areas)
     r = _invoke(["infer", str(gaw), *TOY, "--out", str(tmp_path / "o")])
     assert r.exit_code == 0, r.output
     assert not [ln for ln in r.stderr.splitlines() if "negative" in ln], r.stderr
     got = np.array(fake_run[0].gaw.areas)
-    np.testing.assert_allclose(got, areas, rtol=1e-8, atol=1e-9)    # the CSV keeps 9 significant digits
+    np.testing.assert_allclose(got, areas, rtol=1e-8, atol=1e-9)  # the CSV keeps 9 significant digits
     deep = areas.copy()
-    deep[10] = -20.0                                            # 40 noise sds: a baseline error
+    deep[10] = -20.0  # 40 noise sds: a baseline error
     r = _invoke(["infer", str(_toy_gaw(tmp_path / "deep.csv", deep)), *TOY, "--out", str(tmp_path / "o2")])
     assert r.exit_code == 2 and "beyond the recording's noise" in r.stderr and len(fake_run) == 1
     body = {**toy_spec(), "gaw": {**toy_spec()["gaw"], "areas": deep.tolist()}}
@@ -135,6 +181,7 @@ def test_negative_samples_within_the_noise_are_kept_as_measured(tmp_path, fake_r
 
 def test_an_output_folder_is_replaced_only_with_overwrite_and_never_half_written(tmp_path, fake_run, monkeypatch):
     import service.cli as cli
+
     gaw, out = _toy_gaw(tmp_path / "g.csv"), tmp_path / "o"
     assert _invoke(["infer", str(gaw), *TOY, "-o", str(out)]).exit_code == 0
     assert (out / "posterior.json").read_text() == "run 1"
@@ -148,12 +195,14 @@ def test_an_output_folder_is_replaced_only_with_overwrite_and_never_half_written
         out.mkdir(parents=True, exist_ok=True)
         (out / "half.txt").write_text("half")
         raise RuntimeError("worker lost")
+
     monkeypatch.setattr(cli, "run_local", dies)
     r = _invoke(["infer", str(gaw), *TOY, "-o", str(tmp_path / "new")])
     assert r.exit_code == 1 and "Traceback" not in r.output
-    assert r.stderr.strip() == ("error: internal error: RuntimeError: worker lost (VFINFER_DEBUG=1 shows the "
-                                "traceback)")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.csv", "o"]        # nothing of the failed run
+    assert r.stderr.strip() == (
+        "error: internal error: RuntimeError: worker lost (VFINFER_DEBUG=1 shows the traceback)"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.csv", "o"]  # nothing of the failed run
 
 
 def test_human_times():
@@ -168,6 +217,7 @@ def test_list_status_cancel_on_the_service(service):
     """A slow toy job: `list` shows it, `status` says how long ago it was submitted (no epoch seconds), `cancel`
     cancels it, a second cancel says so, and cancelling a finished job is refused."""
     from svc_helpers import auth, wait_done
+
     env = {"VFINFER_URL": service.url, "VFINFER_TOKEN": TOKENS["carol"]}
     slow = service.http.post("/jobs", json=toy_spec(n=400, delay=0.05), headers=auth("carol")).json()["id"]
     done = service.http.post("/jobs", json=toy_spec(n=40), headers=auth("carol")).json()["id"]
@@ -175,7 +225,7 @@ def test_list_status_cancel_on_the_service(service):
     assert r.exit_code == 0 and slow in r.stdout and done in r.stdout and " ago" in r.stdout, r.output
     r = _invoke(["status", slow], **env)
     assert r.exit_code == 0 and " ago)" in r.stdout and "simulations" in r.stdout, r.output
-    assert not re.search(r"\b1[5-9]\d{8}(\.\d+)?\b", r.stdout), r.stdout          # no raw epoch times
+    assert not re.search(r"\b1[5-9]\d{8}(\.\d+)?\b", r.stdout), r.stdout  # no raw epoch times
     r = _invoke(["cancel", slow], **env)
     assert r.exit_code == 0 and "cancel" in r.stdout, r.output
     assert wait_done(service.http, slow, "carol")["state"] == "cancelled"
@@ -204,12 +254,14 @@ def test_a_python_warning_is_a_warning_line_in_words_and_the_report_lists_it(tmp
 
     import worker.run as wr
     from vfcore.inference.diagnostics import DegenerateEnsembleWarning
+
     summary = {"table": [], "method": "smc", "n_simulations": 40, "n_failed": 0, "ess": 3.0, "warnings": []}
 
     def run_job(client, job_id, store_path, spec, report=None):
-        warnings.warn(DEGENERATE, DegenerateEnsembleWarning)
+        warnings.warn(DEGENERATE, DegenerateEnsembleWarning, stacklevel=2)
         zarr.open_group(str(store_path), mode="a", path="posterior").attrs["summary"] = summary
         return {"wall_s": 0.0}
+
     monkeypatch.setattr(wr, "run_job", run_job)
     out = tmp_path / "o"
     r = _invoke(["infer", str(_toy_gaw(tmp_path / "g.csv")), *TOY, "--workers", "1", "-o", str(out)])
@@ -233,9 +285,10 @@ def test_a_diagnosis_shows_a_python_warning_in_words_and_keeps_it_for_its_report
             return {}
 
     def diagnose(problem, *, map, **kw):
-        warnings.warn(DEGENERATE, UserWarning)
-        warnings.warn(DEGENERATE, UserWarning)          # the same text twice is one line
+        warnings.warn(DEGENERATE, UserWarning, stacklevel=2)
+        warnings.warn(DEGENERATE, UserWarning, stacklevel=2)  # the same text twice is one line
         return Report()
+
     monkeypatch.setattr(P, "diagnose", diagnose)
     d, _ = C.run_local(SimpleNamespace(), DiagnoseRequest(), 1, None, None)
     err = capsys.readouterr().err

@@ -1,4 +1,5 @@
 """`vfinfer gaw` on a synthetic stack of known GAW; bad input exits 2 with a message."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,8 +17,9 @@ def test_cli_gaw_writes_csv_and_figure(tmp_path):
     src = tmp_path / "clip.npy"
     np.save(src, vid.frames)
     out = tmp_path / "gaw.csv"
-    r = CliRunner().invoke(app, ["gaw", str(src), "--fps", "2000", "--px-per-mm", "24.4", "-o", str(out),
-                                 "--segment-s", "0.04"])
+    r = CliRunner().invoke(
+        app, ["gaw", str(src), "--fps", "2000", "--px-per-mm", "24.4", "-o", str(out), "--segment-s", "0.04"]
+    )
     assert r.exit_code == 0, r.output
     g = read_gaw(out)
     assert g.fps == fps and g.area.min() >= 0
@@ -27,6 +29,8 @@ def test_cli_gaw_writes_csv_and_figure(tmp_path):
 def test_cli_gaw_bad_input(tmp_path):
     src = tmp_path / "flat.npy"
     np.save(src, np.full((30, 40, 40), 200, dtype=np.uint8))
-    r = CliRunner().invoke(app, ["gaw", str(src), "--fps", "2000", "--px-per-mm", "24.4", "-o", str(tmp_path / "g.csv")])
+    r = CliRunner().invoke(
+        app, ["gaw", str(src), "--fps", "2000", "--px-per-mm", "24.4", "-o", str(tmp_path / "g.csv")]
+    )
     assert r.exit_code == 2 and "error" in r.output
     assert not (tmp_path / "g.csv").exists()

@@ -5,6 +5,7 @@ environment the compose file gives them (only hosts, ports and the data path are
 A job run there is byte-identical to the same job on the in-process LocalCluster the rest of the
 suite uses, and stays so when one worker "container" is SIGKILLed mid-job; a structural test pins the
 parts of the compose file that the distributed code path relies on."""
+
 from __future__ import annotations
 
 import os
@@ -69,21 +70,21 @@ def test_compose_file_wires_scheduler_workers_and_api_together():
     address = f"tcp://scheduler:{port}"
 
     assert wrk_cmd[:2] == ["dask", "worker"]
-    assert address in wrk_cmd                                   # workers find the scheduler service
+    assert address in wrk_cmd  # workers find the scheduler service
     # one thread per worker process: results are bit-identical only with one BLAS/numba thread
     assert _arg(wrk_cmd, "--nthreads") == "1"
     assert api_cmd[:2] == ["vfinfer", "serve"]
 
     api_env = api["environment"]
-    assert api_env["VFINFER_SCHEDULER"] == address             # the API submits where workers listen
+    assert api_env["VFINFER_SCHEDULER"] == address  # the API submits where workers listen
 
     # workers write the Zarr stores the API reads: one named volume, mounted at one path everywhere
     mounts = {name: {_volume(v) for v in svcs[name].get("volumes", [])} for name in ("scheduler", "worker", "api")}
     assert len(mounts["api"]) == 1, mounts
     assert mounts["scheduler"] == mounts["worker"] == mounts["api"], mounts
-    (vol_name, vol_path), = mounts["api"]
+    ((vol_name, vol_path),) = mounts["api"]
     assert vol_path == api_env["VFINFER_DATA_DIR"]
-    assert vol_name in (doc.get("volumes") or {})               # a named volume, not a host bind
+    assert vol_name in (doc.get("volumes") or {})  # a named volume, not a host bind
 
     assert "scheduler" in _depends(wrk)
     assert "scheduler" in _depends(api)
@@ -134,8 +135,7 @@ class Procs:
     def start(self, name: str, cmd: list[str], env: dict) -> subprocess.Popen:
         log = self.logdir / f"{name}.log"
         with open(log, "wb") as fh:
-            p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                 start_new_session=True)
+            p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
         self.procs.append((p, log))
         return p
 
@@ -147,8 +147,9 @@ class Procs:
         return ""
 
     def logs(self) -> str:
-        return "\n".join(f"--- {log.name} (exit {p.poll()}) ---\n{log.read_text(errors='replace')[-2000:]}"
-                         for p, log in self.procs)
+        return "\n".join(
+            f"--- {log.name} (exit {p.poll()}) ---\n{log.read_text(errors='replace')[-2000:]}" for p, log in self.procs
+        )
 
     def stop_all(self) -> None:
         # newest first, one at a time: the API's client disconnects before the scheduler goes (no
@@ -156,7 +157,7 @@ class Procs:
         for p, _ in reversed(self.procs):
             for sig, wait in ((signal.SIGTERM, 10), (signal.SIGKILL, 10)):
                 try:
-                    os.killpg(p.pid, sig)            # the whole group: nanny, worker, resource tracker
+                    os.killpg(p.pid, sig)  # the whole group: nanny, worker, resource tracker
                 except ProcessLookupError:
                     pass
                 try:
@@ -165,7 +166,7 @@ class Procs:
                 except subprocess.TimeoutExpired:
                     continue
             try:
-                os.killpg(p.pid, signal.SIGKILL)     # a child that outlived its leader
+                os.killpg(p.pid, signal.SIGKILL)  # a child that outlived its leader
             except ProcessLookupError:
                 pass
 
@@ -180,8 +181,10 @@ def _wait_http(procs: Procs, p: subprocess.Popen, url: str, ok, what: str, timeo
         except httpx.HTTPError:
             pass
         if p.poll() is not None or time.time() - t0 > timeout:
-            raise RuntimeError(f"{what} not healthy at {url} after {time.time() - t0:.0f} s "
-                               f"(exit code {p.poll()}); its output:\n{procs.log_of(p)}")
+            raise RuntimeError(
+                f"{what} not healthy at {url} after {time.time() - t0:.0f} s "
+                f"(exit code {p.poll()}); its output:\n{procs.log_of(p)}"
+            )
         time.sleep(0.1)
 
 
@@ -190,8 +193,10 @@ def _port_of(procs: Procs, p: subprocess.Popen, prefix: str, what: str, timeout:
     t0 = time.time()
     while (port := listening_port(procs.log_of(p, tail=None), prefix)) is None:
         if p.poll() is not None or time.time() - t0 > timeout:
-            raise RuntimeError(f"{what} named no port after {time.time() - t0:.0f} s (exit code {p.poll()}); "
-                               f"its output:\n{procs.log_of(p)}")
+            raise RuntimeError(
+                f"{what} named no port after {time.time() - t0:.0f} s (exit code {p.poll()}); "
+                f"its output:\n{procs.log_of(p)}"
+            )
         time.sleep(0.1)
     return port
 
@@ -203,13 +208,15 @@ def deployed_cluster(tmp: Path):
     worker binds random ports of its own) before its owner bound it."""
     svcs = _compose()["services"]
     procs = Procs(tmp)
-    data = tmp / "data"                    # stands in for the shared volume
+    data = tmp / "data"  # stands in for the shared volume
     data.mkdir(parents=True)
     try:
         sch = svcs["scheduler"]
-        p_sch = procs.start("scheduler", _local(sch["command"], {"--host": "127.0.0.1", "--port": "0",
-                                                                 "--dashboard-address": "127.0.0.1:0"}),
-                            _env(sch["environment"]))
+        p_sch = procs.start(
+            "scheduler",
+            _local(sch["command"], {"--host": "127.0.0.1", "--port": "0", "--dashboard-address": "127.0.0.1:0"}),
+            _env(sch["environment"]),
+        )
         sched_port = _port_of(procs, p_sch, r"Scheduler at:\s+tcp://127\.0\.0\.1:", "scheduler")
         address = f"tcp://127.0.0.1:{sched_port}"
         sched_dash = _port_of(procs, p_sch, r"dashboard at:\s+http://127\.0\.0\.1:", "scheduler's dashboard")
@@ -220,20 +227,34 @@ def deployed_cluster(tmp: Path):
         n_workers = int(wrk.get("deploy", {}).get("replicas", 2))
         assert n_workers >= 2, "the fault test needs a worker to survive the kill"
         compose_addr = next(a for a in wrk["command"] if a.startswith("tcp://"))
-        workers = [procs.start(f"worker{i}", _local(wrk["command"], {"--dashboard-address": "127.0.0.1:0"},
-                                                    {compose_addr: address}),
-                               _env(wrk["environment"]))
-                   for i in range(n_workers)]
+        workers = [
+            procs.start(
+                f"worker{i}",
+                _local(wrk["command"], {"--dashboard-address": "127.0.0.1:0"}, {compose_addr: address}),
+                _env(wrk["environment"]),
+            )
+            for i in range(n_workers)
+        ]
 
         api = svcs["api"]
-        api_env = _env(api["environment"], VFINFER_SCHEDULER=address, VFINFER_DATA_DIR=str(data),
-                       VFINFER_TOKENS=",".join(f"{u}:{t}" for u, t in TOKENS.items()),
-                       VFINFER_ALLOW_TOY="1")           # the test double; never set in compose
+        api_env = _env(
+            api["environment"],
+            VFINFER_SCHEDULER=address,
+            VFINFER_DATA_DIR=str(data),
+            VFINFER_TOKENS=",".join(f"{u}:{t}" for u, t in TOKENS.items()),
+            VFINFER_ALLOW_TOY="1",
+        )  # the test double; never set in compose
         p_api = procs.start("api", _local(api["command"], {"--host": "127.0.0.1", "--port": "0"}), api_env)
         api_port = _port_of(procs, p_api, r"listening on http://127\.0\.0\.1:", "api")
         url = f"http://127.0.0.1:{api_port}"
-        _wait_http(procs, p_api, f"{url}/health",
-                   lambda r: r.json()["status"] == "ok" and r.json()["dask_workers"] == n_workers, "api", timeout=120)
+        _wait_http(
+            procs,
+            p_api,
+            f"{url}/health",
+            lambda r: r.json()["status"] == "ok" and r.json()["dask_workers"] == n_workers,
+            "api",
+            timeout=120,
+        )
         yield {"url": url, "address": address, "data": data, "workers": workers, "procs": procs}
     finally:
         procs.stop_all()
@@ -277,9 +298,11 @@ def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive
     from distributed import Client
 
     t_start = time.time()
-    with deployed_cluster(tmp_path / "deployed") as dep, \
-            httpx.Client(base_url=dep["url"], timeout=60) as http, \
-            Client(dep["address"], set_as_default=False, timeout=30) as observer:
+    with (
+        deployed_cluster(tmp_path / "deployed") as dep,
+        httpx.Client(base_url=dep["url"], timeout=60) as http,
+        Client(dep["address"], set_as_default=False, timeout=30) as observer,
+    ):
         procs: Procs = dep["procs"]
         stores = dep["data"] / "stores"
         try:
@@ -302,9 +325,10 @@ def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive
                 now = http.get(f"/jobs/{job2}", headers=auth("alice")).json()
                 assert now["state"] in ("queued", "running"), f"job ended before a worker could be killed: {now}"
                 assert time.time() - t0 < 60, "job never had a chunk running on a worker"
-                if now["progress"]["simulations_done"] >= 96:            # chunks written: mid-job
-                    busy = [w for w, keys in observer.processing().items()
-                            if any(f"vfchunk-{job2}" in str(k) for k in keys)]
+                if now["progress"]["simulations_done"] >= 96:  # chunks written: mid-job
+                    busy = [
+                        w for w, keys in observer.processing().items() if any(f"vfchunk-{job2}" in str(k) for k in keys)
+                    ]
                     if busy:
                         pid = observer.run(os.getpid, workers=[busy[0]])[busy[0]]
                         group = os.getpgid(pid)
@@ -323,6 +347,6 @@ def test_external_scheduler_and_worker_processes_match_local_cluster_and_survive
             assert killed not in workers_left and len(workers_left) == len(dep["workers"]) - 1
             _assert_same(expected, _product_bytes(http, stores, job2, "alice"), "after a worker was killed")
         except BaseException:
-            print(procs.logs())                   # shown by pytest on failure only
+            print(procs.logs())  # shown by pytest on failure only
             raise
     print(f"\nprocess cluster test: {time.time() - t_start:.1f} s")

@@ -1,6 +1,7 @@
 """POST /jobs/{id}/diagnose, GET /jobs/{id}/diagnosis(/figure): ownership, states, validation, and one
 real (tiny) diagnosis of a finished finite-element job on the service's Dask cluster. A diagnosis is a
 job of the job table run by the job manager: resumed after a stop, cancelled by DELETE."""
+
 from __future__ import annotations
 
 import time
@@ -35,21 +36,36 @@ def test_diagnose_rules(service):
     assert r.status_code == 202, r.text
     toy = r.json()["id"]
     assert wait_done(http, toy, "alice")["state"] == "done"
-    for method, path in (("post", f"/jobs/{toy}/diagnose"), ("get", f"/jobs/{toy}/diagnosis"),
-                         ("get", f"/jobs/{toy}/diagnosis/figure")):
+    for method, path in (
+        ("post", f"/jobs/{toy}/diagnose"),
+        ("get", f"/jobs/{toy}/diagnosis"),
+        ("get", f"/jobs/{toy}/diagnosis/figure"),
+    ):
         assert getattr(http, method)(path, headers=auth("bob")).status_code == 404, path
     assert http.get(f"/jobs/{'x' * 32}/diagnosis", headers=auth("alice")).status_code == 404
     r = http.post(f"/jobs/{toy}/diagnose", headers=auth("alice"))
     assert r.status_code == 422 and "fe" in r.text, r.text
     # nothing ever started on it
-    assert http.get(f"/jobs/{toy}/diagnosis", headers=auth("alice")).json() == \
-        {"state": "none", "error": None, "report": None, "progress": None, "diagnosis_id": None}
+    assert http.get(f"/jobs/{toy}/diagnosis", headers=auth("alice")).json() == {
+        "state": "none",
+        "error": None,
+        "report": None,
+        "progress": None,
+        "diagnosis_id": None,
+    }
     assert http.get(f"/jobs/{toy}/diagnosis/figure", headers=auth("alice")).status_code == 404
     # body validation: unknown / unimplemented candidates are named, ranges enforced, extras refused
     r = http.post(f"/jobs/{toy}/diagnose", json={"candidates": ["leak", "warp_drive"]}, headers=auth("alice"))
     assert r.status_code == 422 and "warp_drive" in r.text and "leak'" not in r.text.split("known")[0], r.text
-    for body in ({"n_particles": 5}, {"n_particles": 401}, {"max_refits": 7}, {"refit_particles": 3}, {"candidates": []},
-                 {"colour": "red"}, {"refit_start": "posterior"}):
+    for body in (
+        {"n_particles": 5},
+        {"n_particles": 401},
+        {"max_refits": 7},
+        {"refit_particles": 3},
+        {"candidates": []},
+        {"colour": "red"},
+        {"refit_start": "posterior"},
+    ):
         assert http.post(f"/jobs/{toy}/diagnose", json=body, headers=auth("alice")).status_code == 422, body
     # a job that is not done: 409
     r = http.post("/jobs", json=toy_spec(n=400, delay=0.05), headers=auth("alice"))
@@ -64,6 +80,7 @@ def leaky_spec():
     """A tiny FE job on a Table 3 simulation with a 1.5 mm^2 leak and N(0, 0.3^2) noise."""
     pytest.importorskip("vfcore.forward", reason="FE forward model not available")
     from svc_helpers import leaky_fe_spec
+
     return leaky_fe_spec(FPS)
 
 
@@ -76,8 +93,14 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert wait_done(http, job, "alice", timeout=300)["state"] == "done"
 
     # the search and the material-first stage are tested in tests/vfcore (a one-parameter problem here)
-    body = {"candidates": ["leak"], "n_particles": 12, "max_refits": 1, "seed": 0, "continuation": False,
-            "free_material": False}
+    body = {
+        "candidates": ["leak"],
+        "n_particles": 12,
+        "max_refits": 1,
+        "seed": 0,
+        "continuation": False,
+        "free_material": False,
+    }
     t0 = time.perf_counter()
     r = http.post(f"/jobs/{job}/diagnose", json=body, headers=auth("alice"))
     assert r.status_code == 202, r.text
@@ -95,12 +118,13 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert d["state"] == "done", d
     # while it ran, the status told where it was: known stages, simulations only growing
     from vfcore.diagnose.progress import STAGES
+
     assert seen and all(p["stage"] in STAGES for p in seen), seen
     assert [p["simulations"] for p in seen] == sorted(p["simulations"] for p in seen)
     assert seen[-1]["simulations"] > 0 and d["progress"] is None
     rep = d["report"]
     assert isinstance(rep["verdict"], str) and rep["verdict"]
-    assert rep["winner"] == "leak", rep["verdict"]          # the hidden 1.5 mm^2 leak is found
+    assert rep["winner"] == "leak", rep["verdict"]  # the hidden 1.5 mm^2 leak is found
     assert rep["n_simulations"] > 0 and rep["base"]["residual_rms"] > 0
     assert set(rep["screening"]) >= {"leak"} and rep["request"]["n_particles"] == 12
     assert rep["wall_s"] <= wall + 1.0
@@ -115,7 +139,7 @@ def test_diagnose_finished_fe_job(service, leaky_spec):
     assert st["progress"]["simulations_done"] == rep["n_simulations"]
     store = service.settings.stores_dir / f"{diag}.zarr"
     assert not [p.name for p in store.rglob(".*") if p.name.startswith((".figure", ".tmp"))]
-    assert not (store / "resume").exists()                      # the resume store goes once done
+    assert not (store / "resume").exists()  # the resume store goes once done
 
 
 def test_a_failed_diagnosis_leaves_its_simulations_to_the_next_request(service, monkeypatch):
@@ -133,15 +157,15 @@ def test_a_failed_diagnosis_leaves_its_simulations_to_the_next_request(service, 
     first = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).json()
     d = _wait_diagnosis(http, jid, "alice", timeout=60)
     assert d["state"] == "failed" and "worker lost" in d["error"], d
-    balanced = maps[0].inner                              # inside the cancellable map
+    balanced = maps[0].inner  # inside the cancellable map
     assert isinstance(balanced, BalancedMap)
     stored = len(list(resume_dir(stores / f"{first['diagnosis_id']}.zarr").rglob("*.pkl")))
     assert stored == min(balanced.workers, 6) >= 1
     second = http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).json()
     assert _wait_diagnosis(http, jid, "alice", timeout=60)["state"] == "failed"
-    store = maps[1].inner.inner                           # the store, inside the balanced, cancellable map
+    store = maps[1].inner.inner  # the store, inside the balanced, cancellable map
     assert (store.hits, store.misses) == (stored, 0)
-    assert store.earlier_attempts == 1                    # the dead attempt's time is on record
+    assert store.earlier_attempts == 1  # the dead attempt's time is on record
     # the new diagnosis replaced the old one, which is gone with its store
     assert http.get(f"/jobs/{first['diagnosis_id']}", headers=auth("alice")).status_code == 404
     assert not (stores / f"{first['diagnosis_id']}.zarr").exists() and second["diagnosis_id"] != first["diagnosis_id"]
@@ -157,19 +181,24 @@ def test_a_diagnosis_announces_its_expected_simulations_when_queued(service, mon
     from worker.jobspec import JobSpec
 
     monkeypatch.setattr(P, "diagnose", dying_diagnosis([], "stopped after the announcement"))
-    jid = done_fe_job(service.settings)            # no posterior stored: the diagnosis fits its base itself
+    jid = done_fe_job(service.settings)  # no posterior stored: the diagnosis fits its base itself
     http = service.http
     from service.db import JobDB
+
     db = JobDB(service.settings.db_path)
     try:
         problem = JobSpec.from_json(db.get(jid)["spec"]).to_problem()
     finally:
         db.close()
-    assert pinned(problem)                         # the premise of the two base fits below
+    assert pinned(problem)  # the premise of the two base fits below
     r = http.post(f"/jobs/{jid}/diagnose", json={"free_material": False}, headers=auth("alice"))
     assert r.status_code == 202, r.text
-    assert r.json()["expected"] == {"floor_simulations": list(FLOOR_SIMULATIONS), "base_fits": 1,
-                                    "catalogue_simulations": list(CATALOGUE_SIMULATIONS), "scaled_for": []}
+    assert r.json()["expected"] == {
+        "floor_simulations": list(FLOOR_SIMULATIONS),
+        "base_fits": 1,
+        "catalogue_simulations": list(CATALOGUE_SIMULATIONS),
+        "scaled_for": [],
+    }
     assert _wait_diagnosis(http, jid, "alice", timeout=60)["state"] == "failed"
     e = http.post(f"/jobs/{jid}/diagnose", json={"candidates": ["leak"]}, headers=auth("alice")).json()["expected"]
     assert e["base_fits"] == 2 and e["floor_simulations"] == [2 * f for f in FLOOR_SIMULATIONS]
@@ -180,11 +209,13 @@ def test_a_diagnosis_announces_its_expected_simulations_when_queued(service, mon
 
 def httpx_client(srv):
     import httpx
+
     return httpx.Client(base_url=srv.url, timeout=60)
 
 
 def _diagnosis_row(settings, jid: str) -> dict:
     from service.db import JobDB
+
     db = JobDB(settings.db_path)
     try:
         return db.children(jid)[0]
@@ -202,16 +233,22 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
     from service.main import create_app
 
     jid = done_fe_job(settings)
-    body = {"candidates": ["leak", "scale"], "n_particles": 14, "refit_particles": 10, "max_refits": 2,
-            "continuation": False, "seed": 5}
+    body = {
+        "candidates": ["leak", "scale"],
+        "n_particles": 14,
+        "refit_particles": 10,
+        "max_refits": 2,
+        "continuation": False,
+        "seed": 5,
+    }
     calls = []
 
-    def first(problem, *, map, **kw):          # runs until the service stops, then loses its cluster
+    def first(problem, *, map, **kw):  # runs until the service stops, then loses its cluster
         calls.append(kw)
         while True:
             try:
                 map(np.square, [np.zeros((1, 1))])
-            except Exception:                   # noqa: BLE001 - the stop, seen by the map
+            except Exception:  # noqa: BLE001 - the stop, seen by the map
                 raise OSError("connection to the scheduler lost") from None
             time.sleep(0.05)
 
@@ -236,8 +273,13 @@ def test_a_diagnosis_stopped_by_a_shutdown_goes_on_at_the_next_start(settings, d
             d = _wait_diagnosis(http, jid, "alice", timeout=60)
     assert d["state"] == "failed" and "a failure of its own" in d["error"], d
     assert len(calls) == 2 and calls[1]["candidates"] == ["leak", "scale"]
-    assert {k: calls[1][k] for k in ("n_particles", "refit_particles", "max_refits", "continuation", "seed")} == \
-        {"n_particles": 14, "refit_particles": 10, "max_refits": 2, "continuation": False, "seed": 5}
+    assert {k: calls[1][k] for k in ("n_particles", "refit_particles", "max_refits", "continuation", "seed")} == {
+        "n_particles": 14,
+        "refit_particles": 10,
+        "max_refits": 2,
+        "continuation": False,
+        "seed": 5,
+    }
     assert _diagnosis_row(settings, jid)["attempts"] == 2
 
 
@@ -252,12 +294,16 @@ def test_a_diagnosis_that_cannot_run_fails_and_one_stopped_too_often_is_not_star
 
     def never(*a, **k):
         raise AssertionError("a diagnosis ran")
+
     monkeypatch.setattr(P, "diagnose", never)
     jid = done_fe_job(settings)
     db = JobDB(settings.db_path)
     spec = DiagnosisSpec(job=jid, request=DiagnoseRequest()).to_json()
-    rows = {"gone": DiagnosisSpec(job="ab" * 16, request=DiagnoseRequest()).to_json(), "broken": "{broken",
-            "stopped": spec}
+    rows = {
+        "gone": DiagnosisSpec(job="ab" * 16, request=DiagnoseRequest()).to_json(),
+        "broken": "{broken",
+        "stopped": spec,
+    }
     ids = {}
     for name, s in rows.items():
         ids[name] = name.ljust(32, "0")
@@ -275,7 +321,9 @@ def test_a_diagnosis_that_cannot_run_fails_and_one_stopped_too_often_is_not_star
     err = {name: db.get(i)["error"] for name, i in ids.items()}
     db.close()
     assert "gone" in err["gone"] and "ValidationError" in err["broken"]
-    assert f"interrupted {MAX_AUTO_RESUMES + 1} times" in err["stopped"] and f"POST /jobs/{jid}/diagnose" in err["stopped"]
+    assert (
+        f"interrupted {MAX_AUTO_RESUMES + 1} times" in err["stopped"] and f"POST /jobs/{jid}/diagnose" in err["stopped"]
+    )
 
 
 def test_diagnoses_kept_beside_the_stores_by_an_earlier_release_become_jobs(settings):
@@ -299,6 +347,7 @@ def test_diagnoses_kept_beside_the_stores_by_an_earlier_release_become_jobs(sett
     db = JobDB(settings.db_path)
     manager = JobManager(settings, db, None)
     from service.diagnosis_import import import_legacy_diagnoses
+
     made = import_legacy_diagnoses(manager)
     rows = {r["parent"]: r for r in db.list(kind="diagnosis")}
     db.close()
@@ -306,6 +355,7 @@ def test_diagnoses_kept_beside_the_stores_by_an_earlier_release_become_jobs(sett
     assert not list(d.glob("*.diagnosis.*"))
     from service.diagnosis import read_report
     from worker.store import read_blob
+
     r = rows[done]
     assert r["state"] == "done" and r["owner"] == "alice"
     rep = read_report(d / f"{r['id']}.zarr", r["stats"], REPORT["request"])
@@ -332,7 +382,7 @@ def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch
     batches = []
     started = threading.Event()
 
-    def endless(problem, *, map, **kw):         # batch after batch through the service's map
+    def endless(problem, *, map, **kw):  # batch after batch through the service's map
         for k in range(100_000):
             map(np.square, [np.full((2, 1), float(k)), np.full((2, 1), -float(k))])
             batches.append(k)
@@ -361,13 +411,13 @@ def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch
         assert st["state"] == "cancelled" and st["diagnosis_id"] == diag, st
         n = len(batches)
         time.sleep(0.3)
-        assert len(batches) == n                    # it stopped
+        assert len(batches) == n  # it stopped
         assert not (d / f"{diag}.zarr" / "resume").exists()
         assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409
 
     with ServerThread(create_app(settings, client=dask_client)) as srv:
         with httpx_client(srv) as http:
-            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409   # none running
+            assert http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice")).status_code == 409  # none running
 
             def by_the_diagnosis_route(diag):
                 r = http.delete(f"/jobs/{jid}/diagnosis", headers=auth("alice"))
@@ -383,7 +433,11 @@ def test_a_running_diagnosis_can_be_cancelled(settings, dask_client, monkeypatch
 
             def fails(problem, *, map, **kw):
                 raise RuntimeError("second run")
+
             monkeypatch.setattr(P, "diagnose", fails)
-            assert http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).status_code == 202
+            assert (
+                http.post(f"/jobs/{jid}/diagnose", json={"continuation": False}, headers=auth("alice")).status_code
+                == 202
+            )
             st = _wait_diagnosis(http, jid, "alice", timeout=60)
-            assert st["state"] == "failed" and "second run" in st["error"]     # the cancelled mark is gone
+            assert st["state"] == "failed" and "second run" in st["error"]  # the cancelled mark is gone

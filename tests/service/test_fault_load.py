@@ -1,4 +1,5 @@
 """A worker process killed mid-job; 20 concurrent submissions from several tokens."""
+
 from __future__ import annotations
 
 import os
@@ -27,7 +28,7 @@ def _kill_busy_worker(client) -> str:
         busy = [w for w, tasks in client.processing().items() if any("vfchunk" in str(k) for k in tasks)]
         if busy:
             pid = client.run(os.getpid, workers=[busy[0]])[busy[0]]
-            os.kill(pid, signal.SIGKILL)                 # the worker process dies mid-chunk
+            os.kill(pid, signal.SIGKILL)  # the worker process dies mid-chunk
             return busy[0]
         time.sleep(0.02)
     raise AssertionError("no busy worker found")
@@ -35,7 +36,7 @@ def _kill_busy_worker(client) -> str:
 
 def test_worker_killed_mid_job_bit_identical(service):
     http, client = service.http, service.client
-    spec = toy_spec(n=480, seed=21, delay=0.01, chunk_size=24)       # 20 chunks of ~0.24 s
+    spec = toy_spec(n=480, seed=21, delay=0.01, chunk_size=24)  # 20 chunks of ~0.24 s
     ref = http.post("/jobs", json=spec, headers=auth("alice")).json()["id"]
     assert wait_done(http, ref, "alice")["state"] == "done"
     n_workers = len(client.scheduler_info()["workers"])
@@ -48,11 +49,11 @@ def test_worker_killed_mid_job_bit_identical(service):
     killed = _kill_busy_worker(client)
     st_ = wait_done(http, job, "alice", timeout=120)
     assert st_["state"] == "done", st_
-    assert killed not in client.scheduler_info()["workers"]          # that process really went away
+    assert killed not in client.scheduler_info()["workers"]  # that process really went away
     a, b = _posterior_bytes(service, ref, "alice"), _posterior_bytes(service, job, "alice")
-    assert a[1] == b[1]                       # samples, log-weights, resampled indices: same bytes
-    assert a[0] == b[0]                       # the published summary too
-    client.wait_for_workers(n_workers, timeout=60)                   # the nanny restarted it
+    assert a[1] == b[1]  # samples, log-weights, resampled indices: same bytes
+    assert a[0] == b[0]  # the published summary too
+    client.wait_for_workers(n_workers, timeout=60)  # the nanny restarted it
 
 
 # A load test (20 jobs through one service): about a minute on 2 cores, so `make test-all` runs it.
@@ -71,6 +72,7 @@ def test_twenty_concurrent_submissions_and_fast_status(service):
 
     def submit(i):
         import httpx
+
         with httpx.Client(base_url=http_url, timeout=60) as h:
             r = h.post("/jobs", json=specs[i], headers=auth(users[i % 3]))
             codes[i] = r.status_code
@@ -100,8 +102,10 @@ def test_twenty_concurrent_submissions_and_fast_status(service):
     assert states == ["done"] * 20
     lat_ms = np.array(lat) * 1e3
     p50, p95 = np.percentile(lat_ms, [50, 95])
-    print(f"\n20 jobs x 240 sims: wall {wall:.1f} s; status latency over {lat_ms.size} calls while busy: "
-          f"p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {lat_ms.max():.1f} ms")
+    print(
+        f"\n20 jobs x 240 sims: wall {wall:.1f} s; status latency over {lat_ms.size} calls while busy: "
+        f"p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {lat_ms.max():.1f} ms"
+    )
     # Not a speed target (those live in benchmarks/bench_service.py --status-load, which prints the
     # p95 against its 250 ms target): a status read must not wait for the work it reports on, so
     # its latency is a small fraction of the batch's wall time, however loaded the machine is.

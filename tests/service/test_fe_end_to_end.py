@@ -1,5 +1,6 @@
 """End to end through the real finite-element model (coarse mesh, a few hundred simulations):
 submit -> poll -> fetch equals vfcore.inference.importance_sample called directly, same seed."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,6 +15,7 @@ N = 160
 @pytest.fixture(scope="module")
 def demo_gaw(tmp_path_factory):
     from vfcore.data import DEMO_GAW, make_demo_gaw
+
     if DEMO_GAW.exists():
         return DEMO_GAW
     return make_demo_gaw(tmp_path_factory.mktemp("gaw") / "demo_gaw.csv")
@@ -56,6 +58,7 @@ def test_fe_job_equals_direct_vfcore(service, demo_gaw):
     assert post["predictive"]["max_contact"]["depends_on"] == "mesh and time step"
     # the regularity check at the heaviest sample (7 simulations in the reducer) equals vfcore's
     from vfcore.diagnose.regularity import sensitivity
+
     reg = sensitivity(problem, direct.samples[int(np.argmax(direct.log_weights))], seed=spec["seed"])
     assert post["regularity"]["n_simulations"] == 7
     assert post["regularity"]["loglik"] == pytest.approx(reg.loglik, rel=1e-12, abs=1e-9)
@@ -77,8 +80,17 @@ def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw, tmp_path):
     from worker.jobspec import JobSpec
 
     n = 24
-    spec = demo_spec_dict(n=n, path=demo_gaw, chunk_size=12, mesh="coarse", dt=1e-4, duration=0.3, discard=0.15,
-                          contact="layer", contact_layer_mm=0.1)
+    spec = demo_spec_dict(
+        n=n,
+        path=demo_gaw,
+        chunk_size=12,
+        mesh="coarse",
+        dt=1e-4,
+        duration=0.3,
+        discard=0.15,
+        contact="layer",
+        contact_layer_mm=0.1,
+    )
     http, client = service.http, service.client
     job_id, js, post = run_job(http, spec)
     lw = np.array([-np.inf if v is None else v for v in js["log_weights"]])
@@ -92,14 +104,14 @@ def test_fe_job_runs_the_contact_law_it_asks_for(service, demo_gaw, tmp_path):
     np.testing.assert_array_equal(lw, direct.log_weights)
     rigid = JobSpec.model_validate({**spec, "contact": "projection"}).to_problem()
     other = importance_sample(rigid, n=n, seed=spec["seed"], map=dask_map, chunk_size=12)
-    np.testing.assert_array_equal(other.samples, direct.samples)          # the same draws ...
-    assert not np.array_equal(other.log_weights, direct.log_weights)      # ... scored by another model
+    np.testing.assert_array_equal(other.samples, direct.samples)  # the same draws ...
+    assert not np.array_equal(other.log_weights, direct.log_weights)  # ... scored by another model
     assert post["model"]["contact"] == "layer" and post["model"]["contact_layer_mm"] == 0.1
     assert post["predictive"]["max_contact"]["depends_on"] == "mesh"
     nc = http.get(f"/jobs/{job_id}/samples", params={"format": "netcdf"}, headers=auth("alice"))
     path = tmp_path / "posterior.nc"
     path.write_bytes(nc.content)
-    recorded = Posterior.from_netcdf(path).model             # what a later `diagnose --base` checks against
+    recorded = Posterior.from_netcdf(path).model  # what a later `diagnose --base` checks against
     assert recorded["contact"] == "layer" and layer.config.differences(recorded) == {}
     assert rigid.config.differences(recorded) == {"contact": ("layer", "projection")}
     html = http.get(f"/jobs/{job_id}/report", headers=auth("alice")).text

@@ -2,6 +2,7 @@
 `error:` line with the numbers) unless --force-reach, `vfinfer reach` builds and caches an ensemble, and
 POST /jobs answers 422 with the numbers (or, with force_reach, accepts the job with a warning in its status).
 No FE simulation runs here: the shipped ensemble answers, and builds use a stand-in simulator."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -27,6 +28,7 @@ def sine(f0=200.0, seconds=0.25, peak=20.0):
 @pytest.fixture
 def gaw_200(tmp_path):
     from vfvideo.io import write_gaw_csv
+
     t, a = sine()
     return write_gaw_csv(tmp_path / "sine200.csv", t, a, FPS)
 
@@ -45,8 +47,9 @@ def _lines(out: str) -> list[str]:
 def test_infer_outside_the_reach_exits_2_with_one_line(tmp_path, gaw_200, extra):
     """A 200-Hz sine against the shipped coarse/dt=1e-4 ensemble (and, with four parameters fixed, against it as
     the ensemble of a wider prior): one error line with the recording's f0 and the reach, nothing run."""
-    r = CliRunner().invoke(cli_app, ["infer", str(gaw_200), *CHEAP, *extra, "--out", str(tmp_path / "o")],
-                           env={"COLUMNS": "80"})
+    r = CliRunner().invoke(
+        cli_app, ["infer", str(gaw_200), *CHEAP, *extra, "--out", str(tmp_path / "o")], env={"COLUMNS": "80"}
+    )
     assert r.exit_code == 2, r.output
     lines = _lines(r.output)
     assert len(lines) == 1 and lines[0].startswith("error: recording outside this model's reach"), r.output
@@ -59,16 +62,26 @@ def test_infer_outside_the_reach_exits_2_with_one_line(tmp_path, gaw_200, extra)
 def test_infer_with_force_reach_warns_and_fits(tmp_path, gaw_200, monkeypatch):
     """--force-reach: the same recording is fitted (the fit is a stand-in here) after one warning line."""
     import service.cli as cli
+
     seen = {}
 
     def fake_run_local(spec, out, workers, job_id="local"):
         seen["spec"] = spec
-        return {"table": [{"name": "E_body", "unit": "kPa", "mean": 14.98, "sd": 0.02, "pct": 0.1, "q05": 14.95,
-                           "q95": 15.0}], "method": "importance", "n_simulations": 4, "n_failed": 0, "ess": 3.0,
-                "warnings": ["AT PRIOR BOUND: E_body stand-in"]}
+        return {
+            "table": [
+                {"name": "E_body", "unit": "kPa", "mean": 14.98, "sd": 0.02, "pct": 0.1, "q05": 14.95, "q95": 15.0}
+            ],
+            "method": "importance",
+            "n_simulations": 4,
+            "n_failed": 0,
+            "ess": 3.0,
+            "warnings": ["AT PRIOR BOUND: E_body stand-in"],
+        }
+
     monkeypatch.setattr(cli, "run_local", fake_run_local)
-    r = CliRunner().invoke(cli_app, ["infer", str(gaw_200), *CHEAP, "--force-reach", "--out", str(tmp_path / "o")],
-                           env={"COLUMNS": "80"})
+    r = CliRunner().invoke(
+        cli_app, ["infer", str(gaw_200), *CHEAP, "--force-reach", "--out", str(tmp_path / "o")], env={"COLUMNS": "80"}
+    )
     assert r.exit_code == 0, r.output
     assert seen["spec"].force_reach is True
     warn = [ln for ln in r.output.splitlines() if "outside this model's reach" in ln]
@@ -78,12 +91,15 @@ def test_infer_with_force_reach_warns_and_fits(tmp_path, gaw_200, monkeypatch):
 
 def fake_simulate(rows, config, block=32):
     t = np.arange(1200) / config.fps
-    return [SimpleNamespace(ok=True, fps=config.fps, f0=6.0 * r[0],
-                            gaw=10.0 * (1 - np.cos(2 * np.pi * 6.0 * r[0] * t))) for r in rows]
+    return [
+        SimpleNamespace(ok=True, fps=config.fps, f0=6.0 * r[0], gaw=10.0 * (1 - np.cos(2 * np.pi * 6.0 * r[0] * t)))
+        for r in rows
+    ]
 
 
 def test_reach_command_builds_caches_and_checks(tmp_path, gaw_200, empty_cache, monkeypatch):
     import vfcore.batch
+
     monkeypatch.setattr(vfcore.batch, "simulate_many", fake_simulate)
     args = ["reach", "--mesh", "coarse", "--dt", "1e-4", "--fix", "E_lig=1.808", "--n", "6"]
     r = CliRunner().invoke(cli_app, args, env={"COLUMNS": "200"})
@@ -113,6 +129,7 @@ class NoCluster:
 def http(tmp_path):
     from service.main import create_app
     from service.settings import Settings
+
     settings = Settings(data_dir=tmp_path / "data", users=TOKENS, allow_toy_model=True, max_running_jobs=1)
     with TestClient(create_app(settings, client=NoCluster())) as c:
         yield c
@@ -120,8 +137,17 @@ def http(tmp_path):
 
 def fe_body(f0=200.0, **kw):
     t, a = sine(f0)
-    body = {"model": "fe", "gaw": {"areas": a.tolist(), "fps": FPS}, "sampler": {"kind": "is", "n_samples": 1},
-            "mesh": "coarse", "dt": 1e-4, "duration": 0.55, "discard": 0.25, "sigma_e": 1.0, "seed": 0}
+    body = {
+        "model": "fe",
+        "gaw": {"areas": a.tolist(), "fps": FPS},
+        "sampler": {"kind": "is", "n_samples": 1},
+        "mesh": "coarse",
+        "dt": 1e-4,
+        "duration": 0.55,
+        "discard": 0.25,
+        "sigma_e": 1.0,
+        "seed": 0,
+    }
     body.update(kw)
     return body
 
@@ -200,21 +226,45 @@ def test_an_element_hint_is_a_command_the_cli_runs(tmp_path, empty_cache, monkey
     assert getattr(rc.find_ensemble(cfg.replace(element="p1"), prior)[0], "key", None) != ens.key
 
 
-def test_infer_builds_a_missing_ensemble_on_first_use_caches_it_and_says_which(tmp_path, gaw_200, empty_cache,
-                                                                                  monkeypatch):
+def test_infer_builds_a_missing_ensemble_on_first_use_caches_it_and_says_which(
+    tmp_path, gaw_200, empty_cache, monkeypatch
+):
     """The paper's medium mesh has no shipped ensemble: the first `vfinfer infer` builds one of the prior set (a
     line says so, with its cost and where it goes), the recording is checked against it, and the next run reads
     it from the cache; the coarse default says "shipped"; VFINFER_REACH_BUILD=0 builds nothing. Stand-in
     simulator (vfinfer reach's test), stand-in fit."""
-    import vfcore.batch
     import service.cli as cli
+    import vfcore.batch
     from vfcore.inference import reach as rc
     from vfcore.inference.prior import Prior as PriorBox
-    monkeypatch.setattr(cli, "run_local", lambda spec, out, workers, job_id="local": {
-        "table": [], "method": "importance", "n_simulations": 4, "n_failed": 0, "ess": 3.0})
+
+    monkeypatch.setattr(
+        cli,
+        "run_local",
+        lambda spec, out, workers, job_id="local": {
+            "table": [],
+            "method": "importance",
+            "n_simulations": 4,
+            "n_failed": 0,
+            "ess": 3.0,
+        },
+    )
     monkeypatch.setattr(rc, "DEFAULT_N", 40)
-    args = ["infer", str(gaw_200), "--mesh", "medium", "--fix", "x0=8.4", "--sampler", "is", "--n", "4",
-            "--workers", "1", "--force-reach"]
+    args = [
+        "infer",
+        str(gaw_200),
+        "--mesh",
+        "medium",
+        "--fix",
+        "x0=8.4",
+        "--sampler",
+        "is",
+        "--n",
+        "4",
+        "--workers",
+        "1",
+        "--force-reach",
+    ]
     monkeypatch.setenv("VFINFER_REACH_BUILD", "0")
     r = CliRunner().invoke(cli_app, [*args, "--out", str(tmp_path / "o0")], env={"COLUMNS": "200"})
     assert r.exit_code == 0 and "was not checked" in r.output and "building" not in r.output, r.output
@@ -233,10 +283,11 @@ def test_infer_builds_a_missing_ensemble_on_first_use_caches_it_and_says_which(t
     assert "was not checked: no reach ensemble" not in r.output
     assert "outside this model's reach" in r.output and f"(reach ensemble: built now, {files[0]})" in r.output
 
-    monkeypatch.setattr(rc, "build_ensemble", None)            # the cache answers: nothing is built
+    monkeypatch.setattr(rc, "build_ensemble", None)  # the cache answers: nothing is built
     r = CliRunner().invoke(cli_app, [*args, "--out", str(tmp_path / "o2")], env={"COLUMNS": "200"})
     assert r.exit_code == 0 and f"(reach ensemble: cached ensemble of 40 draws, {files[0]})" in r.output, r.output
     assert "building" not in r.output
-    r = CliRunner().invoke(cli_app, ["infer", str(gaw_200), *CHEAP, "--force-reach", "--out", str(tmp_path / "o3")],
-                           env={"COLUMNS": "200"})
+    r = CliRunner().invoke(
+        cli_app, ["infer", str(gaw_200), *CHEAP, "--force-reach", "--out", str(tmp_path / "o3")], env={"COLUMNS": "200"}
+    )
     assert r.exit_code == 0 and "(reach ensemble: shipped ensemble of 2000 draws, " in r.output, r.output

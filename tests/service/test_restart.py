@@ -1,5 +1,6 @@
 """The whole service (API + its LocalCluster) killed mid-job and restarted: the job resumes from
 its store, finished chunks are not recomputed, and the posterior equals an undisturbed run."""
+
 from __future__ import annotations
 
 import time
@@ -17,7 +18,7 @@ def test_service_restart_resumes_without_recomputing(tmp_path):
     from worker.jobspec import JobSpec
 
     data = tmp_path / "data"
-    spec = toy_spec(n=600, seed=33, delay=0.01, chunk_size=30)       # 20 chunks of ~0.3 s
+    spec = toy_spec(n=600, seed=33, delay=0.01, chunk_size=30)  # 20 chunks of ~0.3 s
     p, port = start_service(data)
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as http:

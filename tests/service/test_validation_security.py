@@ -1,4 +1,5 @@
 """Bad input -> 422 naming the field, nothing written; tokens and ownership."""
+
 from __future__ import annotations
 
 import json
@@ -27,8 +28,11 @@ def _bad(**patch):
 one_cycle = toy_spec()["gaw"]["areas"][:30]
 
 CASES = [
-    ("nan_area", lambda: json.dumps(toy_spec()).replace("[0.0,", "[NaN,", 1).replace('"areas": [', '"areas": [NaN, ', 1),
-     "areas"),
+    (
+        "nan_area",
+        lambda: json.dumps(toy_spec()).replace("[0.0,", "[NaN,", 1).replace('"areas": [', '"areas": [NaN, ', 1),
+        "areas",
+    ),
     ("inf_area", lambda: json.dumps(toy_spec()).replace('"areas": [', '"areas": [Infinity, ', 1), "areas"),
     ("negative_area", lambda: _bad(gaw__areas=[-50.0] + toy_spec()["gaw"]["areas"]), "areas"),
     ("one_cycle", lambda: _bad(gaw__areas=one_cycle), "gaw"),
@@ -84,7 +88,7 @@ def test_toy_model_refused_when_disabled(service):
 
 def test_body_too_large_413(service):
     big = toy_spec()
-    big["gaw"]["areas"] = big["gaw"]["areas"] * 1500         # > 2 MB (the test limit)
+    big["gaw"]["areas"] = big["gaw"]["areas"] * 1500  # > 2 MB (the test limit)
     r = service.http.post("/jobs", json=big, headers=auth("alice"))
     assert r.status_code == 413
     _nothing_written(service)
@@ -99,9 +103,13 @@ def test_tokens_and_ownership(service):
     _nothing_written(service)
     jid = http.post("/jobs", json=spec, headers=auth("alice")).json()["id"]
     wait_done(http, jid, "alice")
-    for method, url in (("GET", f"/jobs/{jid}"), ("GET", f"/jobs/{jid}/posterior"),
-                        ("GET", f"/jobs/{jid}/samples"), ("GET", f"/jobs/{jid}/figures/corner"),
-                        ("DELETE", f"/jobs/{jid}")):
+    for method, url in (
+        ("GET", f"/jobs/{jid}"),
+        ("GET", f"/jobs/{jid}/posterior"),
+        ("GET", f"/jobs/{jid}/samples"),
+        ("GET", f"/jobs/{jid}/figures/corner"),
+        ("DELETE", f"/jobs/{jid}"),
+    ):
         assert http.request(method, url).status_code == 401
         r = http.request(method, url, headers=auth("bob"))
         assert r.status_code == 404, (method, url, r.status_code)

@@ -1,4 +1,5 @@
 """Sub-frame, profile-likelihood alignment (vfcore.observe.align) and the continuity it buys."""
+
 import dataclasses
 
 import numpy as np
@@ -25,12 +26,12 @@ def test_fractional_shift_is_recovered(shift, method):
     hr = _signal()
     sim = hr[::HR_OVERSAMPLE]
     t_fine = np.arange(hr.size) / HR_OVERSAMPLE
-    obs = np.interp(shift + np.arange(300), t_fine, hr)        # the recording starts `shift` frames in
+    obs = np.interp(shift + np.arange(300), t_fine, hr)  # the recording starts `shift` frames in
     seg, o, lag = align(sim, obs, FPS, (40, 300), sim_hr=hr, oversample=HR_OVERSAMPLE, method=method)
     # the right cycle modulo one period (31.4 frames at 63.7 Hz)
     period = FPS / 63.7
     d = (lag - shift + period / 2) % period - period / 2
-    assert abs(d) < 0.05          # a twentieth of a frame (25 us at 2000 fps)
+    assert abs(d) < 0.05  # a twentieth of a frame (25 us at 2000 fps)
     if method == "profile":
         assert np.sqrt(np.mean((seg - obs) ** 2)) < 0.02 * obs.max()
     # the integer path can only be right to within half a frame
@@ -90,6 +91,7 @@ def test_profile_scores_equal_the_direct_sum_at_every_fine_lag():
     """The correlate/cumsum form of the profile criterion equals the direct windowed sum of
     squared differences at every fine lag (and so picks the same lag)."""
     from vfcore.observe import _profile_scores
+
     rng = np.random.default_rng(1)
     q, n, j_max = 10, 352, 450
     t = np.arange(9000) / 20000.0
@@ -107,6 +109,7 @@ def test_profile_scores_keep_each_template_apart_and_refuse_a_short_record():
     and another oversampling, still gives each its own direct sum; a record too short for the
     lags asked is an error, not a wrapped correlation."""
     from vfcore.observe import _profile_scores
+
     rng = np.random.default_rng(2)
     hr = rng.standard_normal(5000)
     n, j_max = 200, 300
@@ -114,7 +117,7 @@ def test_profile_scores_keep_each_template_apart_and_refuse_a_short_record():
         direct = -np.array([np.sum((hr[j + q * np.arange(n)] - t) ** 2) for j in range(j_max + 1)])
         assert np.max(np.abs(_profile_scores(hr, t, q, j_max) - direct)) < 1e-9 * np.max(np.abs(direct))
     with pytest.raises(ValueError, match="too short"):
-        _profile_scores(hr[:10 * (n - 1) + j_max], rng.standard_normal(n), 10, j_max)
+        _profile_scores(hr[: 10 * (n - 1) + j_max], rng.standard_normal(n), 10, j_max)
 
 
 def test_window_search_finds_a_recording_deep_in_a_drifting_simulation():
@@ -125,6 +128,7 @@ def test_window_search_finds_a_recording_deep_in_a_drifting_simulation():
     finds the recording exactly. For a settled cycle the two agree (same misfit, to rounding)."""
     from vfcore.inference import Prior
     from vfcore.inference.problem import Problem
+
     q, n, f0 = HR_OVERSAMPLE, 600, 63.7
     t = np.arange(q * (n - 1) + 1) / (q * FPS)
     settled = 20.0 * np.maximum(np.sin(2 * np.pi * f0 * t), 0.0) ** 1.5
@@ -161,18 +165,21 @@ def test_aligning_many_waveforms_gives_each_the_bytes_of_its_own_alignment(metho
     batch: each row's segment and lag are exactly those of aligning it alone, and each recovers its
     own shift (so rows are not mixed up)."""
     from vfcore.observe import align_many
+
     hr = _signal(n=600)
     t_fine = np.arange(hr.size) / HR_OVERSAMPLE
     obs = np.interp(9.4 + np.arange(300), t_fine, hr)
-    shifts = np.array([0.0, 3.2, 11.7, 17.05])            # fine samples of delay per row
-    rows = np.stack([np.interp(t_fine - s / HR_OVERSAMPLE, t_fine, hr) * (1 + 0.05 * k) + 0.1 * k
-                     for k, s in enumerate(shifts)])
+    shifts = np.array([0.0, 3.2, 11.7, 17.05])  # fine samples of delay per row
+    rows = np.stack(
+        [np.interp(t_fine - s / HR_OVERSAMPLE, t_fine, hr) * (1 + 0.05 * k) + 0.1 * k for k, s in enumerate(shifts)]
+    )
     segs, lags = align_many(rows, obs, FPS, (40, 300), HR_OVERSAMPLE, method=method)
     assert segs.shape == (4, 300) and lags.shape == (4,)
     period = FPS / 63.7
     for k, row in enumerate(rows):
-        seg, _, lag = align(row[::HR_OVERSAMPLE], obs, FPS, (40, 300), sim_hr=row, oversample=HR_OVERSAMPLE,
-                            method=method)
+        seg, _, lag = align(
+            row[::HR_OVERSAMPLE], obs, FPS, (40, 300), sim_hr=row, oversample=HR_OVERSAMPLE, method=method
+        )
         assert np.array_equal(seg, segs[k]) and lag == lags[k]
         d = (lags[k] - (9.4 + shifts[k] / HR_OVERSAMPLE) + period / 2) % period - period / 2
         assert abs(d) < 0.05
@@ -184,6 +191,7 @@ def test_a_problems_batch_alignment_and_likelihoods_equal_its_one_by_one(area_sc
     search, which runs per row) equal ``Problem.align`` / ``aligned_loglik`` row by row, bit for bit."""
     from vfcore.inference import Prior, Problem
     from vfcore.inference.scoring import aligned_loglik, aligned_logliks
+
     cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.45)
     hr = _signal(n=int(round((cfg.duration - cfg.discard) * FPS)) + 1)
     rng = np.random.default_rng(4)
@@ -201,6 +209,7 @@ def test_a_problems_batch_alignment_and_likelihoods_equal_its_one_by_one(area_sc
 
 def test_aligning_many_refuses_records_shorter_than_the_window():
     from vfcore.observe import align_many
+
     hr = _signal(n=200)
     with pytest.raises(ValueError, match="shorter than the 300 frames"):
         align_many(np.stack([hr, hr]), hr[::HR_OVERSAMPLE], FPS, (40, 300), HR_OVERSAMPLE)

@@ -1,11 +1,12 @@
 """Batched forward model (vfcore.batch.simulate_many) against the scalar simulate."""
+
 import numpy as np
 import pytest
 
 from vfcore import Params, SimConfig, simulate
 from vfcore.batch import simulate_many
 
-LO = np.array([9.0, 250.0, 0.5, 400.0, 950.0, 1.0, 7.4])     # paper priors, paper units
+LO = np.array([9.0, 250.0, 0.5, 400.0, 950.0, 1.0, 7.4])  # paper priors, paper units
 HI = np.array([15.0, 950.0, 3.0, 1800.0, 1200.0, 7.0, 8.4])
 
 
@@ -31,16 +32,18 @@ def test_small_blocks_take_the_scalar_kernel_with_the_same_bits(rows, batched, m
     """A block of fewer than MIN_LOCKSTEP rows goes to the scalar kernel: the lock-step kernel sees only the
     full blocks, and the small block's results equal those the lock-step kernel gave the same rows."""
     import vfcore.batch as vb
+
     sizes = []
     lockstep = vb._simulate_block
 
     def spy(ps, cfgs):
         sizes.append(len(ps))
         return lockstep(ps, cfgs)
+
     monkeypatch.setattr(vb, "_simulate_block", spy)
-    out = simulate_many(rows, SimConfig(), block=5)            # a block of 5, then one of 1
+    out = simulate_many(rows, SimConfig(), block=5)  # a block of 5, then one of 1
     assert sizes == [5] and 1 < vb.MIN_LOCKSTEP <= 5
-    one = simulate_many(rows[1:2], SimConfig())                # a single oscillating row
+    one = simulate_many(rows[1:2], SimConfig())  # a single oscillating row
     assert sizes == [5]
     for b, s in zip(batched, out):
         assert b.ok == s.ok
@@ -52,7 +55,7 @@ def test_small_blocks_take_the_scalar_kernel_with_the_same_bits(rows, batched, m
 
 def test_batch_equals_scalar(scalar, batched):
     assert any(not s.ok for s in scalar) and sum(s.ok for s in scalar) >= 3
-    assert any(s.ok and s.gaw.max() > 1e-4 for s in scalar)      # at least one oscillating sample
+    assert any(s.ok and s.gaw.max() > 1e-4 for s in scalar)  # at least one oscillating sample
     for s, b in zip(scalar, batched):
         assert s.ok == b.ok and s.message == b.message
         if not s.ok:
@@ -62,8 +65,12 @@ def test_batch_equals_scalar(scalar, batched):
         for f in ("gaw", "gaw_hr", "width", "flow", "contact_pressure", "contact_force"):
             assert np.array_equal(getattr(s, f), getattr(b, f)), f
         # the per-cycle contact products include the kernels' projection impulses
-        for f in ("contact_impulse", "contact_duration", "contact_pressure_in_contact",
-                  "max_contact_pressure_unconverged"):
+        for f in (
+            "contact_impulse",
+            "contact_duration",
+            "contact_pressure_in_contact",
+            "max_contact_pressure_unconverged",
+        ):
             assert np.array_equal(getattr(s.cycles, f), getattr(b.cycles, f)), f
 
 
@@ -74,7 +81,7 @@ def test_batch_equals_scalar_with_the_contact_layer(rows, flow):
     cfg = SimConfig(contact="layer", flow=flow, duration=0.2, discard=0.05)
     scalar = [simulate(r, cfg) for r in rows]
     batched = simulate_many(rows, cfg, block=6)
-    assert any(s.ok and s.contact_force.max() > 0 for s in scalar)      # some sample touches the layer
+    assert any(s.ok and s.contact_force.max() > 0 for s in scalar)  # some sample touches the layer
     for s, b in zip(scalar, batched):
         assert s.ok == b.ok and s.message == b.message
         if s.ok:
@@ -85,7 +92,7 @@ def test_batch_equals_scalar_with_the_contact_layer(rows, flow):
 
 
 def test_batch_reruns_bit_identical(rows, batched):
-    again = simulate_many(rows, SimConfig(), block=4)    # different blocking, same numbers
+    again = simulate_many(rows, SimConfig(), block=4)  # different blocking, same numbers
     for a, b in zip(batched, again):
         assert a.ok == b.ok
         if a.ok:
@@ -106,13 +113,21 @@ def test_per_row_extensions_share_one_block():
     simulation with its own configuration."""
     from vfcore import TABLE3
     from vfcore.batch import block_key
+
     short = dict(duration=0.12, discard=0.06)
-    cfgs = [SimConfig(**short),
-            SimConfig(**short, sep_ratio=1.1),
-            SimConfig(**short, epithelium_E_kpa=20.0),
-            SimConfig(**short, subglottal_modes=((600.0, 0.1, 1e5),)),
-            SimConfig(**short, subglottal_modes=((500.0, 0.1, 1e5), (1400.0, 0.05, 5e4)), sep_ratio=1.5,
-                      epithelium_E_kpa=40.0, epithelium_h_mm=0.03)]
+    cfgs = [
+        SimConfig(**short),
+        SimConfig(**short, sep_ratio=1.1),
+        SimConfig(**short, epithelium_E_kpa=20.0),
+        SimConfig(**short, subglottal_modes=((600.0, 0.1, 1e5),)),
+        SimConfig(
+            **short,
+            subglottal_modes=((500.0, 0.1, 1e5), (1400.0, 0.05, 5e4)),
+            sep_ratio=1.5,
+            epithelium_E_kpa=40.0,
+            epithelium_h_mm=0.03,
+        ),
+    ]
     assert len({block_key(c) for c in cfgs}) == 1
     rows = np.array([TABLE3.as_array()] * 3 + [TABLE3.replace(p_sub=800.0).as_array()] * 2)
     out = simulate_many(rows, block=8, configs=cfgs)
@@ -122,7 +137,7 @@ def test_per_row_extensions_share_one_block():
         _close(s, b)
         assert b.config == c
         if c.has_subglottal:
-            assert np.ptp(b.p_in) > 1.0                 # the resonators move the inlet pressure (Pa)
+            assert np.ptp(b.p_in) > 1.0  # the resonators move the inlet pressure (Pa)
         else:
             assert b.p_in.size == 0
         gaws.append(b.gaw)
@@ -133,6 +148,7 @@ def test_per_row_extensions_share_one_block():
 
 def test_configs_of_different_numerics_are_grouped():
     from vfcore import TABLE3
+
     short = dict(duration=0.08, discard=0.04)
     cfgs = [SimConfig(**short, mesh="coarse"), SimConfig(**short), SimConfig(**short, mesh="coarse", sep_ratio=1.2)]
     rows = np.array([TABLE3.as_array()] * 3)
@@ -161,10 +177,10 @@ def test_early_stop_saves_only_settled_draws_and_matches_the_scalar_kernel(rows)
         for fld in ("gaw", "gaw_hr", "flow", "contact_force"):
             assert np.array_equal(getattr(s, fld), getattr(b, fld)), fld
         if np.ptp(f.gaw[-200:]) > 0.05:
-            assert not st                                # oscillating at the end: never stopped
+            assert not st  # oscillating at the end: never stopped
         if st:
             # settled: the area varied by < 1.7e-4 mm^2 over the last two windows and keeps to that
             assert np.max(np.abs(b.gaw - f.gaw)) < 1e-3
-            assert np.ptp(f.gaw[-200:]) < 1e-3          # the full run is indeed flat at the end
+            assert np.ptp(f.gaw[-200:]) < 1e-3  # the full run is indeed flat at the end
         else:
-            assert np.array_equal(b.gaw, f.gaw)          # ran to the end: the same run
+            assert np.array_equal(b.gaw, f.gaw)  # ran to the end: the same run

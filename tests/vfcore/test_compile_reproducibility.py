@@ -5,6 +5,7 @@ time loop compiled in a fresh process produced other GAWs (up to 22 mm^2 apart o
 case) than the cached machine code used by every later run. Each subprocess below gets its own
 empty NUMBA_CACHE_DIR for the first (cold) run, which the second run then loads.
 """
+
 import os
 import subprocess
 import sys
@@ -27,14 +28,20 @@ print(h.hexdigest())
 
 def _run(cache_dir: Path) -> str:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), OMP_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600,
-                         cwd=Path(__file__).resolve().parents[2])
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=Path(__file__).resolve().parents[2],
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout.strip().splitlines()[-1]
 
 
 def test_cold_compile_equals_cached(tmp_path):
-    cold = _run(tmp_path)                     # empty cache: every kernel compiled here
-    assert any(tmp_path.rglob("*.nbi"))       # ... and written to the cache
-    warm = _run(tmp_path)                     # loaded from the cache
+    cold = _run(tmp_path)  # empty cache: every kernel compiled here
+    assert any(tmp_path.rglob("*.nbi"))  # ... and written to the cache
+    warm = _run(tmp_path)  # loaded from the cache
     assert cold == warm

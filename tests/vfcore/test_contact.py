@@ -1,5 +1,6 @@
 """Contact: the rigid projection's and the compliant layer's laws, and the products built on them
 (impulse per cycle, contact duration, pressure in contact; :ref:`model-contact`)."""
+
 import math
 
 import numpy as np
@@ -23,24 +24,36 @@ def _masses_series(mass, v0, gap, h, n_steps, kc=None, cc=None):
     am, af, beta, gamma = kern.newmark_coefficients(h, 1.0)
     cM, _, _ = kern.effective_scales(h, 1.0)
     Lp, Lj = indptr.copy(), indices.copy()
-    Lx = np.full(n, 1.0 / np.sqrt(cM * mass))          # diagonal factor, stored as its reciprocal
+    Lx = np.full(n, 1.0 / np.sqrt(cM * mass))  # diagonal factor, stored as its reciprocal
     sdx = np.array([0, 2], dtype=np.int64)
     sdz = np.array([1, 3], dtype=np.int64)
     G = np.zeros((n, m))
-    G[sdx, [0, 1]] = 1.0 / (cM * mass)                 # K_eff^-1 e_j
+    G[sdx, [0, 1]] = 1.0 / (cM * mass)  # K_eff^-1 e_j
     sX, sZ = np.zeros(m), np.array([0.0, 1e-3])
     u, a = np.zeros(n), np.zeros(n)
     v = np.array([v0, 0.0, v0, 0.0])
     lam, proj = np.zeros((n_steps, m)), np.zeros((n_steps, m))
     layer = kc is not None
-    st = kern.integrate_coupled(A.Stepper(n_steps, h, am, af, beta, gamma),
-                                A.Pattern(indptr, indices, Lp, Lj, sdx, sdz, sX, sZ),
-                                A.Model(0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 0, 1.0),
-                                A.Coupling(np.zeros((0, 3)), 0.0, layer, np.full(m, kc if layer else 0.0),
-                                           np.full(m, cc if layer else 0.0)),
-                                A.Stop(0, 0.0, 0.0), A.Matrices(kval, mval, dval, Lx, G), A.State(u, v, a),
-                                A.Outputs(np.zeros(n_steps), np.zeros(n_steps), lam, proj, np.zeros(0), 0,
-                                          np.zeros((0, n)), np.zeros((0, n)), np.zeros(1, dtype=np.int64)))
+    st = kern.integrate_coupled(
+        A.Stepper(n_steps, h, am, af, beta, gamma),
+        A.Pattern(indptr, indices, Lp, Lj, sdx, sdz, sX, sZ),
+        A.Model(0.0, 0.0, 1.3, gap, fw.CLOSED_TOL, 0.0, 0, 1.0),
+        A.Coupling(np.zeros((0, 3)), 0.0, layer, np.full(m, kc if layer else 0.0), np.full(m, cc if layer else 0.0)),
+        A.Stop(0, 0.0, 0.0),
+        A.Matrices(kval, mval, dval, Lx, G),
+        A.State(u, v, a),
+        A.Outputs(
+            np.zeros(n_steps),
+            np.zeros(n_steps),
+            lam,
+            proj,
+            np.zeros(0),
+            0,
+            np.zeros((0, n)),
+            np.zeros((0, n)),
+            np.zeros(1, dtype=np.int64),
+        ),
+    )
     assert st == 0
     return lam, proj, u[sdx], v[sdx]
 
@@ -48,7 +61,7 @@ def _masses_series(mass, v0, gap, h, n_steps, kc=None, cc=None):
 def _free_masses(mass, v0, gap, h, n_steps):
     """:func:`_masses_series` against the rigid midline: (multiplier impulse, projection impulse) per node."""
     lam, proj, u, v = _masses_series(mass, v0, gap, h, n_steps)
-    assert np.allclose(u, gap, rtol=0, atol=1e-15) and np.all(v == 0.0)   # stopped at the midline
+    assert np.allclose(u, gap, rtol=0, atol=1e-15) and np.all(v == 0.0)  # stopped at the midline
     return h * lam.sum(axis=0), proj.sum(axis=0)
 
 
@@ -56,8 +69,8 @@ def _free_masses(mass, v0, gap, h, n_steps):
 def test_rigid_stop_impulse_is_m_v(h):
     """An inelastic stop takes exactly the momentum m v, whatever the step and wherever in a step
     the midline is reached; the multiplier's impulse alone does not (it depends on that phase)."""
-    mass, v0 = 0.02, 0.7                                 # kg/m (per unit length), m/s
-    gap = 0.37 * h * v0 + 5 * h * v0                    # reached a fraction into a step
+    mass, v0 = 0.02, 0.7  # kg/m (per unit length), m/s
+    gap = 0.37 * h * v0 + 5 * h * v0  # reached a fraction into a step
     imp_lam, imp_proj = _free_masses(mass, v0, gap, h, 20)
     np.testing.assert_allclose(imp_lam + imp_proj, mass * v0, rtol=1e-12)
     assert abs(imp_lam[0] - mass * v0) > 0.1 * mass * v0
@@ -72,7 +85,7 @@ def test_cycle_products_from_per_step_series():
     closed = gaw == 0.0
     rng = np.random.default_rng(0)
     force = np.where(closed[:, None], rng.random((t.size, 3)), 0.0)
-    force[:, 1] *= rng.random(t.size) > 0.5           # node 1 touches on some steps only
+    force[:, 1] *= rng.random(t.size) > 0.5  # node 1 touches on some steps only
     proj = np.where(closed[:, None], 1e-6 * rng.random((t.size, 3)), 0.0)
     share = np.array([1e-4, 2e-4, 3e-4])
     cyc = fw.cycle_summary(t, gaw, gaw * 0.0, force.max(axis=1), force, share, h, proj)
@@ -120,7 +133,7 @@ def test_impulse_converges_in_dt():
         pk.append(y.max_contact_pressure_unconverged.max())
     d_imp = [abs(imp[i + 1] - imp[i]) / imp[i + 1] for i in range(2)]
     d_pk = [abs(pk[i + 1] - pk[i]) / pk[i + 1] for i in range(2)]
-    assert d_imp[1] < d_imp[0]                      # the differences shrink
+    assert d_imp[1] < d_imp[0]  # the differences shrink
     assert d_imp[1] < 0.15 and d_imp[1] < d_pk[1]
 
 
@@ -147,19 +160,19 @@ def test_layer_impact_matches_the_exact_kelvin_voigt_solution(zeta):
     exact spring-dashpot impact as the step shrinks (first order: the contact starts inside a step and
     the dashpot uses the backward difference of the overlap). zeta = 0 is the elastic bounce, impulse
     2 m v0."""
-    mass, v0, k = 0.02, 0.7, 2000.0                      # kg/m, m/s, N/m^2: contact of ~10 ms
+    mass, v0, k = 0.02, 0.7, 2000.0  # kg/m, m/s, N/m^2: contact of ~10 ms
     c = 2.0 * zeta * math.sqrt(k * mass)
     J, F, T = _kelvin_voigt_impact(mass, v0, k, c)
     if zeta == 0.0:
         assert J == pytest.approx(2.0 * mass * v0, rel=1e-9)
     err = []
     for h in (2e-4, 1e-4, 5e-5, 2.5e-5):
-        gap = 0.37 * h * v0 + 5 * h * v0                  # reached a fraction into a step
+        gap = 0.37 * h * v0 + 5 * h * v0  # reached a fraction into a step
         lam, proj, _, _ = _masses_series(mass, v0, gap, h, int(round(0.03 / h)), kc=k, cc=c)
-        assert np.all(proj == 0.0) and np.all(lam >= 0.0)   # no projection; never adhesive
+        assert np.all(proj == 0.0) and np.all(lam >= 0.0)  # no projection; never adhesive
         f = lam[:, 0]
         touching = np.nonzero(f > 0)[0]
-        assert np.all(np.diff(touching) == 1)            # one contact, then free flight
+        assert np.all(np.diff(touching) == 1)  # one contact, then free flight
         err.append((abs(h * f.sum() - J) / J, abs(f.max() - F) / F, abs(h * touching.size - T) / T))
     err = np.array(err)
     assert np.all(err[-1] < 0.02), err[-1]
@@ -174,15 +187,33 @@ def test_layer_static_compression_is_the_spring_solution():
     n, m = 2, 1
     K = 3000.0
     kc = 1000.0
-    g = 1e-4                                            # the midline is 0.1 mm inside the rest position
+    g = 1e-4  # the midline is 0.1 mm inside the rest position
     G = np.array([[1.0 / K], [0.0]])
     u = np.zeros(n)
     lam = np.zeros(m)
     active = np.zeros(m, dtype=np.bool_)
     sdx = np.array([0], dtype=np.int64)
-    it = kern.contact_layer_ws(u, np.zeros(n), 1.0, 1.0, sdx, np.array([g]), 0.0, G, np.array([kc]), np.zeros(m),
-                               lam, active, 20, np.empty(n), np.empty((m, m)), np.empty(m),
-                               np.empty(m, dtype=np.int64), np.empty(m), np.empty(m))
+    it = kern.contact_layer_ws(
+        u,
+        np.zeros(n),
+        1.0,
+        1.0,
+        sdx,
+        np.array([g]),
+        0.0,
+        G,
+        np.array([kc]),
+        np.zeros(m),
+        lam,
+        active,
+        20,
+        np.empty(n),
+        np.empty((m, m)),
+        np.empty(m),
+        np.empty(m, dtype=np.int64),
+        np.empty(m),
+        np.empty(m),
+    )
     assert it >= 1
     # equilibrium: K u = f, f = -kc (g + u): u = -kc g / (K + kc)
     assert u[0] == pytest.approx(-kc * g / (K + kc), rel=1e-12)
@@ -200,10 +231,12 @@ def test_layer_peak_pressure_converges_in_dt_where_the_projection_does_not():
     """Table 3, medium mesh, the two finest steps of benchmarks/bench_contact.py: with the compliant layer
     the peak nodal pressure, the impulse and the pressure in contact agree within 5 %; with the rigid
     projection the peak grows like m v / h (:ref:`model-contact`)."""
+
     def products(contact, dt):
         y = simulate(TABLE3, SimConfig(contact=contact, dt=dt, duration=0.35, discard=0.15)).cycles
-        return np.array([y.max_contact_pressure_unconverged.max(), y.contact_impulse.mean(),
-                         y.contact_pressure_in_contact.mean()])
+        return np.array(
+            [y.max_contact_pressure_unconverged.max(), y.contact_impulse.mean(), y.contact_pressure_in_contact.mean()]
+        )
 
     a, b = products("layer", 1.25e-5), products("layer", 6.25e-6)
     assert np.all(np.abs(a - b) / b < 0.05), (a, b)

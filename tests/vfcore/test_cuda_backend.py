@@ -5,6 +5,7 @@ imported: those checks run in a subprocess with NUMBA_ENABLE_CUDASIM=1. The simu
 integrate_ws as CPU code, so it checks the kernel's thread mapping, interleaved layout, launch and assembly;
 test_kernel_compiles_for_the_gpu checks that numba's CUDA target compiles that same code (NVVM, no GPU needed).
 """
+
 from __future__ import annotations
 
 import json
@@ -101,22 +102,32 @@ print("RESULT " + json.dumps(out))
 
 
 def _run_script(code: str, timeout: float, **env_extra) -> tuple[dict, float]:
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", NUMBA_NUM_THREADS="1", MPLBACKEND="Agg",
-               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env_extra)
+    env = dict(
+        os.environ,
+        OMP_NUM_THREADS="1",
+        OPENBLAS_NUM_THREADS="1",
+        NUMBA_NUM_THREADS="1",
+        MPLBACKEND="Agg",
+        PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+        **env_extra,
+    )
     t = time.perf_counter()
     try:
-        proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
-                              timeout=timeout)
+        proc = subprocess.run(
+            [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout
+        )
     except subprocess.TimeoutExpired:
-        pytest.skip(f"the CUDA-simulator run took over {timeout:.0f} s on this machine (compiling the kernel's "
-                    "thread body for strided arrays dominates); too slow here to check anything")
+        pytest.skip(
+            f"the CUDA-simulator run took over {timeout:.0f} s on this machine (compiling the kernel's "
+            "thread body for strided arrays dominates); too slow here to check anything"
+        )
     wall = time.perf_counter() - t
     if proc.returncode != 0:
         raise AssertionError(f"subprocess failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}")
     if "SKIP " in proc.stdout:
         pytest.skip(proc.stdout.split("SKIP ", 1)[1].strip().splitlines()[0])
     line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
-    return json.loads(line[len("RESULT "):]), wall
+    return json.loads(line[len("RESULT ") :]), wall
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +135,7 @@ def simulated():
     return _run_script(_SIM_SCRIPT, SIM_TIMEOUT_S, NUMBA_ENABLE_CUDASIM="1")
 
 
-@pytest.mark.slow                      # half a minute compiling the kernel for the simulator
+@pytest.mark.slow  # half a minute compiling the kernel for the simulator
 def test_simulator_matches_the_cpu_lockstep_kernel(simulated):
     """On the simulator each thread runs the CPU's integrate_ws on its columns of the interleaved arrays: the
     results equal the CPU lock-step kernel's bit for bit (flags, messages, GAW, contact, p_in, trajectories,
@@ -141,12 +152,12 @@ def test_simulator_matches_the_cpu_lockstep_kernel(simulated):
         assert r["identical"], (name, r)
 
 
-@pytest.mark.slow                      # half a minute compiling the kernel for the simulator
+@pytest.mark.slow  # half a minute compiling the kernel for the simulator
 def test_device_zero_fill(simulated):
     assert simulated[0]["fill_zero"]
 
 
-@pytest.mark.slow                      # half a minute compiling the kernel for the simulator
+@pytest.mark.slow  # half a minute compiling the kernel for the simulator
 def test_device_evaluator_scores_as_the_cpu_evaluator(simulated):
     res, _ = simulated
     ev = res["evaluator"]
@@ -162,6 +173,7 @@ def test_worker_passes_a_jobs_device_through():
     from vfcore.inference.device_eval import DeviceEvaluator
     from vfcore.inference.problem import ProblemEvaluator
     from worker.run import GPU_CHUNK, evaluator_for, job_device
+
     assert job_device(SimpleNamespace(model="fe")) == "cpu"
     ev = evaluator_for(SimpleNamespace(model="fe", device="cuda"), problem=None)
     assert isinstance(ev, DeviceEvaluator) and ev.device == "cuda"
@@ -171,6 +183,7 @@ def test_worker_passes_a_jobs_device_through():
 
 def test_cuda_without_a_gpu_is_one_clear_error():
     from vfcore.gpu import CudaUnavailable, cuda_status, resolve_device
+
     assert resolve_device("cpu") == "cpu"
     with pytest.raises(ValueError, match="device must be one of"):
         resolve_device("gpu")
@@ -183,9 +196,11 @@ def test_cuda_without_a_gpu_is_one_clear_error():
     assert "\n" not in str(err.value)
     from vfcore import TABLE3, SimConfig
     from vfcore.batch import simulate_many
+
     with pytest.raises(CudaUnavailable):
-        simulate_many(np.array([TABLE3.as_array()]), SimConfig(mesh="coarse", duration=0.001, discard=0.0),
-                      device="cuda")
+        simulate_many(
+            np.array([TABLE3.as_array()]), SimConfig(mesh="coarse", duration=0.001, discard=0.0), device="cuda"
+        )
 
 
 _PTX_SCRIPT = r"""
@@ -234,21 +249,27 @@ def _real_gpu() -> bool:
     if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
         return False
     from vfcore.gpu import cuda_status
+
     return cuda_status()[0]
 
 
-@pytest.mark.skipif(not _real_gpu(), reason="no usable NVIDIA GPU (numba.cuda.is_available() is false, or NVVM is "
-                                             "missing); the kernel's logic is checked on the simulator above")
+@pytest.mark.skipif(
+    not _real_gpu(),
+    reason="no usable NVIDIA GPU (numba.cuda.is_available() is false, or NVVM is "
+    "missing); the kernel's logic is checked on the simulator above",
+)
 def test_real_gpu_matches_the_cpu_lockstep_kernel():
     """On a GPU: the medium mesh, prior draws and Table 3 over 100 ms, both contact laws and flow loads; with FMA contraction
     off the GPU's arithmetic is the CPU's, so the GAWs agree to 1e-10 relative (bit for bit expected)."""
     from vfcore import TABLE3, Params, SimConfig
     from vfcore.batch import simulate_many
+
     lo = np.array([9.0, 250.0, 0.5, 400.0, 950.0, 1.0, 7.4])
     hi = np.array([15.0, 950.0, 3.0, 1800.0, 1200.0, 7.0, 8.4])
     rng = np.random.default_rng(2)
-    rows = np.array([Params.from_array(r).as_array() for r in lo + (hi - lo) * rng.random((15, 7))]
-                    + [TABLE3.as_array()])
+    rows = np.array(
+        [Params.from_array(r).as_array() for r in lo + (hi - lo) * rng.random((15, 7))] + [TABLE3.as_array()]
+    )
     for contact, flow in (("projection", "paper"), ("layer", "paper"), ("layer", "continuous")):
         cfg = SimConfig(duration=0.1, discard=0.02, contact=contact, flow=flow)
         cpu = simulate_many(rows, cfg, block=16)

@@ -5,6 +5,7 @@ Expected values come from mechanics (patch test, exact uniform-strain energy, ri
 a divergence-free manufactured solution, an independent numpy assembly), never from the
 code's own output.
 """
+
 import math
 from functools import cache
 
@@ -19,11 +20,11 @@ from vfcore import forward as fw
 from vfcore.fem.assemble import ELEMENTS, _shear, _volumetric, assemble_unit, lame, nodal_volumetric
 from vfcore.measures import cycle_boundaries, estimate_f0
 from vfcore.mesh import load_mesh
-from vfcore.solver import _args as A
+from vfcore.solver import _args as args
 from vfcore.solver import _kernels as kern
 from vfcore.solver.system import get_system
 
-E_TABLE3 = np.array([12150.0, 1808.0, 636.2])     # body, ligament, cover (Pa)
+E_TABLE3 = np.array([12150.0, 1808.0, 636.2])  # body, ligament, cover (Pa)
 
 
 def _boundary_nodes(tri: np.ndarray) -> np.ndarray:
@@ -34,7 +35,7 @@ def _boundary_nodes(tri: np.ndarray) -> np.ndarray:
 
 def _geometry(mesh):
     """Areas (nt,) and the element divergence rows B (nt, 6) on interleaved local dofs, by hand."""
-    p = mesh.points[mesh.triangles]                      # (nt, 3, 2)
+    p = mesh.points[mesh.triangles]  # (nt, 3, 2)
     x, z = p[:, :, 0], p[:, :, 1]
     det = (x[:, 1] - x[:, 0]) * (z[:, 2] - z[:, 0]) - (x[:, 2] - x[:, 0]) * (z[:, 1] - z[:, 0])
     area = 0.5 * np.abs(det)
@@ -43,7 +44,7 @@ def _geometry(mesh):
     gx = (z[:, j] - z[:, k]) / det[:, None]
     gz = (x[:, k] - x[:, j]) / det[:, None]
     B = np.empty((len(area), 6))
-    B[:, 0::2], B[:, 1::2] = gx, gz                      # div u = sum_i gx_i ux_i + gz_i uz_i
+    B[:, 0::2], B[:, 1::2] = gx, gz  # div u = sum_i gx_i ux_i + gz_i uz_i
     return area, B
 
 
@@ -84,16 +85,23 @@ def test_anp_changes_only_the_volumetric_part():
     # element-wise volumetric: sum_e E_e A_e B_e^T B_e
     rows = np.repeat(dof, 6, axis=1).ravel()
     cols = np.tile(dof, (1, 6)).ravel()
-    Kvol = sp.csr_matrix(sp.coo_matrix((((E * area)[:, None, None] * B[:, :, None] * B[:, None, :]).ravel(),
-                                        (rows, cols)), shape=(n, n)))
+    Kvol = sp.csr_matrix(
+        sp.coo_matrix((((E * area)[:, None, None] * B[:, :, None] * B[:, None, :]).ravel(), (rows, cols)), shape=(n, n))
+    )
     # nodal: C_aj = sum_{e ni a} A_e/3 B_e,j ; V_a = sum A_e/3 ; W_a = sum E_e A_e/3
     na = mesh.n_nodes
-    C = sp.csr_matrix(sp.coo_matrix((np.repeat((area / 3)[:, None, None] * B[:, None, :], 3, axis=1).ravel(),
-                                     (np.repeat(mesh.triangles, 6, axis=1).ravel(),
-                                      np.tile(dof, (1, 3)).ravel())), shape=(na, n)))
+    C = sp.csr_matrix(
+        sp.coo_matrix(
+            (
+                np.repeat((area / 3)[:, None, None] * B[:, None, :], 3, axis=1).ravel(),
+                (np.repeat(mesh.triangles, 6, axis=1).ravel(), np.tile(dof, (1, 3)).ravel()),
+            ),
+            shape=(na, n),
+        )
+    )
     V = np.bincount(mesh.triangles.ravel(), np.repeat(area / 3, 3), minlength=na)
     W = np.bincount(mesh.triangles.ravel(), np.repeat(E * area / 3, 3), minlength=na)
-    Kbar = C.T @ sp.diags(W / V ** 2) @ C
+    Kbar = C.T @ sp.diags(W / V**2) @ C
     Kp = sum(e * K for e, K in zip(E_TABLE3, p.K_layers))
     Kq = sum(e * K for e, K in zip(E_TABLE3, q.K_layers))
     ref = lam1 * (Kbar - Kvol)
@@ -111,8 +119,10 @@ def test_anp_patch_test(mesh_name, nu):
     inner = np.setdiff1d(np.arange(mesh.n_nodes), bnd)
     dof_b = np.sort(np.concatenate([2 * bnd, 2 * bnd + 1]))
     dof_i = np.sort(np.concatenate([2 * inner, 2 * inner + 1]))
-    for A, b in ((np.array([[0.3, -0.7], [1.1, 0.4]]), np.array([1e-3, -2e-3])),
-                 (np.array([[-1.0, 0.25], [0.5, 2.0]]), np.array([0.0, 5e-4]))):
+    for A, b in (
+        (np.array([[0.3, -0.7], [1.1, 0.4]]), np.array([1e-3, -2e-3])),
+        (np.array([[-1.0, 0.25], [0.5, 2.0]]), np.array([0.0, 5e-4])),
+    ):
         exact = (mesh.points @ A.T + b).ravel()
         ui = spla.spsolve(sp.csc_matrix(K[dof_i][:, dof_i]), -K[dof_i][:, dof_b] @ exact[dof_b])
         assert np.max(np.abs(ui - exact[dof_i])) <= 1e-10 * np.max(np.abs(exact[dof_i]))
@@ -141,16 +151,19 @@ def test_anp_symmetric_semidefinite_rigid_modes_only():
     assert abs(K - K.T).max() <= 1e-12 * abs(K).max()
     w = np.linalg.eigvalsh(K.toarray())
     assert w.min() >= -1e-10 * w.max()
-    assert np.sum(w < 1e-10 * w.max()) == 3                  # no spurious zero-energy mode
+    assert np.sum(w < 1e-10 * w.max()) == 3  # no spurious zero-energy mode
     x, z = mesh.points[:, 0], mesh.points[:, 1]
-    for r in (np.column_stack([np.ones_like(x), 0 * x]), np.column_stack([0 * x, np.ones_like(x)]),
-              np.column_stack([-z, x])):
+    for r in (
+        np.column_stack([np.ones_like(x), 0 * x]),
+        np.column_stack([0 * x, np.ones_like(x)]),
+        np.column_stack([-z, x]),
+    ):
         r = r.ravel()
         assert np.max(np.abs(K @ r)) <= 1e-10 * abs(K).max() * np.max(np.abs(r))
     # with the fixed boundary the free-dof system is positive definite (Cholesky succeeds)
     s = get_system("medium", 0.4995, "anp")
     s.factor(s.stiffness_values(E_TABLE3))
-    assert s.indices.size > get_system("medium", 0.4995).indices.size   # wider stencil (two-ring coupling)
+    assert s.indices.size > get_system("medium", 0.4995).indices.size  # wider stencil (two-ring coupling)
 
 
 # ---------------------------------------------------------------- locking: manufactured solution
@@ -159,8 +172,12 @@ _PI = math.pi
 
 def _S(t, d=0):
     """sin^2(pi t) and its derivatives."""
-    return [np.sin(_PI * t) ** 2, _PI * np.sin(2 * _PI * t), 2 * _PI ** 2 * np.cos(2 * _PI * t),
-            -4 * _PI ** 3 * np.sin(2 * _PI * t)][d]
+    return [
+        np.sin(_PI * t) ** 2,
+        _PI * np.sin(2 * _PI * t),
+        2 * _PI**2 * np.cos(2 * _PI * t),
+        -4 * _PI**3 * np.sin(2 * _PI * t),
+    ][d]
 
 
 @cache
@@ -202,7 +219,7 @@ def _locking_error(level: int, nu: float, element: str) -> float:
 
 
 def test_anp_converges_where_p1_locks():
-    levels = (2, 3, 4, 5)                     # h = 1/8 .. 1/64
+    levels = (2, 3, 4, 5)  # h = 1/8 .. 1/64
     e_p1 = np.array([_locking_error(k, 0.4995, "p1") for k in levels])
     e_anp = np.array([_locking_error(k, 0.4995, "anp") for k in levels])
     e_anp_c = np.array([_locking_error(k, 0.3, "anp") for k in levels])
@@ -237,12 +254,24 @@ def test_anp_newmark_conserves_energy_undamped():
     am, af, beta, gamma = kern.newmark_coefficients(h, 1.0)
     tu, tv = np.zeros((n_steps, s.n)), np.zeros((n_steps, s.n))
     u0 = u.copy()
-    st = kern.integrate(A.Stepper(n_steps, h, am, af, beta, gamma),
-                        A.Pattern(s.indptr, s.indices, s.Lp, s.Lj, s.sdx, s.sdz, s.sX, s.sZ),
-                        A.Model(0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, 0, fw.BLOWUP),
-                        A.Matrices(K_vals, m_vals, d_vals, Lx, s.contact_columns(Lx)), A.State(u, v, a),
-                        A.Outputs(np.zeros(n_steps), np.zeros(n_steps), np.zeros((n_steps, s.sdx.size)),
-                                  np.zeros((0, s.sdx.size)), np.zeros(0), 1, tu, tv, np.zeros(1, dtype=np.int64)))
+    st = kern.integrate(
+        args.Stepper(n_steps, h, am, af, beta, gamma),
+        args.Pattern(s.indptr, s.indices, s.Lp, s.Lj, s.sdx, s.sdz, s.sX, s.sZ),
+        args.Model(0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, 0, fw.BLOWUP),
+        args.Matrices(K_vals, m_vals, d_vals, Lx, s.contact_columns(Lx)),
+        args.State(u, v, a),
+        args.Outputs(
+            np.zeros(n_steps),
+            np.zeros(n_steps),
+            np.zeros((n_steps, s.sdx.size)),
+            np.zeros((0, s.sdx.size)),
+            np.zeros(0),
+            1,
+            tu,
+            tv,
+            np.zeros(1, dtype=np.int64),
+        ),
+    )
     assert st == 0 and np.abs(tu).max() > 1e-5
     e0 = 0.5 * u0 @ (K @ u0)
     energy = 0.5 * np.einsum("ij,ij->i", tv, (M @ tv.T).T) + 0.5 * np.einsum("ij,ij->i", tu, (K @ tu.T).T)
@@ -257,10 +286,10 @@ def _table3(mesh: str, element: str):
 
 def _limit_cycle(r):
     g = r.gaw
-    last = g[-int(round(0.1 * r.fps)):]
+    last = g[-int(round(0.1 * r.fps)) :]
     f0 = estimate_f0(g, r.fps)
     b = cycle_boundaries(g, r.fps, f0)
-    peaks = np.array([g[i:j + 1].max() for i, j in zip(b[:-1], b[1:])])
+    peaks = np.array([g[i : j + 1].max() for i, j in zip(b[:-1], b[1:])])
     return f0, peaks, last
 
 
@@ -272,7 +301,7 @@ def test_anp_all_meshes_oscillate_at_table3(mesh):
     print(mesh, "f0", f0, "peak", peaks.mean(), "p2p(last 100 ms)", np.ptp(last))
     assert np.ptp(last) > 0.5 and 45.0 <= f0 <= 65.0
     assert peaks.size >= 12 and 20.0 <= peaks.mean() <= 50.0
-    assert last.min() == 0.0                          # the glottis closes (collision) every cycle
+    assert last.min() == 0.0  # the glottis closes (collision) every cycle
 
 
 def test_anp_f0_agrees_across_meshes():

@@ -5,6 +5,7 @@ Table 3 on the coarse mesh with the contact layer, the first 100 ms (opening, cl
 the surface), the density scanned over ±1e-3 relative; the largest change of the GAW between neighbours is
 bisected 30 times. A continuous map's change shrinks with the step (here by about 2^30); a switch keeps it.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -43,10 +44,20 @@ def _bisected_change(flow, halvings=30):
     return float(dif[k]), float(np.max(np.abs(Gb - Ga)))
 
 
-@pytest.mark.parametrize("flow", ["continuous", pytest.param("paper", marks=pytest.mark.xfail(
-    reason="the paper's node-wise load switches: the GAW jumps by a fixed amount however small the step",
-    strict=False))])
+@pytest.mark.parametrize(
+    "flow",
+    [
+        "continuous",
+        pytest.param(
+            "paper",
+            marks=pytest.mark.xfail(
+                reason="the paper's node-wise load switches: the GAW jumps by a fixed amount however small the step",
+                strict=False,
+            ),
+        ),
+    ],
+)
 def test_gaw_is_continuous_in_the_parameters(flow):
     first, last = _bisected_change(flow)
-    assert first > 1e-3                       # the scan crosses something: the waveform does move
+    assert first > 1e-3  # the scan crosses something: the waveform does move
     assert last < 1e-5 * first, (first, last)

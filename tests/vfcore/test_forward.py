@@ -1,5 +1,6 @@
 """Forward model (vfcore.forward) against physics: energy balance of the integrator,
 self-sustained oscillation at Table 3, contact admissibility, convergence, failure modes."""
+
 import math
 from functools import cache
 
@@ -39,7 +40,7 @@ def _free_vibration(eta_si, rho_inf=1.0, n_steps=1500, h=5e-5):
     u = f.copy()
     s.solve(s.factor(K_vals), u)
     v = np.zeros(s.n)
-    a = -(K @ u)                                     # consistent: M a0 = -K u0 - D v0
+    a = -(K @ u)  # consistent: M a0 = -K u0 - D v0
     s.solve(s.factor(m_vals), a)
     cM, cD, cK = kern.effective_scales(h, rho_inf)
     Lx = s.factor(cK * K_vals + cD * d_vals + cM * m_vals)
@@ -48,12 +49,24 @@ def _free_vibration(eta_si, rho_inf=1.0, n_steps=1500, h=5e-5):
     m = s.sdx.size
     tu, tv = np.zeros((n_steps, s.n)), np.zeros((n_steps, s.n))
     u0, v0 = u.copy(), v.copy()
-    st = kern.integrate(A.Stepper(n_steps, h, am, af, beta, gamma),
-                        A.Pattern(s.indptr, s.indices, s.Lp, s.Lj, s.sdx, s.sdz, s.sX, s.sZ),
-                        A.Model(0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, 0, fw.BLOWUP),
-                        A.Matrices(K_vals, m_vals, d_vals, Lx, G), A.State(u, v, a),
-                        A.Outputs(np.zeros(n_steps), np.zeros(n_steps), np.zeros((n_steps, m)), np.zeros((0, m)),
-                                  np.zeros(0), 1, tu, tv, np.zeros(1, dtype=np.int64)))
+    st = kern.integrate(
+        A.Stepper(n_steps, h, am, af, beta, gamma),
+        A.Pattern(s.indptr, s.indices, s.Lp, s.Lj, s.sdx, s.sdz, s.sX, s.sZ),
+        A.Model(0.0, 0.0, 1.3, 1.0, fw.CLOSED_TOL, 0.0, 0, fw.BLOWUP),
+        A.Matrices(K_vals, m_vals, d_vals, Lx, G),
+        A.State(u, v, a),
+        A.Outputs(
+            np.zeros(n_steps),
+            np.zeros(n_steps),
+            np.zeros((n_steps, m)),
+            np.zeros((0, m)),
+            np.zeros(0),
+            1,
+            tu,
+            tv,
+            np.zeros(1, dtype=np.int64),
+        ),
+    )
     assert st == 0
     U = np.vstack([u0, tu])
     V = np.vstack([v0, tv])
@@ -66,7 +79,7 @@ def _free_vibration(eta_si, rho_inf=1.0, n_steps=1500, h=5e-5):
 
 def test_newmark_conserves_energy_undamped():
     energy, _, _, _, U = _free_vibration(eta_si=1e-12)
-    assert np.abs(U).max() > 1e-5                    # it really moves (tens of micrometres)
+    assert np.abs(U).max() > 1e-5  # it really moves (tens of micrometres)
     drift = np.abs(energy - energy[0]).max() / energy[0]
     print("relative energy drift", drift)
     assert drift < 1e-8
@@ -74,9 +87,9 @@ def test_newmark_conserves_energy_undamped():
 
 def test_damped_energy_decays_by_the_dissipated_work():
     energy, power, power_mid, h, _ = _free_vibration(eta_si=TABLE3.si()["eta"])
-    assert np.all(np.diff(energy) <= 1e-12 * energy[0])          # monotone
+    assert np.all(np.diff(energy) <= 1e-12 * energy[0])  # monotone
     lost = energy[0] - energy[-1]
-    assert lost > 0.05 * energy[0]                               # damping is significant over the run
+    assert lost > 0.05 * energy[0]  # damping is significant over the run
     # trapezoid of the dissipated power
     work = h * (0.5 * power[0] + power[1:-1].sum() + 0.5 * power[-1])
     assert work == pytest.approx(lost, rel=0.03)
@@ -116,13 +129,22 @@ def test_table3_limit_cycle_medium():
     assert r.gaw.max() == pytest.approx(cyc.peak_area.max(), rel=0.05)
 
 
-@pytest.mark.parametrize("mesh", [
-    "coarse", "medium",
-    pytest.param("fine", marks=pytest.mark.xfail(
-        reason="fine mesh at Table 3: f0 ~58.7 Hz (< 60) and a small non-closing cycle (~2.2-2.6 mm^2) "
-               "-- amplitude is not mesh-converged (coarse 19, medium 27, fine 2.4 mm^2); with the locking-free "
-               "element='anp' all three oscillate (test_element_option.py)", strict=False)),
-])
+@pytest.mark.parametrize(
+    "mesh",
+    [
+        "coarse",
+        "medium",
+        pytest.param(
+            "fine",
+            marks=pytest.mark.xfail(
+                reason="fine mesh at Table 3: f0 ~58.7 Hz (< 60) and a small non-closing cycle (~2.2-2.6 mm^2) "
+                "-- amplitude is not mesh-converged (coarse 19, medium 27, fine 2.4 mm^2); with the locking-free "
+                "element='anp' all three oscillate (test_element_option.py)",
+                strict=False,
+            ),
+        ),
+    ],
+)
 def test_all_meshes_oscillate(mesh):
     _check_oscillation(_sim(mesh=mesh))
 
@@ -132,7 +154,7 @@ def test_contact_never_violated_and_pressure_when_closed():
     r = _sim(keep=True)
     assert r.ok
     mesh = get_system("medium", r.config.nu).mesh
-    xs = mesh.points[mesh.surface, 0] * 1e3 + r.trajectories[:, mesh.surface, 0]     # mm
+    xs = mesh.points[mesh.surface, 0] * 1e3 + r.trajectories[:, mesh.surface, 0]  # mm
     x_mid = TABLE3.x0 + r.config.half_gap_mm
     assert xs.max() <= x_mid + 1e-9
     assert np.all(r.contact_pressure >= 0.0) and np.all(r.contact_force >= 0.0)
@@ -157,10 +179,12 @@ def test_time_step_convergence_of_transient_waveform():
     assert order > 0.8
 
 
-@pytest.mark.xfail(reason="limit-cycle f0 / mean peak area are not monotonically convergent in dt "
-                          "(measured: f0 64.19, 64.11, 64.07, 64.21 Hz; peak 27.63, 26.47, 25.95, 26.26 mm^2 at "
-                          "dt = 1e-4 .. 1.25e-5): contact events / ~1 % cycle-to-cycle variation dominate",
-                   strict=False)
+@pytest.mark.xfail(
+    reason="limit-cycle f0 / mean peak area are not monotonically convergent in dt "
+    "(measured: f0 64.19, 64.11, 64.07, 64.21 Hz; peak 27.63, 26.47, 25.95, 26.26 mm^2 at "
+    "dt = 1e-4 .. 1.25e-5): contact events / ~1 % cycle-to-cycle variation dominate",
+    strict=False,
+)
 def test_time_step_convergence_of_limit_cycle():
     dts = [1e-4, 5e-5, 2.5e-5, 1.25e-5]
     rs = [_sim(dt=dt) for dt in dts]
@@ -175,11 +199,19 @@ def test_time_step_convergence_of_limit_cycle():
 
 
 # ---------------------------------------------------------------- (f) validation
-@pytest.mark.parametrize("kw,name", [
-    (dict(E_body=0.0), "E_body"), (dict(E_body=-1.0), "E_body"), (dict(E_cover=float("nan")), "E_cover"),
-    (dict(x0=8.5), "x0"), (dict(x0=-0.1), "x0"), (dict(eta=0.0), "eta"), (dict(rho=float("inf")), "rho"),
-    (dict(p_sub=-5.0), "p_sub"),
-])
+@pytest.mark.parametrize(
+    "kw,name",
+    [
+        (dict(E_body=0.0), "E_body"),
+        (dict(E_body=-1.0), "E_body"),
+        (dict(E_cover=float("nan")), "E_cover"),
+        (dict(x0=8.5), "x0"),
+        (dict(x0=-0.1), "x0"),
+        (dict(eta=0.0), "eta"),
+        (dict(rho=float("inf")), "rho"),
+        (dict(p_sub=-5.0), "p_sub"),
+    ],
+)
 def test_invalid_parameters_raise(kw, name):
     with pytest.raises(ValueError, match=name):
         simulate(TABLE3.as_dict() | kw)
@@ -221,8 +253,7 @@ def test_bit_identical_reruns():
 
 def test_batch_parallel_equals_serial():
     cfg = SimConfig(duration=0.1, discard=0.05)
-    P = np.array([TABLE3.as_array(), TABLE3.replace(p_sub=800.0).as_array(),
-                  TABLE3.replace(E_cover=900.0).as_array()])
+    P = np.array([TABLE3.as_array(), TABLE3.replace(p_sub=800.0).as_array(), TABLE3.replace(E_cover=900.0).as_array()])
     ser = simulate_batch(P, cfg, n_workers=1)
     par = simulate_batch(P, cfg, n_workers=2)
     assert len(ser) == len(par) == 3
@@ -274,15 +305,17 @@ def test_config_differences_name_what_changes_the_simulation():
     a changed step or law is named with both values; settings that do not change the waveform, the layer's
     thickness under the rigid projection, and settings an older record lacks are not differences."""
     import json
+
     cfg = SimConfig(mesh="coarse", dt=1e-4, fps=2000.0, epithelium_profile=(1.0,) * 20 + (2.0,))
     rec = json.loads(json.dumps(cfg.as_dict()))
     assert cfg.differences(rec) == {}
     assert cfg.differences({**rec, "dt": 5e-5, "mesh": "medium"}) == {"dt": (5e-5, 1e-4), "mesh": ("medium", "coarse")}
     assert cfg.differences({**rec, "early_stop": False, "keep_trajectories": True}) == {}
-    assert cfg.differences({**rec, "contact_layer_mm": 0.3}) == {}                  # projection: no layer
+    assert cfg.differences({**rec, "contact_layer_mm": 0.3}) == {}  # projection: no layer
     layer = cfg.replace(contact="layer")
     assert layer.differences({**rec, "contact": "layer", "contact_layer_mm": 0.3}) == {"contact_layer_mm": (0.3, 0.1)}
     assert layer.differences(rec) == {"contact": ("projection", "layer")}
     assert cfg.differences({k: v for k, v in rec.items() if k != "contact"}) == {}
-    assert cfg.differences({**rec, "epithelium_profile": [1.0] * 21}) == {"epithelium_profile": ([1.0] * 21,
-                                                                                             [1.0] * 20 + [2.0])}
+    assert cfg.differences({**rec, "epithelium_profile": [1.0] * 21}) == {
+        "epithelium_profile": ([1.0] * 21, [1.0] * 20 + [2.0])
+    }

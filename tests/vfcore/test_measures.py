@@ -1,4 +1,5 @@
 """GAW measures against analytic waveforms (expected values are derived, not recorded)."""
+
 import math
 
 import numpy as np
@@ -45,7 +46,7 @@ def test_half_rectified_sine_hrf():
     # Fourier series: 1/pi + sin/2 - (2/pi) sum_{k even} cos(k w t)/(k^2-1)
     h1 = 0.5
     hk = [2 / (math.pi * (k * k - 1)) for k in range(2, 11, 2)]
-    expected = 10 * math.log10(sum(h * h for h in hk) / h1 ** 2)
+    expected = 10 * math.log10(sum(h * h for h in hk) / h1**2)
     assert M.harmonic_richness_factor(x, fps, n_harmonics=10) == pytest.approx(expected, abs=0.02)
 
 
@@ -79,7 +80,7 @@ def test_sine_harmonic_content():
     assert M.estimate_f0(x, fps) == pytest.approx(f0, abs=0.05)
     h = M.harmonic_amplitudes(x, fps, 5)
     np.testing.assert_allclose(h, [1.0, a2, a3, 0.0, 0.0], atol=1e-6)
-    assert M.harmonic_richness_factor(x, fps) == pytest.approx(10 * math.log10(a2 ** 2 + a3 ** 2), abs=1e-6)
+    assert M.harmonic_richness_factor(x, fps) == pytest.approx(10 * math.log10(a2**2 + a3**2), abs=1e-6)
     assert M.subharmonic_to_harmonic_ratio(x, fps) == pytest.approx(0.0, abs=1e-9)
 
 
@@ -121,8 +122,20 @@ def test_alternating_period_jitter():
 def test_gaw_measures_dict():
     x, fps = half_rectified_sine()
     d = M.gaw_measures(x, fps)
-    for key in ("f0_hz", "n_cycles", "open_quotient", "speed_quotient", "closing_quotient",
-                "amplitude_quotient_s", "naq", "glottal_gap_index", "hrf_db", "jitter", "shimmer", "shr"):
+    for key in (
+        "f0_hz",
+        "n_cycles",
+        "open_quotient",
+        "speed_quotient",
+        "closing_quotient",
+        "amplitude_quotient_s",
+        "naq",
+        "glottal_gap_index",
+        "hrf_db",
+        "jitter",
+        "shimmer",
+        "shr",
+    ):
         assert key in d
     assert d["f0_hz"] == pytest.approx(100.0, abs=0.05)
     assert d["open_quotient"] == pytest.approx(M.open_quotient(x, fps), abs=1e-12)

@@ -2,6 +2,7 @@
 
 Both are off by default; off means bit-identical to the default model.
 """
+
 from functools import cache
 
 import numpy as np
@@ -44,12 +45,20 @@ def test_config_defaults_and_validation():
     n_edges = len(load_mesh("medium").surface) - 1
     with pytest.raises(ValueError, match=f"expected length {n_edges}"):
         SimConfig(epithelium_E_kpa=30.0, epithelium_profile=(1.0, 2.0))
-    for bad in (dict(epithelium_E_kpa=-1.0), dict(epithelium_E_kpa=float("nan")), dict(epithelium_h_mm=0.0),
-                dict(epithelium_h_mm=1.0), dict(epithelium_profile=(-1.0,) * n_edges),
-                dict(epithelium_profile=(float("inf"),) * n_edges),
-                dict(subglottal_modes=((0.0, 0.1, 1e6),)), dict(subglottal_modes=((600.0, 0.0, 1e6),)),
-                dict(subglottal_modes=((600.0, 1.5, 1e6),)), dict(subglottal_modes=((600.0, 0.1, -1.0),)),
-                dict(subglottal_modes=((600.0, 0.1),)), dict(subglottal_modes=((20000.0, 0.1, 1e6),))):
+    for bad in (
+        dict(epithelium_E_kpa=-1.0),
+        dict(epithelium_E_kpa=float("nan")),
+        dict(epithelium_h_mm=0.0),
+        dict(epithelium_h_mm=1.0),
+        dict(epithelium_profile=(-1.0,) * n_edges),
+        dict(epithelium_profile=(float("inf"),) * n_edges),
+        dict(subglottal_modes=((0.0, 0.1, 1e6),)),
+        dict(subglottal_modes=((600.0, 0.0, 1e6),)),
+        dict(subglottal_modes=((600.0, 1.5, 1e6),)),
+        dict(subglottal_modes=((600.0, 0.1, -1.0),)),
+        dict(subglottal_modes=((600.0, 0.1),)),
+        dict(subglottal_modes=((20000.0, 0.1, 1e6),)),
+    ):
         with pytest.raises(ValueError):
             SimConfig(**bad)
     # lists (e.g. from JSON) are normalised to hashable tuples; as_dict / replace round-trip
@@ -62,8 +71,7 @@ def test_config_defaults_and_validation():
 # ---------------------------------------------------------------- epithelium
 def test_epithelium_off_is_bit_identical():
     n_edges = len(load_mesh("medium").surface) - 1
-    _same(_sim(**SHORT), _sim(**SHORT, epithelium_E_kpa=0.0, epithelium_h_mm=0.08,
-                              epithelium_profile=(2.0,) * n_edges))
+    _same(_sim(**SHORT), _sim(**SHORT, epithelium_E_kpa=0.0, epithelium_h_mm=0.08, epithelium_profile=(2.0,) * n_edges))
 
 
 def test_membrane_matrix_on_pattern():
@@ -85,10 +93,10 @@ def test_membrane_uniform_stretch_gives_E_h_strain():
     """Uniform in-plane stretch eps of the straight superior surface: axial force E' h eps."""
     s = get_system("medium", 0.4995)
     E_kpa, h_mm, eps = 30.0, 0.05, 1e-3
-    Ep = E_kpa * 1e3 / (1.0 - s.nu ** 2)
+    Ep = E_kpa * 1e3 / (1.0 - s.nu**2)
     z_top = s.sZ.max()
     on_top = np.abs(s.sZ - z_top) < 1e-9
-    edges = on_top[:-1] & on_top[1:]                    # edges of the flat superior surface
+    edges = on_top[:-1] & on_top[1:]  # edges of the flat superior surface
     assert edges.sum() >= 4
     K_ep, D_ep = s.epithelium_values(E_kpa, h_mm, tuple(edges.astype(float)), eta=0.3)
     # every element: the linear field u = eps (X - X_a) stretches it by eps
@@ -105,7 +113,7 @@ def test_membrane_uniform_stretch_gives_E_h_strain():
         if s.sdx[j] >= 0:
             u[s.sdx[j]] = eps * s.sX[j]
     f = s.matrix(K_ep) @ u
-    j_med = top[np.argmax(s.sX[top])]                   # the medial end of the segment: free
+    j_med = top[np.argmax(s.sX[top])]  # the medial end of the segment: free
     N = Ep * h_mm * 1e-3 * eps
     assert np.isclose(f[s.sdx[j_med]], N, rtol=1e-10)
     assert abs(f[s.sdz[j_med]]) < 1e-10 * N
@@ -125,7 +133,7 @@ def test_epithelium_raises_lowest_eigenfrequency_monotonically():
         K = s.matrix(K0 + s.epithelium_values(E, 0.05)[0]).toarray()
         lam = sla.eigh(K, M, eigvals_only=True, subset_by_index=[0, 2])
         f1.append(np.sqrt(lam[0]) / (2 * np.pi))
-    assert abs(f1[0] - 54.9) < 0.5                      # :ref:`model`: 54.9 Hz at Table 3
+    assert abs(f1[0] - 54.9) < 0.5  # :ref:`model`: 54.9 Hz at Table 3
     assert np.all(np.diff(f1) > 0.1), f1
 
 
@@ -142,8 +150,8 @@ def test_epithelium_profile_scales_stiffness():
 def test_table3_with_epithelium_runs():
     r0, r = _sim(), _sim(epithelium_E_kpa=30.0, epithelium_h_mm=0.05)
     assert r.ok, r.message
-    assert r.f0 > r0.f0 + 1.0                           # the stiffer surface raises f0 (64.1 -> 68.8 Hz)
-    assert np.ptp(r.gaw) > 5.0                          # still oscillates with closure
+    assert r.f0 > r0.f0 + 1.0  # the stiffer surface raises f0 (64.1 -> 68.8 Hz)
+    assert np.ptp(r.gaw) > 5.0  # still oscillates with closure
 
 
 # ---------------------------------------------------------------- subglottal coupling
@@ -153,9 +161,16 @@ def test_subglottal_off_is_bit_identical():
     assert r1.p_in.size == 0
 
 
-@pytest.mark.parametrize("mode,fd", [((600.0, 0.1, 2e6), 64.0), ((600.0, 0.1, 2e6), 600.0),
-                                     ((600.0, 0.1, 2e6), 450.0), ((600.0, 0.02, 1e6), 590.0),
-                                     ((300.0, 0.5, 5e6), 900.0)])
+@pytest.mark.parametrize(
+    "mode,fd",
+    [
+        ((600.0, 0.1, 2e6), 64.0),
+        ((600.0, 0.1, 2e6), 600.0),
+        ((600.0, 0.1, 2e6), 450.0),
+        ((600.0, 0.02, 1e6), 590.0),
+        ((300.0, 0.5, 5e6), 900.0),
+    ],
+)
 def test_resonator_steady_state_response(mode, fd):
     """Prescribed Q = Q0 sin(w t): steady-state p matches |H(jw)|, arg H(jw) of the resonance to < 1 %."""
     h = 5e-5
@@ -166,13 +181,13 @@ def test_resonator_steady_state_response(mode, fd):
     sel = t > 0.4
     A = np.c_[np.sin(2 * np.pi * fd * t[sel]), np.cos(2 * np.pi * fd * t[sel])]
     a, b = np.linalg.lstsq(A, p[sel], rcond=None)[0]
-    resp = (a + 1j * b) / q0                            # p = Im(resp q0 e^{jwt})
+    resp = (a + 1j * b) / q0  # p = Im(resp q0 e^{jwt})
     w, w0 = 2 * np.pi * fd, 2 * np.pi * f
     H = 2 * zeta * w0 * Z * 1j * w / (w0 * w0 - w * w + 2j * zeta * w0 * w)
     assert abs(abs(resp) / abs(H) - 1) < 0.01
     assert abs(np.angle(resp / H)) < 0.01
     if fd == f:
-        assert abs(abs(resp) - Z) < 1e-9 * Z            # prewarped: exact peak at the resonance
+        assert abs(abs(resp) - Z) < 1e-9 * Z  # prewarped: exact peak at the resonance
 
 
 def test_small_impedance_converges_linearly_to_uncoupled():
@@ -190,10 +205,10 @@ def test_small_impedance_converges_linearly_to_uncoupled():
 def test_subglottal_flow_and_p_in_reported():
     r = _sim(subglottal_modes=((600.0, 0.1, 1e6),))
     assert r.ok and r.p_in.shape == r.gaw.shape
-    assert np.ptp(r.p_in) > 50.0                        # the resonator pressure swings by ~100 Pa
+    assert np.ptp(r.p_in) > 50.0  # the resonator pressure swings by ~100 Pa
     # flow uses p_in: Q = 1.3 * A_min * sqrt(2 (p_in - p_sup) / rho), up to the one-step coupling lag
     open_ = r.flow > 0.2 * r.flow.max()
-    a_sep = 1e-6 * r.config.length_mm * r.config.sep_ratio * r.width[open_]      # m^2
+    a_sep = 1e-6 * r.config.length_mm * r.config.sep_ratio * r.width[open_]  # m^2
     err_in = np.max(np.abs(r.flow[open_] / (a_sep * np.sqrt(2 * r.p_in[open_] / 1.14)) - 1))
     err_sub = np.max(np.abs(r.flow[open_] / (a_sep * np.sqrt(2 * TABLE3.p_sub / 1.14)) - 1))
     assert err_in < 0.01 and err_sub > 3 * err_in, (err_in, err_sub)

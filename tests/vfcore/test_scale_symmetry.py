@@ -4,6 +4,7 @@ and the flow rate by sqrt(c) (:ref:`inference-scale-the-common-scale-what-a`). E
 carries one power of mass (stiffness, subglottal and Bernoulli loads, mass, damping) and the air density
 enters the flow velocity only, so c is a change of the unit of mass that lengths and times do not see.
 A GAW likelihood therefore cannot tell theta from c * theta; a measured parameter can."""
+
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
 """Bad input gives a clear error, never a silent zero waveform; GAW file reading."""
+
 import numpy as np
 import pytest
 
@@ -26,7 +27,7 @@ def test_unreadable_file(tmp_path):
 
 def test_zero_frames(tmp_path):
     with pytest.raises(VideoError, match="no frames"):
-        read_frames(tmp_path)                                  # empty folder
+        read_frames(tmp_path)  # empty folder
     np.save(tmp_path / "none.npy", np.zeros((0, 20, 20), np.uint8))
     with pytest.raises(VideoError, match="no frames"):
         extract_gaw(tmp_path / "none.npy", fps=2000, px_per_mm=24.4)
@@ -45,6 +46,7 @@ def test_bad_pixel_size():
 
 def test_frames_of_different_sizes(tmp_path):
     import imageio.v3 as iio
+
     iio.imwrite(tmp_path / "f001.png", np.full((40, 50), 100, np.uint8))
     iio.imwrite(tmp_path / "f002.png", np.full((40, 52), 100, np.uint8))
     with pytest.raises(VideoError, match="different sizes"):
@@ -54,7 +56,7 @@ def test_frames_of_different_sizes(tmp_path):
 def test_no_visible_opening_static():
     v = small_video()
     static = np.repeat(v.frames[:1], 40, axis=0).astype(float)
-    static += np.random.default_rng(0).normal(0, 3, static.shape)   # sensor noise only
+    static += np.random.default_rng(0).normal(0, 3, static.shape)  # sensor noise only
     with pytest.raises(VideoError, match="no visible opening"):
         extract_gaw(static, fps=2000, px_per_mm=24.4)
 
@@ -72,18 +74,19 @@ def test_bright_flicker_is_not_an_opening():
     yy, xx = np.mgrid[0:160, 0:140]
     blob = np.exp(-((yy - 40) ** 2 + (xx - 100) ** 2) / 50.0)
     f = np.repeat(np.full((1, 160, 140), 120.0), 40, axis=0)
-    f += 80 * blob[None] * (1 + np.sin(np.arange(40) / 3.0))[:, None, None]   # a bright moving reflection
+    f += 80 * blob[None] * (1 + np.sin(np.arange(40) / 3.0))[:, None, None]  # a bright moving reflection
     with pytest.raises(VideoError, match="no visible opening"):
         extract_gaw(f, fps=2000, px_per_mm=24.4)
 
 
 def test_folder_and_npy_stacks(tmp_path):
     import imageio.v3 as iio
+
     v = small_video()
     d = tmp_path / "frames"
     d.mkdir()
     for i, fr in enumerate(v.frames):
-        iio.imwrite(d / f"img{i}.png", fr)                  # natural sort: img2 before img10
+        iio.imwrite(d / f"img{i}.png", fr)  # natural sort: img2 before img10
     np.save(tmp_path / "stack.npy", v.frames)
     a = extract_gaw(d, fps=2000, px_per_mm=24.4).area
     b = extract_gaw(tmp_path / "stack.npy", fps=2000, px_per_mm=24.4).area
@@ -93,14 +96,21 @@ def test_folder_and_npy_stacks(tmp_path):
 
 def test_video_file_roundtrip(tmp_path):
     import imageio.v3 as iio
+
     v = small_video(n=60)
     p = tmp_path / "clip.mp4"
-    iio.imwrite(p, np.ascontiguousarray(v.frames[..., None].repeat(3, -1)), fps=25, codec="libx264",
-                quality=10, macro_block_size=4)
+    iio.imwrite(
+        p,
+        np.ascontiguousarray(v.frames[..., None].repeat(3, -1)),
+        fps=25,
+        codec="libx264",
+        quality=10,
+        macro_block_size=4,
+    )
     ex = extract_gaw(p, fps=2000, px_per_mm=24.4)
     assert ex.area.size == 60
     err = np.sqrt(np.mean((ex.area - v.area_mm2) ** 2)) / v.area_mm2.max()
-    assert err < 0.06                                          # lossy codec on a tiny glottis
+    assert err < 0.06  # lossy codec on a tiny glottis
     assert ex.f0 == pytest.approx(200.0, abs=0.5)
 
 
@@ -115,7 +125,7 @@ def test_read_gaw_formats(tmp_path):
     assert g.fps == fps and g.meta["source"] == "x"
     # foreign CSV: ms and pixels
     q = tmp_path / "px.csv"
-    q.write_text("time_ms,area_px\n" + "\n".join(f"{ti * 1e3},{ai * 24.4 ** 2}" for ti, ai in zip(t, area)))
+    q.write_text("time_ms,area_px\n" + "\n".join(f"{ti * 1e3},{ai * 24.4**2}" for ti, ai in zip(t, area)))
     with pytest.raises(GawFileError, match="px_per_mm"):
         read_gaw(q)
     g = read_gaw(q, px_per_mm=24.4)
@@ -141,4 +151,4 @@ def test_read_gaw_formats(tmp_path):
     with pytest.raises(GawFileError, match="negative"):
         read_gaw(bad)
     with pytest.raises(GawFileError, match="fps"):
-        read_gaw(p, fps=0.0 + 1000.0)                           # disagrees with the time column
+        read_gaw(p, fps=0.0 + 1000.0)  # disagrees with the time column

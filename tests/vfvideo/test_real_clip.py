@@ -1,4 +1,5 @@
 """The public high-speed clip of real vocal folds (../shared/data/hsv beside the repository)."""
+
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,7 @@ from vfvideo import extract_gaw, plot_extraction
 
 REPO = Path(__file__).resolve().parents[2]
 CLIP = REPO.parent / "shared" / "data" / "hsv" / "oscillating_vocal_folds.mp4"
-FPS = 4000.0   # not stated in the source; typical of the recording system (see the data README)
+FPS = 4000.0  # not stated in the source; typical of the recording system (see the data README)
 
 
 @pytest.fixture(scope="module")
@@ -22,10 +23,10 @@ def test_real_clip_periodic_nonnegative(ex):
     a = ex.area
     assert a.size == 47
     assert np.all(np.isfinite(a)) and np.all(a >= 0)
-    assert a.max() > 0.5                                # mm^2: a visible opening
-    assert a.min() < 0.1 * a.max()                      # (nearly) closes every cycle
+    assert a.max() > 0.5  # mm^2: a visible opening
+    assert a.min() < 0.1 * a.max()  # (nearly) closes every cycle
     period = FPS / ex.f0
-    assert 5.5 < period < 8.0                           # about 6.7 frames per cycle
+    assert 5.5 < period < 8.0  # about 6.7 frames per cycle
     lag = int(round(period))
     x = a - a.mean()
     r = [np.corrcoef(x[:-L], x[L:])[0, 1] for L in (lag - 1, lag, lag + 1)]

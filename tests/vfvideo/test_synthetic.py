@@ -1,4 +1,5 @@
 """Synthetic videos rendered from a known GAW: the segmentation must recover it."""
+
 import numpy as np
 import pytest
 
@@ -11,11 +12,29 @@ PX = 24.4
 
 CASES = {
     # name: (f0, n_frames, render kwargs, gaw kwargs)
-    "paper_frame_asym": (125.0, 160, dict(center=(200.0, 300.0), tilt=0.15, asymmetry=0.2, blur_sigma=1.2,
-                                          noise_sigma=4.0, illumination=0.5, seed=1), dict(peak_mm2=8.0)),
-    "gap_strong_light": (137.0, 140, dict(center=(290.0, 170.0), length_mm=10.0, tilt=-0.1, blur_sigma=1.3,
-                                          noise_sigma=6.0, illumination=0.7, chink_mm2=0.6, seed=2),
-                         dict(peak_mm2=6.0, gap_mm2=0.6, open_quotient=0.8, speed_quotient=1.5)),
+    "paper_frame_asym": (
+        125.0,
+        160,
+        dict(
+            center=(200.0, 300.0), tilt=0.15, asymmetry=0.2, blur_sigma=1.2, noise_sigma=4.0, illumination=0.5, seed=1
+        ),
+        dict(peak_mm2=8.0),
+    ),
+    "gap_strong_light": (
+        137.0,
+        140,
+        dict(
+            center=(290.0, 170.0),
+            length_mm=10.0,
+            tilt=-0.1,
+            blur_sigma=1.3,
+            noise_sigma=6.0,
+            illumination=0.7,
+            chink_mm2=0.6,
+            seed=2,
+        ),
+        dict(peak_mm2=6.0, gap_mm2=0.6, open_quotient=0.8, speed_quotient=1.5),
+    ),
 }
 
 

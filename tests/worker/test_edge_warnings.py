@@ -1,5 +1,6 @@
 """Posteriors at the edges get plain warnings: a parameter piled against a bound of the prior's box
 (vfcore.inference.identify.at_bounds) and a fit far above the recording's own noise (worker.reduce)."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -13,8 +14,10 @@ from vfcore.inference.identify import BOUND_FRACTION, BOUND_MASS_WARN, at_bounds
 from worker.jobspec import JobSpec
 from worker.reduce import MISFIT_RATIO_WARN, edge_warnings, noise_check
 
-PRIOR = Prior({"E_body": (9.0, 15.0), "p_sub": (400.0, 1800.0)},
-              {"E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4})
+PRIOR = Prior(
+    {"E_body": (9.0, 15.0), "p_sub": (400.0, 1800.0)},
+    {"E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+)
 
 
 def posterior(cols: dict, prior: Prior = PRIOR, seed: int = 0) -> Posterior:
@@ -35,10 +38,13 @@ def test_piled_on_two_bounds_names_both():
     assert w.startswith("AT PRIOR BOUND: E_body = 14.97") and "upper bound 15 kPa" in w and "[9, 15]" in w
 
 
-@pytest.mark.parametrize("cols", [
-    {"E_body": ("normal", 12.0, 0.5), "p_sub": ("normal", 1000.0, 50.0)},     # well inside
-    {"E_body": ("uniform", 9.0, 15.0), "p_sub": ("uniform", 400.0, 1800.0)},  # the prior itself: 2 % per edge
-])
+@pytest.mark.parametrize(
+    "cols",
+    [
+        {"E_body": ("normal", 12.0, 0.5), "p_sub": ("normal", 1000.0, 50.0)},  # well inside
+        {"E_body": ("uniform", 9.0, 15.0), "p_sub": ("uniform", 400.0, 1800.0)},  # the prior itself: 2 % per edge
+    ],
+)
 def test_no_warning_inside_or_flat(cols):
     rng = np.random.default_rng(2)
     post = posterior({n: getattr(rng, kind)(a, b, 4000) for n, (kind, a, b) in cols.items()})
@@ -61,11 +67,19 @@ def test_the_threshold(frac, flagged):
 def _spec() -> JobSpec:
     t = np.arange(800) / 4000.0
     areas = (10.0 * (1 - np.cos(2 * np.pi * 70.0 * t))).tolist()
-    return JobSpec.model_validate({
-        "model": "toy", "gaw": {"areas": areas, "fps": 4000.0}, "priors": {"E_body": [9.0, 15.0],
-                                                                         "p_sub": [400.0, 1800.0]},
-        "fixed": {"E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
-        "sampler": {"kind": "is", "n_samples": 10}, "duration": 0.35, "discard": 0.2, "sigma_e": 1.0, "seed": 0})
+    return JobSpec.model_validate(
+        {
+            "model": "toy",
+            "gaw": {"areas": areas, "fps": 4000.0},
+            "priors": {"E_body": [9.0, 15.0], "p_sub": [400.0, 1800.0]},
+            "fixed": {"E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+            "sampler": {"kind": "is", "n_samples": 10},
+            "duration": 0.35,
+            "discard": 0.2,
+            "sigma_e": 1.0,
+            "seed": 0,
+        }
+    )
 
 
 def _obs_and_pred(misfit: bool, n_draws: int = 50):
@@ -84,8 +98,9 @@ def test_misfit_against_the_recordings_noise(misfit):
     spec = _spec()
     obs, pred = _obs_and_pred(misfit)
     rng = np.random.default_rng(5)
-    post = posterior({"E_body": rng.normal(12.0, 0.5, 500), "p_sub": rng.normal(1000.0, 50.0, 500)},
-                     prior=spec.to_prior())
+    post = posterior(
+        {"E_body": rng.normal(12.0, 0.5, 500), "p_sub": rng.normal(1000.0, 50.0, 500)}, prior=spec.to_prior()
+    )
     post.obs_gaw = obs
     nc = noise_check(spec, post, pred)
     assert nc["recording_noise_sd"] == pytest.approx(0.3, rel=0.25)
@@ -101,7 +116,8 @@ def test_misfit_against_the_recordings_noise(misfit):
 def test_edge_warnings_include_the_bounds():
     spec = _spec()
     rng = np.random.default_rng(6)
-    post = posterior({"E_body": rng.normal(14.99, 0.01, 500), "p_sub": rng.normal(1000.0, 50.0, 500)},
-                     prior=spec.to_prior())
+    post = posterior(
+        {"E_body": rng.normal(14.99, 0.01, 500), "p_sub": rng.normal(1000.0, 50.0, 500)}, prior=spec.to_prior()
+    )
     ws = edge_warnings(spec, post, None)
     assert len(ws) == 1 and ws[0].startswith("AT PRIOR BOUND: E_body")

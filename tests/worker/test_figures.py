@@ -1,4 +1,5 @@
 """Job figures render for every posterior the reducer can meet, degenerate ones included."""
+
 from types import SimpleNamespace
 
 import numpy as np

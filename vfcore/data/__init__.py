@@ -12,6 +12,7 @@ the window), which would bias the posterior well away from the truth. The demo i
 check of the inference machinery with the truth inside the model (only the noise differs from
 what is assumed), stated as such in :ref:`inference`.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,8 +21,15 @@ DATA_DIR = Path(__file__).resolve().parent
 DEMO_GAW = DATA_DIR / "demo_gaw.csv"
 
 #: How the demo GAW was made (also written into its header).
-DEMO_TRUTH = {"mesh": "medium", "dt": 5e-5, "duration": 0.4, "discard": 0.25, "fps": 2000.0,
-              "noise_sd_mm2": 0.5, "noise_seed": 2019}
+DEMO_TRUTH = {
+    "mesh": "medium",
+    "dt": 5e-5,
+    "duration": 0.4,
+    "discard": 0.25,
+    "fps": 2000.0,
+    "noise_sd_mm2": 0.5,
+    "noise_seed": 2019,
+}
 
 
 def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
@@ -36,15 +44,24 @@ def make_demo_gaw(path: Path = DEMO_GAW) -> Path:
     from vfcore.params import TABLE3
 
     d = DEMO_TRUTH
-    r = simulate(TABLE3, SimConfig(mesh=d["mesh"], dt=d["dt"], duration=d["duration"], discard=d["discard"],
-                                   fps=d["fps"]))
+    r = simulate(
+        TABLE3, SimConfig(mesh=d["mesh"], dt=d["dt"], duration=d["duration"], discard=d["discard"], fps=d["fps"])
+    )
     if not r.ok:
         raise RuntimeError(f"demo simulation failed: {r.message}")
     noisy = r.gaw + np.random.default_rng(d["noise_seed"]).normal(0.0, d["noise_sd_mm2"], r.gaw.size)
     noisy = np.maximum(noisy, 0.0)
-    return write_gaw_csv(path, r.t, noisy, r.fps, meta={
-        "source": "vfcore.data.make_demo_gaw (synthetic: FE model + noise)",
-        "params": json.dumps(TABLE3.as_dict()), **{k: str(v) for k, v in d.items()}})
+    return write_gaw_csv(
+        path,
+        r.t,
+        noisy,
+        r.fps,
+        meta={
+            "source": "vfcore.data.make_demo_gaw (synthetic: FE model + noise)",
+            "params": json.dumps(TABLE3.as_dict()),
+            **{k: str(v) for k, v in d.items()},
+        },
+    )
 
 
 #: The demo sampler: SMC over (E_cover, p_sub), ~2500-3000 simulations (~3 min on 2 cores).
@@ -60,11 +77,18 @@ def demo_spec_dict(n: int = 240, path: Path = DEMO_GAW, sampler: dict | None = N
     from vfcore.gawio import read_gaw
 
     g = read_gaw(path)
-    spec = {"model": "fe", "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
-            "priors": {"E_cover": [400.0, 900.0], "p_sub": [700.0, 1300.0]},
-            "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
-            "sampler": dict(sampler) if sampler else {"kind": "is", "n_samples": int(n)},
-            "mesh": DEMO_TRUTH["mesh"], "dt": DEMO_TRUTH["dt"], "duration": DEMO_TRUTH["duration"],
-            "discard": DEMO_TRUTH["discard"], "sigma_e": 1.0, "seed": 2019}
+    spec = {
+        "model": "fe",
+        "gaw": {"areas": [float(a) for a in g.area], "fps": float(g.fps), "units": "mm2"},
+        "priors": {"E_cover": [400.0, 900.0], "p_sub": [700.0, 1300.0]},
+        "fixed": {"E_body": 12.15, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+        "sampler": dict(sampler) if sampler else {"kind": "is", "n_samples": int(n)},
+        "mesh": DEMO_TRUTH["mesh"],
+        "dt": DEMO_TRUTH["dt"],
+        "duration": DEMO_TRUTH["duration"],
+        "discard": DEMO_TRUTH["discard"],
+        "sigma_e": 1.0,
+        "seed": 2019,
+    }
     spec.update(overrides)
     return spec

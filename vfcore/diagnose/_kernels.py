@@ -1,4 +1,5 @@
 """Numba kernels of the diagnosis' observation models (vfcore.diagnose.fit)."""
+
 from __future__ import annotations
 
 import math
@@ -22,16 +23,16 @@ def strip_sum(y, delays, weights):
             continue
         m = int(math.floor(-delays[k]))
         f = -delays[k] - m
-        a = min(max(-m, 0), n)              # i < a: before the record's start (t < 0)
-        b = max(min(n - 1 - m, n), a)       # a <= i < b: inside; i >= b: at or past its end
+        a = min(max(-m, 0), n)  # i < a: before the record's start (t < 0)
+        b = max(min(n - 1 - m, n), a)  # a <= i < b: inside; i >= b: at or past its end
         y0 = w * y[0]
         for i in range(a):
             out[i] += y0
         w0 = w * (1.0 - f)
         w1 = w * f
-        o = out[a:b]                         # slices indexed from 0: no negative-index checks in the loop
-        y_lo = y[a + m:b + m]
-        y_hi = y[a + m + 1:b + m + 1]
+        o = out[a:b]  # slices indexed from 0: no negative-index checks in the loop
+        y_lo = y[a + m : b + m]
+        y_hi = y[a + m + 1 : b + m + 1]
         for j in range(b - a):
             o[j] += w0 * y_lo[j] + w1 * y_hi[j]
         yn = w * y[n - 1]

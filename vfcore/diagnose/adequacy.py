@@ -12,6 +12,7 @@ explanation, never a name.
 The noise is the recording's own, estimated from the best fit's residual by second differences
 (:func:`.locate.noise_sd`): the smallest misfit contaminates it least.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,12 +32,12 @@ P_FLAG = 0.05
 
 @dataclass(frozen=True)
 class FitCheck:
-    best: str                    # "base" or the entry whose fit left the smallest residual
-    residual_rms: float          # mm^2
-    noise_sd: float              # mm^2
+    best: str  # "base" or the entry whose fit left the smallest residual
+    residual_rms: float  # mm^2
+    noise_sd: float  # mm^2
     max_ratio: float
-    phase: str                   # where the best fit's residual concentrates
-    measures: list = field(default_factory=list)   # measures the best fit gets wrong (p < P_FLAG)
+    phase: str  # where the best fit's residual concentrates
+    measures: list = field(default_factory=list)  # measures the best fit gets wrong (p < P_FLAG)
 
     @property
     def ratio(self) -> float:
@@ -47,12 +48,14 @@ class FitCheck:
         return bool(math.isfinite(self.ratio) and self.ratio <= self.max_ratio)
 
     def sentence(self, partial: str | None = None) -> str:
-        where = ("spread over the cycle" if self.phase == "whole cycle" else f"concentrated in the {self.phase} phase")
+        where = "spread over the cycle" if self.phase == "whole cycle" else f"concentrated in the {self.phase} phase"
         meas = f"; measures off: {', '.join(self.measures)}" if self.measures else ""
         part = f"; best partial explanation: {partial}" if partial else ""
-        return (f"{NO_FIT}: the best fit ({self.best}) leaves a residual RMS of {self.residual_rms:.3g} mm² against "
-                f"a noise of {self.noise_sd:.3g} mm² ({self.ratio:.1f} times; at most {self.max_ratio:g} counts as a "
-                f"fit); the mismatch is {where}{meas}; none of the catalogue explains it{part}")
+        return (
+            f"{NO_FIT}: the best fit ({self.best}) leaves a residual RMS of {self.residual_rms:.3g} mm² against "
+            f"a noise of {self.noise_sd:.3g} mm² ({self.ratio:.1f} times; at most {self.max_ratio:g} counts as a "
+            f"fit); the mismatch is {where}{meas}; none of the catalogue explains it{part}"
+        )
 
     def to_dict(self) -> dict:
         return {**asdict(self), "ratio": self.ratio, "fits": self.fits}
@@ -62,10 +65,19 @@ def check_fit(fits: dict, max_ratio: float = MAX_RMS_RATIO) -> FitCheck:
     """``fits``: ``{name: fit summary}`` (``residual_rms``, ``predictive_noise_sd``, ``dominant_phase``,
     ``pvalues``) of every fit the diagnosis kept, the base's under ``"base"``. The check reads the
     one with the smallest residual RMS."""
-    name = min((n for n, s in fits.items() if math.isfinite(s.get("residual_rms", math.nan))),
-               key=lambda n: fits[n]["residual_rms"])
+    name = min(
+        (n for n, s in fits.items() if math.isfinite(s.get("residual_rms", math.nan))),
+        key=lambda n: fits[n]["residual_rms"],
+    )
     s = fits[name]
-    flagged = sorted(k for k, p in (s.get("pvalues") or {}).items() if p is not None and math.isfinite(p)
-                     and p < P_FLAG)
-    return FitCheck(best=name, residual_rms=float(s["residual_rms"]), noise_sd=float(s["predictive_noise_sd"]),
-                    max_ratio=float(max_ratio), phase=str(s.get("dominant_phase", "whole cycle")), measures=flagged)
+    flagged = sorted(
+        k for k, p in (s.get("pvalues") or {}).items() if p is not None and math.isfinite(p) and p < P_FLAG
+    )
+    return FitCheck(
+        best=name,
+        residual_rms=float(s["residual_rms"]),
+        noise_sd=float(s["predictive_noise_sd"]),
+        max_ratio=float(max_ratio),
+        phase=str(s.get("dominant_phase", "whole cycle")),
+        measures=flagged,
+    )

@@ -4,6 +4,7 @@ comparison, the simpler of two nested entries, the simpler of two explanations t
 apart -- and the local check's evidence test. Each returns a new :class:`.rank.RankReport`; the one given
 is left as it was.
 """
+
 from __future__ import annotations
 
 import dataclasses as dc
@@ -19,15 +20,27 @@ def promote_local(ranking: RankReport, name: str, d_local: float, se_local: floa
     (:func:`.mode_fits.base_near`) by ``d_local`` > ``k_se`` local errors ``se_local`` (delta-method
     errors of the two fits, no ``tau``: both sit in one mode, so the mode hopping that ``tau``
     measures is not part of this comparison) and still beats every base-model fit found."""
-    named = _named(ranking, name, (
-        f"{name}: named on the local comparison: dlogZ {d_local:.1f} +- {se_local:.1f} against the base model "
-        f"refitted in its material mode (the global error includes a between-run error of {tau:.1f} nats from "
-        f"base runs that landed in different modes)"))
+    named = _named(
+        ranking,
+        name,
+        (
+            f"{name}: named on the local comparison: dlogZ {d_local:.1f} +- {se_local:.1f} against the base model "
+            f"refitted in its material mode (the global error includes a between-run error of {tau:.1f} nats from "
+            f"base runs that landed in different modes)"
+        ),
+    )
     return dc.replace(named, local=(float(d_local), float(se_local)))
 
 
-def local_passes(d_local: float, se_refit: float, se_bound: float, roughness: float = 0.0, *,
-                 min_gain: float = 3.0, k_se: float = 3.0) -> tuple[bool, float]:
+def local_passes(
+    d_local: float,
+    se_refit: float,
+    se_bound: float,
+    roughness: float = 0.0,
+    *,
+    min_gain: float = 3.0,
+    k_se: float = 3.0,
+) -> tuple[bool, float]:
     """The evidence test of the local check: ``(passes, se)`` with ``se`` the delta-method errors of
     the refit and of the base refitted in its mode, and the likelihood's ``roughness`` at the base
     fit (:func:`.regularity.sensitivity`; 0 for a regular vibration), in quadrature. On an
@@ -75,10 +88,15 @@ def prefer_parsimonious(ranking: RankReport, k: float = 1.0) -> RankReport:
     if best is None:
         return ranking
     gap, se = w.delta - best.delta, math.hypot(w.log_evidence_se, best.log_evidence_se)
-    return _named(ranking, best.name, (
-        f"{best.name} ({best.n_extra} parameter{'s' if best.n_extra != 1 else ''}) named instead of {w.name} "
-        f"({w.n_extra}): log-evidence {gap:.1f} +- {se:.1f} below it, within {k:g} standard error"
-        f"{'s' if k != 1 else ''} (one-standard-error rule: the simpler explanation)"))
+    return _named(
+        ranking,
+        best.name,
+        (
+            f"{best.name} ({best.n_extra} parameter{'s' if best.n_extra != 1 else ''}) named instead of {w.name} "
+            f"({w.n_extra}): log-evidence {gap:.1f} +- {se:.1f} below it, within {k:g} standard error"
+            f"{'s' if k != 1 else ''} (one-standard-error rule: the simpler explanation)"
+        ),
+    )
 
 
 def _named(ranking: RankReport, name: str, note: str) -> RankReport:

@@ -1,5 +1,6 @@
 """The base fit: independent SMC runs of the base model, their between-run error, the escalation when
 they disagree, the base fit's summary and its regularity (:ref:`diagnose-pipeline-base-fit`)."""
+
 from __future__ import annotations
 
 import math
@@ -34,12 +35,22 @@ def between_run_sd(runs) -> float:
     se = np.array([p.log_evidence_se for p in runs], dtype=float)
     if z.size < 2 or not (np.all(np.isfinite(z)) and np.all(np.isfinite(se))):
         return 0.0
-    return float(math.sqrt(max(np.var(z, ddof=1) - np.mean(se ** 2), 0.0)))
+    return float(math.sqrt(max(np.var(z, ddof=1) - np.mean(se**2), 0.0)))
 
 
-def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: int = 0, map=map,
-             chunk_size: int = 40, escalate_tau: float | None = 10.0, escalate_factor: int = 2,
-             runs_out: list | None = None, **smc_options):
+def base_fit(
+    problem: Problem,
+    *,
+    n_particles: int,
+    base_runs: int = 2,
+    seed: int = 0,
+    map=map,
+    chunk_size: int = 40,
+    escalate_tau: float | None = 10.0,
+    escalate_factor: int = 2,
+    runs_out: list | None = None,
+    **smc_options,
+):
     """The base fit of :func:`diagnose`: ``base_runs`` independent SMC runs (run ``k`` seeded by
     the child ``k`` of ``SeedSequence(seed)``, :func:`.seeds.spawn_seed`), the one with the largest log-evidence kept.
 
@@ -77,8 +88,10 @@ def base_fit(problem: Problem, *, n_particles: int, base_runs: int = 2, seed: in
         factor = int(escalate_factor)
         big = made([(n_particles * factor, spawn_seed(seed, k + len(runs))) for k in range(max(2, int(base_runs)))])
         n_sims += sum(int(p.n_simulations) for p in big)
-        notes.append(f"base runs disagree (between-run error {tau:.1f} nats > {escalate_tau:g}): "
-                     f"{factor}x particles from here on; larger base runs: {fmt(big)}")
+        notes.append(
+            f"base runs disagree (between-run error {tau:.1f} nats > {escalate_tau:g}): "
+            f"{factor}x particles from here on; larger base runs: {fmt(big)}"
+        )
         tau = between_run_sd(big)
         runs = runs + big
     if runs_out is not None:
@@ -90,9 +103,18 @@ def _fit(run: Run, problem):
     """``base_fit`` of ``problem`` with the run's settings; returns its tuple and the ``(log Z, se)``
     of every run."""
     o, runs = run.options, []
-    out = base_fit(problem, n_particles=o.n_particles, base_runs=o.base_runs, seed=stage_seed(o.seed, "base"), map=run.map,
-                   chunk_size=o.chunk_size, escalate_tau=o.escalate_tau, escalate_factor=o.escalate_factor,
-                   runs_out=runs, **run.smc)
+    out = base_fit(
+        problem,
+        n_particles=o.n_particles,
+        base_runs=o.base_runs,
+        seed=stage_seed(o.seed, "base"),
+        map=run.map,
+        chunk_size=o.chunk_size,
+        escalate_tau=o.escalate_tau,
+        escalate_factor=o.escalate_factor,
+        runs_out=runs,
+        **run.smc,
+    )
     return (*out, runs)
 
 
@@ -102,13 +124,18 @@ def fit_base(run: Run, st: DiagnosisState) -> None:
     run.track.at("base fit")
     fitted, all_base = None, []
     if run.options.free_material:
-        st.problem, st.base, fitted, st.material = material_first(st.problem, st.base, lambda pb: _fit(run, pb),
-                                                                  rule=run.rule)
+        st.problem, st.base, fitted, st.material = material_first(
+            st.problem, st.base, lambda pb: _fit(run, pb), rule=run.rule
+        )
         m = st.material
         if m is not None:
-            st.notes.append("material: " + ("the fixed parameters were wrong: " if m["found"] else "")
-                            + material_sentence(m) + ("" if m["found"] else f" ({m['reason']})")
-                            + f"; the {m['kept']} model is the base from here on")
+            st.notes.append(
+                "material: "
+                + ("the fixed parameters were wrong: " if m["found"] else "")
+                + material_sentence(m)
+                + ("" if m["found"] else f" ({m['reason']})")
+                + f"; the {m['kept']} model is the base from here on"
+            )
     if st.base is None:
         fitted = _fit(run, st.problem)
     if fitted is not None:
@@ -125,7 +152,7 @@ def fit_base(run: Run, st: DiagnosisState) -> None:
         st.base.area_scale = st.problem.area_scale
     st.before = st.summary(st.base)
     st.before["base_runs"] = [[z, s_] for z, s_ in all_base]
-    st.before["wall_s"] = time.perf_counter() - run.t0          # all base runs
+    st.before["wall_s"] = time.perf_counter() - run.t0  # all base runs
     st.before["base_simulations"] = st.n_simulations
     _note_noise_scale(st)
 
@@ -134,10 +161,12 @@ def _note_noise_scale(st: DiagnosisState) -> None:
     """A note when the likelihood's nominal noise sd is far from the recording's own."""
     s_hat, pb = st.before["predictive_noise_sd"], st.problem
     if pb.noise == "fixed" and s_hat > 0 and not 2.0 / 3.0 <= pb.sigma_e / s_hat <= 1.5:
-        st.notes.append(f"the likelihood's noise sd sigma_e = {pb.sigma_e:g} mm^2 is {pb.sigma_e / s_hat:.2g} times "
-                        f"the recording's noise as estimated from it ({s_hat:.3g} mm^2, second differences of the "
-                        "base fit's residual): log-likelihood differences scale as 1/sigma_e^2, and the dlogZ "
-                        "nearly so; 'noise: marginal' integrates sigma_e out instead")
+        st.notes.append(
+            f"the likelihood's noise sd sigma_e = {pb.sigma_e:g} mm^2 is {pb.sigma_e / s_hat:.2g} times "
+            f"the recording's noise as estimated from it ({s_hat:.3g} mm^2, second differences of the "
+            "base fit's residual): log-likelihood differences scale as 1/sigma_e^2, and the dlogZ "
+            "nearly so; 'noise: marginal' integrates sigma_e out instead"
+        )
 
 
 def check_regularity(run: Run, st: DiagnosisState) -> None:
@@ -146,23 +175,29 @@ def check_regularity(run: Run, st: DiagnosisState) -> None:
     if not run.options.regularity_check:
         return
     from . import regularity
+
     run.track.at("regularity check")
-    sens = regularity.sensitivity(st.problem, best_particles(st.base, 1)[0],
-                                   seed=stage_seed(run.options.seed, "regularity"))
+    sens = regularity.sensitivity(
+        st.problem, best_particles(st.base, 1)[0], seed=stage_seed(run.options.seed, "regularity")
+    )
     st.n_simulations += sens.n_simulations
     st.before["regularity"] = sens.to_dict()
-    st.roughness = sens.max_change                         # inf when a perturbed run failed
+    st.roughness = sens.max_change  # inf when a perturbed run failed
     if sens.irregular:
-        st.notes.append(f"the base fit's vibration is irregular: a relative change of {sens.step:g} in its "
-                        f"parameters changes the log-likelihood by up to {sens.max_change:.1f} nats, so the "
-                        "waveform likelihood is a rough function of the parameters here and log-evidences carry "
-                        "the luck of the simulated points (the between-run error measures part of it); the local "
-                        "check counts that change as an error of its comparison")
+        st.notes.append(
+            f"the base fit's vibration is irregular: a relative change of {sens.step:g} in its "
+            f"parameters changes the log-likelihood by up to {sens.max_change:.1f} nats, so the "
+            "waveform likelihood is a rough function of the parameters here and log-evidences carry "
+            "the luck of the simulated points (the between-run error measures part of it); the local "
+            "check counts that change as an error of its comparison"
+        )
     elif sens.rough:
-        st.notes.append(f"the base fit's likelihood is rough: {regularity.rough_phrase(sens.to_dict())}; the base "
-                        "posterior is a staircase at its own scale, so its evidence, and every dlogZ against it, "
-                        "carries the luck of the simulated points beyond the quoted errors (docs/inference.md, "
-                        "'Aperiodic vibration')")
+        st.notes.append(
+            f"the base fit's likelihood is rough: {regularity.rough_phrase(sens.to_dict())}; the base "
+            "posterior is a staircase at its own scale, so its evidence, and every dlogZ against it, "
+            "carries the luck of the simulated points beyond the quoted errors (docs/inference.md, "
+            "'Aperiodic vibration')"
+        )
 
 
 def at_noise_floor(run: Run, st: DiagnosisState) -> bool:
@@ -173,7 +208,9 @@ def at_noise_floor(run: Run, st: DiagnosisState) -> bool:
     floor = 1.0 - s_hat / b["residual_rms"] if b["residual_rms"] > 0 else 0.0
     if not (o.floor_stop and math.isfinite(floor) and floor < o.min_rms_gain):
         return False
-    st.notes.append(f"the base fit leaves a residual RMS of {b['residual_rms']:.3g} mm² against a noise of "
-                    f"{s_hat:.3g} mm²: no extension could lower it by {100 * o.min_rms_gain:.0f} % (at most "
-                    f"{100 * max(floor, 0.0):.0f} %), so none was screened or refitted")
+    st.notes.append(
+        f"the base fit leaves a residual RMS of {b['residual_rms']:.3g} mm² against a noise of "
+        f"{s_hat:.3g} mm²: no extension could lower it by {100 * o.min_rms_gain:.0f} % (at most "
+        f"{100 * max(floor, 0.0):.0f} %), so none was screened or refitted"
+    )
     return True

@@ -4,6 +4,7 @@ recording) and fitted by an SMC started about the optimum (:func:`.search.contin
 model's fit joins the references as ``"base near continuation"``, so every gain is measured against
 the best base fit found the same way; an entry's replaces its refit when its evidence is higher
 (:ref:`diagnose-search-continuation-search`)."""
+
 from __future__ import annotations
 
 import math
@@ -33,12 +34,14 @@ def search_base(run: Run, st: DiagnosisState, starts, sd: int, label: str, copts
     st.n_simulations += fb.n_simulations
     if not math.isfinite(fb.loglik):
         return None
-    zc, sc, pc = continued_fit(st.problem, fb, None, n_particles=st.refit_n, seed=sd, map=run.map,
-                               chunk_size=o.chunk_size, **run.smc)
+    zc, sc, pc = continued_fit(
+        st.problem, fb, None, n_particles=st.refit_n, seed=sd, map=run.map, chunk_size=o.chunk_size, **run.smc
+    )
     st.n_simulations += int(pc.n_simulations)
     sn = st.summary(pc)
-    sn.update(wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc,
-              continuation=fb.to_dict())
+    sn.update(
+        wall_s=time.perf_counter() - t1, log_evidence_bound=zc, log_evidence_bound_se=sc, continuation=fb.to_dict()
+    )
     st.before.setdefault("mode_checks", {})[label] = sn
     st.references[f"base near {label}"] = (zc, math.hypot(sc, st.tau), sn["residual_rms"])
     return fb, zc, sc, sn
@@ -53,9 +56,12 @@ def _searched_entries(run: Run, st: DiagnosisState) -> list[str]:
         return entries
     z = {n: float(st.refits[n].log_evidence) for n in entries}
     top = set(sorted(entries, key=lambda n: -z[n] if math.isfinite(z[n]) else math.inf)[:k])
-    st.notes.append(f"continuation: the {k} entries of largest refit evidence searched ("
-                    + ", ".join(n for n in entries if n in top) + "); not searched: "
-                    + ", ".join(n for n in entries if n not in top))
+    st.notes.append(
+        f"continuation: the {k} entries of largest refit evidence searched ("
+        + ", ".join(n for n in entries if n in top)
+        + "); not searched: "
+        + ", ".join(n for n in entries if n not in top)
+    )
     return [n for n in entries if n in top]
 
 
@@ -69,9 +75,11 @@ def continue_all(run: Run, st: DiagnosisState) -> None:
     fb = None
     if got is not None:
         fb, zc, sc, sn = got
-        st.notes.append(f"continuation: the base model searched by window continuation (best log-likelihood "
-                        f"{fb.loglik:.1f}, {fb.n_simulations} simulations) and fitted from there: log Z = {zc:.1f} "
-                        f"+- {sc:.1f}, residual {sn['residual_rms']:.3f} mm^2")
+        st.notes.append(
+            f"continuation: the base model searched by window continuation (best log-likelihood "
+            f"{fb.loglik:.1f}, {fb.n_simulations} simulations) and fitted from there: log Z = {zc:.1f} "
+            f"+- {sc:.1f}, residual {sn['residual_rms']:.3f} mm^2"
+        )
     if not entries:
         return
     # every entry's search at once (their starts share the cluster), then each entry's fit in turn
@@ -83,19 +91,31 @@ def continue_all(run: Run, st: DiagnosisState) -> None:
         starts = [th for th in best_particles(st.refits[name], 1) if th.size == prior_e.ndim]
         if fb is not None:
             own = {p.name: (p.null if p.null is not None else 0.5 * (p.lo + p.hi)) for p in get(name).params}
-            starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base:]]]))
+            starts.append(np.concatenate([fb.theta, [own[n] for n in prior_e.names[prior_e.n_base :]]]))
         jobs.append((name, starts, stage_seed(o.seed, "continuation", j + 1)))
-    found = continuation_searches(st.problem, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
-                                  **copts)
+    found = continuation_searches(
+        st.problem, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate, **copts
+    )
     # then every entry's fit from its optimum, the fits run together (each as alone)
     t1 = time.perf_counter()
     ok = [j for j, fe in enumerate(found) if math.isfinite(fe.loglik)]
     fits: dict = {}
     if ok:
         run.track.at("continuation", entries[ok[0]] if len(ok) == 1 else "entries", 1, len(entries))
-        fits = dict(zip(ok, continued_fits(st.problem, [(found[j], entries[j], jobs[j][2]) for j in ok],
-                                           n_particles=st.refit_n, map=run.map, chunk_size=o.chunk_size,
-                                           integrate=o.integrate, **run.smc)))
+        fits = dict(
+            zip(
+                ok,
+                continued_fits(
+                    st.problem,
+                    [(found[j], entries[j], jobs[j][2]) for j in ok],
+                    n_particles=st.refit_n,
+                    map=run.map,
+                    chunk_size=o.chunk_size,
+                    integrate=o.integrate,
+                    **run.smc,
+                ),
+            )
+        )
     for j, (name, fe) in enumerate(zip(entries, found)):
         st.n_simulations += fe.n_simulations
         if j in fits:
@@ -111,6 +131,8 @@ def _keep_entry(run: Run, st: DiagnosisState, name: str, fe, fit: tuple, t1: flo
     st.n_simulations += int(pc.n_simulations)
     z1 = float(st.refits[name].log_evidence)
     kept = keep_if_higher(run, st, name, pc, zc, t1, record=("continuation", fe.to_dict()), continued=True) is not None
-    st.notes.append(f"continuation: {name} searched (best log-likelihood {fe.loglik:.1f}) and fitted from "
-                    f"there: log Z = {zc:.1f} +- {sc:.1f} against its first {z1:.1f}"
-                    + (" (kept)" if kept else " (not higher; the first is kept)"))
+    st.notes.append(
+        f"continuation: {name} searched (best log-likelihood {fe.loglik:.1f}) and fitted from "
+        f"there: log Z = {zc:.1f} +- {sc:.1f} against its first {z1:.1f}"
+        + (" (kept)" if kept else " (not higher; the first is kept)")
+    )

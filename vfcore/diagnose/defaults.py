@@ -5,6 +5,7 @@ The diagnosis' own settings (particles, continuation, material first, ...) are
 :class:`vfcore.diagnose.options.DiagnoseOptions`, the one source of their defaults for the library,
 the command line, the service and the benchmark.
 """
+
 from __future__ import annotations
 
 #: simulated time and discarded transient, s (the paper's 0.55 s; the suites' window)

@@ -25,14 +25,23 @@ linearly and marked as a guide: the ranges were not measured there. So is a diag
 the five at Table 3 and frees them after a pinned fit (two base fits), or one given a base fit to reuse
 (none).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from .options import DiagnoseOptions
 
-__all__ = ["ExpectedCost", "expected_cost", "expected_for", "base_fits", "FLOOR_SIMULATIONS", "CATALOGUE_SIMULATIONS",
-           "FLOOR_TIME_FACTOR", "CATALOGUE_TIME_FACTOR"]
+__all__ = [
+    "ExpectedCost",
+    "expected_cost",
+    "expected_for",
+    "base_fits",
+    "FLOOR_SIMULATIONS",
+    "CATALOGUE_SIMULATIONS",
+    "FLOOR_TIME_FACTOR",
+    "CATALOGUE_TIME_FACTOR",
+]
 
 #: Simulations of a diagnosis that stops after its base fit, at the defaults (seed 12, 10 cases).
 FLOOR_SIMULATIONS = (3_513, 14_393)
@@ -44,8 +53,17 @@ CATALOGUE_TIME_FACTOR = 1.3
 
 #: The settings the ranges were measured at, and those that change the simulation count.
 _DEFAULT = DiagnoseOptions()
-_CHANGING = ("n_particles", "base_runs", "refit_particles", "max_refits", "continuation",
-             "continuation_entries", "escalate_factor", "shared_mode", "mode_checks")
+_CHANGING = (
+    "n_particles",
+    "base_runs",
+    "refit_particles",
+    "max_refits",
+    "continuation",
+    "continuation_entries",
+    "escalate_factor",
+    "shared_mode",
+    "mode_checks",
+)
 _REFITS, _SEARCH, _CHECKS = 0.66, 0.28, 0.06
 
 
@@ -66,29 +84,46 @@ class ExpectedCost:
 
     def lines(self, given: str = "--base fit") -> list[str]:
         """The announcement, one line per outcome; ``given`` names the reused base fit (``base_fits`` 0)."""
+
         def span(a, b, fmt):
             return f"{fmt(a)}-{fmt(b)}"
+
         ints, mins = (lambda v: f"{v:,}"), (lambda v: f"{v:.0f}" if v >= 10 else f"{v:.1f}")
         w = f"{self.workers} worker{'s' if self.workers > 1 else ''}"
         timed = self.seconds_per_simulation is not None
 
         def about(m):
             return f", about {span(*m, mins)} min" if timed else ""
-        first = (f"if the {given} is already at the noise: no further base fit" if self.base_fits == 0 else
-                 f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations"
-                 + about(self.floor_minutes))
-        head = (f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
-                if timed else "expected cost: ")
-        out = [head + first,
-               f"  if it goes on to the catalogue: {span(*self.catalogue, ints)} simulations"
-               + about(self.catalogue_minutes)]
+
+        first = (
+            f"if the {given} is already at the noise: no further base fit"
+            if self.base_fits == 0
+            else f"if the base fit reaches the noise (it stops there): {span(*self.floor, ints)} simulations"
+            + about(self.floor_minutes)
+        )
+        head = (
+            f"expected cost ({self.seconds_per_simulation * 1e3:.0f} ms a simulation on this machine, {w}): "
+            if timed
+            else "expected cost: "
+        )
+        out = [
+            head + first,
+            f"  if it goes on to the catalogue: {span(*self.catalogue, ints)} simulations"
+            + about(self.catalogue_minutes),
+        ]
         if self.guide:
             out.append("  (measured at the default settings; scaled for yours: " + ", ".join(self.guide) + ")")
         return out
 
 
-def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None, workers: int, *,
-                  base_fits: int = 1, n_entries: int | None = None) -> ExpectedCost:
+def expected_cost(
+    options: DiagnoseOptions,
+    seconds_per_simulation: float | None,
+    workers: int,
+    *,
+    base_fits: int = 1,
+    n_entries: int | None = None,
+) -> ExpectedCost:
     """The expected cost of a diagnosis with ``options`` on ``workers`` processes, given the base model's
     probed ``seconds_per_simulation`` (one core; None: simulations only). ``base_fits``: 1 as measured;
     0 when a given base fit is used as it is (its share left out), 2 when parameters held at Table 3 are freed after a
@@ -100,19 +135,20 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None
     d = _DEFAULT
     base = options.n_particles * options.base_runs / (d.n_particles * d.base_runs) * max(base_fits, 1)
     from .extensions import implemented
-    n_all = len(implemented())          # a diagnosis without candidates refits every implemented entry
+
+    n_all = len(implemented())  # a diagnosis without candidates refits every implemented entry
     n = n_all if n_entries is None else int(n_entries)
     if options.max_refits is not None:
         # max_refits caps only the observation-level entries; the forward-level ones are always refitted
         from .options import OBSERVATION_ENTRIES
+
         n = min(n, n_all - OBSERVATION_ENTRIES + options.max_refits)
     refit = options.refit_n / d.refit_n * n / n_all
     searched = 0 if not options.continuation else min(n, options.continuation_entries or n)
     search = (1 + searched) / (1 + d.continuation_entries)
     # the catalogue's share split by stage as the suite's time was (refits and rescues 66 %, the
     # continuation stage 28 %, mode checks 6 %: the mean a case of its first group)
-    rest = (_REFITS * refit + _SEARCH * search
-            + _CHECKS * options.mode_checks / d.mode_checks)
+    rest = _REFITS * refit + _SEARCH * search + _CHECKS * options.mode_checks / d.mode_checks
     f_lo, f_hi = FLOOR_SIMULATIONS
     c_lo, c_hi = CATALOGUE_SIMULATIONS
     floor = (round(f_lo * base), round(f_hi * base))
@@ -123,8 +159,10 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None
 
     def minutes(sims, factor):
         return tuple(s * seconds_per_simulation * factor / workers / 60.0 for s in sims) if timed else None
-    guide = tuple(f"{name} {getattr(options, name)!r}" for name in _CHANGING
-                  if getattr(options, name) != getattr(d, name))
+
+    guide = tuple(
+        f"{name} {getattr(options, name)!r}" for name in _CHANGING if getattr(options, name) != getattr(d, name)
+    )
     if n_entries is not None and n_entries != n_all:
         guide = guide + (f"{n_entries} of {n_all} entries",)
     if base_fits == 2:
@@ -133,8 +171,16 @@ def expected_cost(options: DiagnoseOptions, seconds_per_simulation: float | None
         # not scaled: refits from the base cost 28 % fewer simulations on the nine catalogue cases of the
         # seed-12 suite (:ref:`validation-diagnose-pipeline-refits-started-from-the-base`), too few to give a range
         guide = guide + (f"refit_start {options.refit_start!r}, not scaled (fewer simulations than these)",)
-    return ExpectedCost(floor, cat, minutes(floor, FLOOR_TIME_FACTOR), minutes(cat, CATALOGUE_TIME_FACTOR),
-                        float(seconds_per_simulation) if timed else None, int(workers), int(base_fits), guide)
+    return ExpectedCost(
+        floor,
+        cat,
+        minutes(floor, FLOOR_TIME_FACTOR),
+        minutes(cat, CATALOGUE_TIME_FACTOR),
+        float(seconds_per_simulation) if timed else None,
+        int(workers),
+        int(base_fits),
+        guide,
+    )
 
 
 def base_fits(problem, options: DiagnoseOptions, base_post=None) -> int:
@@ -144,17 +190,21 @@ def base_fits(problem, options: DiagnoseOptions, base_post=None) -> int:
     nothing is freed, 2 when none is given and the parameters held at Table 3 are freed after a pinned
     fit (:func:`.material.material_first`)."""
     from .material import pinned
+
     freed = options.free_material and bool(pinned(problem))
     if base_post is not None:
         return 1 if freed or tuple(base_post.names) != tuple(problem.prior.names) else 0
     return 2 if freed else 1
 
 
-def expected_for(problem, options: DiagnoseOptions, seconds_per_simulation: float | None, workers: int,
-                 base_post=None) -> ExpectedCost:
+def expected_for(
+    problem, options: DiagnoseOptions, seconds_per_simulation: float | None, workers: int, base_post=None
+) -> ExpectedCost:
     """:func:`expected_cost` of a diagnosis of ``problem``: its base fits (:func:`base_fits`) and the
     implemented entries among ``options.candidates`` (all when None)."""
     from .extensions import get
+
     n = None if options.candidates is None else sum(get(c).implemented for c in options.candidates)
-    return expected_cost(options, seconds_per_simulation, workers, base_fits=base_fits(problem, options, base_post),
-                         n_entries=n)
+    return expected_cost(
+        options, seconds_per_simulation, workers, base_fits=base_fits(problem, options, base_post), n_entries=n
+    )

@@ -18,6 +18,7 @@ Kinds:
 
 Sources and prior ranges are in ``:ref:`diagnose`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -26,9 +27,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ExtParam", "Extension", "CATALOGUE", "get", "implemented", "apply_leak", "apply_scale",
-           "apply_exposure", "apply_frame_rate", "leak_flow", "leak_extra", "RHO_AIR", "SUB_LOG10_Z_OFF", "matching",
-           "physics_of"]
+__all__ = [
+    "ExtParam",
+    "Extension",
+    "CATALOGUE",
+    "get",
+    "implemented",
+    "apply_leak",
+    "apply_scale",
+    "apply_exposure",
+    "apply_frame_rate",
+    "leak_flow",
+    "leak_extra",
+    "RHO_AIR",
+    "SUB_LOG10_Z_OFF",
+    "matching",
+    "physics_of",
+]
 
 #: Air density, kg/m^3 (at 37 °C, saturated; Titze, Principles of Voice Production).
 RHO_AIR = 1.14
@@ -46,6 +61,7 @@ class ExtParam:
     stiffness or a resonance frequency, which act only through a thickness or an impedance that has
     one). Used by the naming rule to tell a physics gain from a mode-finding gain (:ref:`diagnose`,
     section 3)."""
+
     name: str
     lo: float
     hi: float
@@ -57,14 +73,14 @@ class ExtParam:
 @dataclass(frozen=True)
 class Extension:
     name: str
-    kind: str                      # "observation" | "forward" | "structural"
+    kind: str  # "observation" | "forward" | "structural"
     params: tuple[ExtParam, ...]
-    phases: tuple[str, ...]        # phases of .locate where its residual lives
-    measures: tuple[str, ...]      # gaw_measures keys it moves
-    signature: str                 # in words
+    phases: tuple[str, ...]  # phases of .locate where its residual lives
+    measures: tuple[str, ...]  # gaw_measures keys it moves
+    signature: str  # in words
     implemented: bool
     _apply: Callable | None = field(default=None, repr=False)
-    family: str = ""               # the physics it models, when several entries model one (asymmetry)
+    family: str = ""  # the physics it models, when several entries model one (asymmetry)
     #: entries whose GAW signature this one reproduces by construction (both a sum of delayed
     #: copies of one waveform): the verdict always lists a qualifying one as a rival
     confusable: tuple[str, ...] = ()
@@ -110,11 +126,14 @@ class Extension:
         (mapping name -> value, or a sequence in ``param_names`` order)."""
         if not self.implemented or self._apply is None:
             if self.implemented:
-                raise NotImplementedError(f"extension {self.name!r} is fitted through vfcore.diagnose.fit "
-                                          "(observe_extended / extended_config), not apply()")
+                raise NotImplementedError(
+                    f"extension {self.name!r} is fitted through vfcore.diagnose.fit "
+                    "(observe_extended / extended_config), not apply()"
+                )
             raise NotImplementedError(
                 f"extension {self.name!r} ({self.kind}) is catalogued but not implemented: it needs a change to "
-                "the forward model (see docs/diagnose.md)")
+                "the forward model (see docs/diagnose.md)"
+            )
         th = dict(theta) if isinstance(theta, dict) else dict(zip(self.param_names, np.atleast_1d(theta)))
         missing = set(self.param_names) - set(th)
         if missing:
@@ -208,6 +227,7 @@ def _obs_apply(fn):
     def wrapped(base, th, fps, **kw):
         g, f = _gaw_fps(base, fps)
         return fn(g, f, th)
+
     return wrapped
 
 
@@ -234,104 +254,257 @@ def _sep(base, th, fps, simulate_fn=None, **kw):
     return simulate_fn(base.params, cfg)
 
 
-CATALOGUE: dict[str, Extension] = {e.name: e for e in [
-    Extension(
-        "leak", "observation",
-        (ExtParam("leak_mm2", 0.0, 3.0, "mm^2",
-                  "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)", null=0.0),
-         ExtParam("chink_fraction", 0.0, 1.0, "-",
-                  "fraction of the fold length the gap spans inside the membranous glottis: 0 = a "
-                  "cartilaginous gap (constant area), 1 = a uniform gap along the length; a chink is "
-                  "hidden where the membranous opening is wider (chosen bounds, docs/diagnose.md)")),
-        ("closed",), ("min_area_mm2", "glottal_gap_index", "open_quotient", "closing_quotient"),
-        "area floor above zero during the closed phase; GGI > 0; DC flow; a membranous chink is "
-        "hidden as the folds open (the added area falls as the GAW rises)", True, _leak),
-    Extension(
-        "scale", "observation",
-        (ExtParam("scale", 0.8, 1.2, "-",
-                  "px-to-mm calibration error of laryngoscopic images (+-20 %; Deng, Hadwin & Peterson 2019)",
-                  null=1.0),),
-        ("peak", "opening", "closing"), ("amplitude_mm2", "min_area_mm2", "max_area_mm2"),
-        "residual proportional to the GAW itself (largest at the peak); timing quotients unchanged", True,
-        _obs_apply(lambda g, f, th: apply_scale(g, th["scale"]))),
-    Extension(
-        "exposure", "observation",
-        (ExtParam("exposure_fraction", 0.0, 1.0, "-",
-                  "exposure time / frame interval, at most 1 (Deng, Hadwin & Peterson 2019)", null=0.0),),
-        ("peak", "closed"), ("amplitude_mm2", "hrf_db", "naq", "amplitude_quotient_s", "speed_quotient"),
-        "peaks lowered and corners rounded (low-pass sinc(f tau)); HRF falls, closing slope shallower", True,
-        _obs_apply(lambda g, f, th: apply_exposure(g, f, th["exposure_fraction"]))),
-    Extension(
-        "frame_rate", "observation",
-        (ExtParam("rate_ratio", 0.9, 1.1, "-",
-                  "true/labelled frame rate, +-10 % (chosen bound; Deng, Hadwin & Peterson 2019 study fps)",
-                  null=1.0),),
-        ("opening", "closing"), ("f0_hz", "period_s"),
-        "f0 offset; residual grows along the record as the phases drift (antisymmetric at edges)", True,
-        _obs_apply(lambda g, f, th: apply_frame_rate(g, f, th["rate_ratio"]))),
-    Extension(
-        "sep_ratio", "forward",
-        (ExtParam("sep_ratio", 1.0, 1.6, "-",
-                  "separation where A >= sep_ratio * A_min; range of empirical separation criteria "
-                  "(Pelorson et al. 1994, JASA); default 1.3 here; JASA-EL 2021 flow-model selection", null=1.3),),
-        ("opening", "closing"), ("speed_quotient", "closing_quotient", "naq", "f0_hz", "amplitude_mm2"),
-        "GAW skew (opening vs closing asymmetry) and amplitude; driving-pressure timing", True, _sep),
-    Extension(
-        "epithelium", "forward",
-        (ExtParam("E_epith_kpa", 5.0, 200.0, "kPa",
-                  "membrane stiffness of the surface layer; vocal-fold epithelium is much stiffer than the SLP "
-                  "(chosen bounds, docs/diagnose.md)"),
-         ExtParam("h_epith_mm", 0.0, 0.1, "mm",
-                  "membrane thickness; vocal-fold epithelium is 0.03-0.1 mm thick (Hirano 1981); 0 = no "
-                  "membrane, the base model (its stiffness and damping both vanish with the thickness)",
-                  null=0.0)),
-        ("closing", "closed", "opening"), ("closing_quotient", "naq", "hrf_db", "f0_hz", "amplitude_mm2"),
-        "stiffer thin surface layer: higher f0 for the same bulk moduli, sharper closure, more HF energy",
-        True, None),
-    Extension(
-        "zipper", "observation",
-        (ExtParam("ap_phase_lag", 0.0, 0.4, "cycles",
-                  "anterior-posterior phase difference of high-speed recordings (zipper-like closure; chosen bounds)",
-                  null=0.0),
-         ExtParam("end_fraction", 0.0, 0.5, "-", "fraction of the length over which the ends are held (taper)",
-                  null=0.0),
-         ExtParam("ap_power", 0.5, 3.0, "-",
-                  "shape of the delay along the length, delay ~ (y/L)^p: 1 = a wave at constant speed, "
-                  "> 1 = most of the length in phase and the lag gathered at the posterior end, < 1 at "
-                  "the anterior end (chosen bounds, docs/diagnose.md)")),
-        ("opening", "closing", "peak"), ("speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
-        "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
-        True, None, confusable=("asymmetry",), sampled_params=("ap_power",)),
-    Extension(
-        "subglottal", "forward",
-        (ExtParam("f_sub_hz", 200.0, 900.0, "Hz",
-                  "first subglottal resonance: ~500-700 Hz in humans, lower in rigs with long subglottal tubes"),
-         ExtParam("log10_Z_sub", SUB_LOG10_Z_OFF, 7.0, "log10(Pa s/m^3)",
-                  "peak input impedance of the resonance: ~1e6 for a human trachea; the lower bound stands for no "
-                  "coupling, the base model (docs/diagnose.md, section 4)", null=SUB_LOG10_Z_OFF)),
-        ("opening", "peak", "closing"), ("hrf_db", "f0_hz", "shr", "amplitude_mm2"),
-        "ripple at the subglottal resonance superposed on the GAW; f0 and amplitude change (p_in varies)",
-        True, None),
-    Extension(
-        "asymmetry", "observation",
-        (ExtParam("lr_phase", 0.0, 0.25, "cycles", "left-right phase difference (chosen bounds)", null=0.0),
-         ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)", null=1.0)),
-        ("opening", "closing", "closed"), ("open_quotient", "speed_quotient", "glottal_gap_index"),
-        "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
-        True, None, family="asymmetry", confusable=("zipper",), nests=(("scale", ("lr_phase",)),)),
-    Extension(
-        "lr_stiffness", "forward",
-        (ExtParam("log2_lr_Q", -1.0, 1.0, "-",
-                  "log2 of the right/left ratio of the three Young's moduli: a unilateral tension imbalance "
-                  "(e.g. paresis; Steinecke & Herzel 1995, JASA); [-1, 1] = ratios 0.5-2 (chosen bounds)", null=0.0),
-         ExtParam("lr_lag", -0.25, 0.25, "cycles", "phase lag of the right fold behind the left (chosen bounds)",
-                  null=0.0)),
-        ("opening", "closing", "closed", "peak"),
-        ("open_quotient", "speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
-        "two folds of different stiffness entrained 1:1: the GAW is the mean of two differently shaped cycles "
-        "(amplitude, open quotient and skew differ; shoulders on opening or closing)",
-        True, None, family="asymmetry", waveform_params=("lr_lag",)),
-]}
+CATALOGUE: dict[str, Extension] = {
+    e.name: e
+    for e in [
+        Extension(
+            "leak",
+            "observation",
+            (
+                ExtParam(
+                    "leak_mm2",
+                    0.0,
+                    3.0,
+                    "mm^2",
+                    "posterior glottal gap areas of a few mm^2 (Zañartu et al. 2014, JASA)",
+                    null=0.0,
+                ),
+                ExtParam(
+                    "chink_fraction",
+                    0.0,
+                    1.0,
+                    "-",
+                    "fraction of the fold length the gap spans inside the membranous glottis: 0 = a "
+                    "cartilaginous gap (constant area), 1 = a uniform gap along the length; a chink is "
+                    "hidden where the membranous opening is wider (chosen bounds, docs/diagnose.md)",
+                ),
+            ),
+            ("closed",),
+            ("min_area_mm2", "glottal_gap_index", "open_quotient", "closing_quotient"),
+            "area floor above zero during the closed phase; GGI > 0; DC flow; a membranous chink is "
+            "hidden as the folds open (the added area falls as the GAW rises)",
+            True,
+            _leak,
+        ),
+        Extension(
+            "scale",
+            "observation",
+            (
+                ExtParam(
+                    "scale",
+                    0.8,
+                    1.2,
+                    "-",
+                    "px-to-mm calibration error of laryngoscopic images (+-20 %; Deng, Hadwin & Peterson 2019)",
+                    null=1.0,
+                ),
+            ),
+            ("peak", "opening", "closing"),
+            ("amplitude_mm2", "min_area_mm2", "max_area_mm2"),
+            "residual proportional to the GAW itself (largest at the peak); timing quotients unchanged",
+            True,
+            _obs_apply(lambda g, f, th: apply_scale(g, th["scale"])),
+        ),
+        Extension(
+            "exposure",
+            "observation",
+            (
+                ExtParam(
+                    "exposure_fraction",
+                    0.0,
+                    1.0,
+                    "-",
+                    "exposure time / frame interval, at most 1 (Deng, Hadwin & Peterson 2019)",
+                    null=0.0,
+                ),
+            ),
+            ("peak", "closed"),
+            ("amplitude_mm2", "hrf_db", "naq", "amplitude_quotient_s", "speed_quotient"),
+            "peaks lowered and corners rounded (low-pass sinc(f tau)); HRF falls, closing slope shallower",
+            True,
+            _obs_apply(lambda g, f, th: apply_exposure(g, f, th["exposure_fraction"])),
+        ),
+        Extension(
+            "frame_rate",
+            "observation",
+            (
+                ExtParam(
+                    "rate_ratio",
+                    0.9,
+                    1.1,
+                    "-",
+                    "true/labelled frame rate, +-10 % (chosen bound; Deng, Hadwin & Peterson 2019 study fps)",
+                    null=1.0,
+                ),
+            ),
+            ("opening", "closing"),
+            ("f0_hz", "period_s"),
+            "f0 offset; residual grows along the record as the phases drift (antisymmetric at edges)",
+            True,
+            _obs_apply(lambda g, f, th: apply_frame_rate(g, f, th["rate_ratio"])),
+        ),
+        Extension(
+            "sep_ratio",
+            "forward",
+            (
+                ExtParam(
+                    "sep_ratio",
+                    1.0,
+                    1.6,
+                    "-",
+                    "separation where A >= sep_ratio * A_min; range of empirical separation criteria "
+                    "(Pelorson et al. 1994, JASA); default 1.3 here; JASA-EL 2021 flow-model selection",
+                    null=1.3,
+                ),
+            ),
+            ("opening", "closing"),
+            ("speed_quotient", "closing_quotient", "naq", "f0_hz", "amplitude_mm2"),
+            "GAW skew (opening vs closing asymmetry) and amplitude; driving-pressure timing",
+            True,
+            _sep,
+        ),
+        Extension(
+            "epithelium",
+            "forward",
+            (
+                ExtParam(
+                    "E_epith_kpa",
+                    5.0,
+                    200.0,
+                    "kPa",
+                    "membrane stiffness of the surface layer; vocal-fold epithelium is much stiffer than the SLP "
+                    "(chosen bounds, docs/diagnose.md)",
+                ),
+                ExtParam(
+                    "h_epith_mm",
+                    0.0,
+                    0.1,
+                    "mm",
+                    "membrane thickness; vocal-fold epithelium is 0.03-0.1 mm thick (Hirano 1981); 0 = no "
+                    "membrane, the base model (its stiffness and damping both vanish with the thickness)",
+                    null=0.0,
+                ),
+            ),
+            ("closing", "closed", "opening"),
+            ("closing_quotient", "naq", "hrf_db", "f0_hz", "amplitude_mm2"),
+            "stiffer thin surface layer: higher f0 for the same bulk moduli, sharper closure, more HF energy",
+            True,
+            None,
+        ),
+        Extension(
+            "zipper",
+            "observation",
+            (
+                ExtParam(
+                    "ap_phase_lag",
+                    0.0,
+                    0.4,
+                    "cycles",
+                    "anterior-posterior phase difference of high-speed recordings (zipper-like closure; chosen bounds)",
+                    null=0.0,
+                ),
+                ExtParam(
+                    "end_fraction",
+                    0.0,
+                    0.5,
+                    "-",
+                    "fraction of the length over which the ends are held (taper)",
+                    null=0.0,
+                ),
+                ExtParam(
+                    "ap_power",
+                    0.5,
+                    3.0,
+                    "-",
+                    "shape of the delay along the length, delay ~ (y/L)^p: 1 = a wave at constant speed, "
+                    "> 1 = most of the length in phase and the lag gathered at the posterior end, < 1 at "
+                    "the anterior end (chosen bounds, docs/diagnose.md)",
+                ),
+            ),
+            ("opening", "closing", "peak"),
+            ("speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
+            "anterior-posterior phase difference: gradual (zipper-like) opening/closing, rounded corners",
+            True,
+            None,
+            confusable=("asymmetry",),
+            sampled_params=("ap_power",),
+        ),
+        Extension(
+            "subglottal",
+            "forward",
+            (
+                ExtParam(
+                    "f_sub_hz",
+                    200.0,
+                    900.0,
+                    "Hz",
+                    "first subglottal resonance: ~500-700 Hz in humans, lower in rigs with long subglottal tubes",
+                ),
+                ExtParam(
+                    "log10_Z_sub",
+                    SUB_LOG10_Z_OFF,
+                    7.0,
+                    "log10(Pa s/m^3)",
+                    "peak input impedance of the resonance: ~1e6 for a human trachea; the lower bound stands for no "
+                    "coupling, the base model (docs/diagnose.md, section 4)",
+                    null=SUB_LOG10_Z_OFF,
+                ),
+            ),
+            ("opening", "peak", "closing"),
+            ("hrf_db", "f0_hz", "shr", "amplitude_mm2"),
+            "ripple at the subglottal resonance superposed on the GAW; f0 and amplitude change (p_in varies)",
+            True,
+            None,
+        ),
+        Extension(
+            "asymmetry",
+            "observation",
+            (
+                ExtParam("lr_phase", 0.0, 0.25, "cycles", "left-right phase difference (chosen bounds)", null=0.0),
+                ExtParam("lr_amp", 0.5, 1.5, "-", "right/left amplitude ratio (chosen bounds)", null=1.0),
+            ),
+            ("opening", "closing", "closed"),
+            ("open_quotient", "speed_quotient", "glottal_gap_index"),
+            "left-right imbalance: phase lag between folds, longer open phase, skewed opening/closing",
+            True,
+            None,
+            family="asymmetry",
+            confusable=("zipper",),
+            nests=(("scale", ("lr_phase",)),),
+        ),
+        Extension(
+            "lr_stiffness",
+            "forward",
+            (
+                ExtParam(
+                    "log2_lr_Q",
+                    -1.0,
+                    1.0,
+                    "-",
+                    "log2 of the right/left ratio of the three Young's moduli: a unilateral tension imbalance "
+                    "(e.g. paresis; Steinecke & Herzel 1995, JASA); [-1, 1] = ratios 0.5-2 (chosen bounds)",
+                    null=0.0,
+                ),
+                ExtParam(
+                    "lr_lag",
+                    -0.25,
+                    0.25,
+                    "cycles",
+                    "phase lag of the right fold behind the left (chosen bounds)",
+                    null=0.0,
+                ),
+            ),
+            ("opening", "closing", "closed", "peak"),
+            ("open_quotient", "speed_quotient", "closing_quotient", "glottal_gap_index", "amplitude_mm2"),
+            "two folds of different stiffness entrained 1:1: the GAW is the mean of two differently shaped cycles "
+            "(amplitude, open quotient and skew differ; shoulders on opening or closing)",
+            True,
+            None,
+            family="asymmetry",
+            waveform_params=("lr_lag",),
+        ),
+    ]
+}
 
 
 def get(name: str) -> Extension:

@@ -19,6 +19,7 @@ Extensions act in one of two ways (``Extension.kind``):
   second, right fold with its moduli scaled and combines the two (:func:`entrain_pair`), so each
   draw costs two simulations.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -33,9 +34,21 @@ from ..result import HR_OVERSAMPLE
 from .extensions import SUB_LOG10_Z_OFF, Extension, get
 from .observers import entrain_pair, observe_extended, observer, pair_observer, right_fold_params
 
-__all__ = ["ExtendedPrior", "ExtendedEvaluator", "observe_extended", "observer", "extended_config", "fit_extended",
-           "entrain_pair", "pair_observer", "right_fold_params", "integrated_summary", "param_table",
-           "finish_extended", "simulate_rows"]
+__all__ = [
+    "ExtendedPrior",
+    "ExtendedEvaluator",
+    "observe_extended",
+    "observer",
+    "extended_config",
+    "fit_extended",
+    "entrain_pair",
+    "pair_observer",
+    "right_fold_params",
+    "integrated_summary",
+    "param_table",
+    "finish_extended",
+    "simulate_rows",
+]
 
 
 # ------------------------------------------------------------------------------------ prior
@@ -92,14 +105,15 @@ def extended_config(config, name: str, phi: dict):
         return dataclasses.replace(config, sep_ratio=phi["sep_ratio"])
     if name == "epithelium":
         h = phi.get("h_epith_mm", 0.05)
-        if h <= 0.0:                      # no membrane: the base model
+        if h <= 0.0:  # no membrane: the base model
             return config
         return dataclasses.replace(config, epithelium_E_kpa=phi["E_epith_kpa"], epithelium_h_mm=h)
     if name == "subglottal":
-        if phi["log10_Z_sub"] <= SUB_LOG10_Z_OFF:     # no coupling: the base model
+        if phi["log10_Z_sub"] <= SUB_LOG10_Z_OFF:  # no coupling: the base model
             return config
-        return dataclasses.replace(config, subglottal_modes=(
-            (phi["f_sub_hz"], phi.get("zeta_sub", 0.1), 10.0 ** phi["log10_Z_sub"]),))
+        return dataclasses.replace(
+            config, subglottal_modes=((phi["f_sub_hz"], phi.get("zeta_sub", 0.1), 10.0 ** phi["log10_Z_sub"]),)
+        )
     raise ValueError(f"{name!r} is not a forward-level extension")
 
 
@@ -123,12 +137,14 @@ def simulate_rows(rows: list, configs: list) -> list:
     batch raises (a configuration the kernel refuses), row by row, so each failing row is reported
     as its own exception and the others still run."""
     from ..batch import LOCKSTEP_WIDTH, simulate_many
+
     if not rows:
         return []
     try:
         return simulate_many(rows, block=LOCKSTEP_WIDTH, configs=configs)
     except Exception:  # noqa: BLE001 - find the failing row(s) one by one
         from ..forward import simulate
+
         out: list = []
         for p, c in zip(rows, configs):
             try:
@@ -165,7 +181,7 @@ class ExtendedEvaluator:
 
     @property
     def extension(self) -> Extension:
-        return get(self.name)            # looked up, not stored: catalogue entries hold closures
+        return get(self.name)  # looked up, not stored: catalogue entries hold closures
 
     def _plan(self, base_params, phis, pairs: bool = False) -> tuple[list, list, list]:
         """What the draws need simulated: ``(rows, configs, slots)``, the simulations' parameters and
@@ -234,8 +250,10 @@ class ExtendedEvaluator:
         pb = self.problem
         observe = None
         if self.extension.kind == "observation":
+
             def observe(i, hr):
                 return observe_extended(self.name, hr, pb.fps, splits[i][1], pb.config.length_mm)
+
         return score_results(results, pb, observe)
 
     def _draws(self, thetas) -> tuple[list, list, list]:
@@ -252,6 +270,7 @@ class ExtendedEvaluator:
         """Score each simulation with the integrated parameters integrated out (class docstring)."""
         from ..inference.scoring import aligned_loglik, aligned_logliks, contact_means, cycle_means
         from . import quadrature as _q
+
         pb = self.problem
         ext = self.extension
         names = self.integrated
@@ -279,12 +298,13 @@ class ExtendedEvaluator:
 
                     def obs_fn(phi, see=see):
                         return see(phi["lr_lag"])
+
                     r = left
                 else:
                     if not r.ok:
                         raise RuntimeError(r.message or "simulation failed")
                     obs_fn = observer(self.name, np.asarray(r.gaw_hr, dtype=float), pb.fps, pb.config.length_mm)
-                    fwd = dict(phis[i])          # an observation entry's sampled parameters, if any
+                    fwd = dict(phis[i])  # an observation entry's sampled parameters, if any
 
                 def look(point, obs_fn=obs_fn, fwd=fwd):
                     hr = obs_fn({**fwd, **dict(zip(names, map(float, point)))})
@@ -311,6 +331,7 @@ class ExtendedEvaluator:
                         except (RuntimeError, ValueError):
                             pass
                     return out
+
                 q = _q.integrate_loglik(fn, lo, hi, n0=cells)
                 if not math.isfinite(q.log_mean):
                     raise RuntimeError("no integrated parameter value gives a finite likelihood")
@@ -324,16 +345,25 @@ class ExtendedEvaluator:
             except Exception as exc:  # noqa: BLE001 - one bad draw must not sink an ensemble
                 messages.append(f"{i}: {type(exc).__name__}: {exc}")
                 continue
-            loglik[i] = q.log_mean + pb.measurement_loglik(r.params)   # constant in the integrated parameters
+            loglik[i] = q.log_mean + pb.measurement_loglik(r.params)  # constant in the integrated parameters
             ok[i] = True
-            extra[i, 0:2 * len(names):2] = q.mean
-            extra[i, 1:2 * len(names):2] = q.sd
-            extra[i, 2 * len(names):] = drops
+            extra[i, 0 : 2 * len(names) : 2] = q.mean
+            extra[i, 1 : 2 * len(names) : 2] = q.sd
+            extra[i, 2 * len(names) :] = drops
             flow[i], cmean[i], cmax[i] = cycle_means(r)
             cimp[i], cin[i] = contact_means(r)
-        return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean, max_contact=cmax,
-                          extra=extra, messages=tuple(messages), contact_impulse=cimp,
-                          contact_pressure_in_contact=cin)
+        return Evaluation(
+            loglik=loglik,
+            ok=ok,
+            gaw=gaw,
+            mean_flow=flow,
+            mean_contact=cmean,
+            max_contact=cmax,
+            extra=extra,
+            messages=tuple(messages),
+            contact_impulse=cimp,
+            contact_pressure_in_contact=cin,
+        )
 
 
 def integrated_summary(post, names) -> dict[str, dict[str, float]]:
@@ -375,8 +405,17 @@ def null_drops(post) -> dict[str, float]:
     return {n: v["null_drop"] for n, v in integ.items() if math.isfinite(v.get("null_drop", math.nan))}
 
 
-def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, seed: int = 0, map=map,
-                 chunk_size: int = 40, integrate: bool = True, **smc_options):
+def fit_extended(
+    problem: Problem,
+    extension: str,
+    *,
+    n_particles: int = 80,
+    seed: int = 0,
+    map=map,
+    chunk_size: int = 40,
+    integrate: bool = True,
+    **smc_options,
+):
     """Tempered-SMC fit of the base model + ``extension``.
 
     ``integrate=True`` (default): the extension's waveform-level parameters are integrated out of
@@ -387,9 +426,9 @@ def fit_extended(problem: Problem, extension: str, *, n_particles: int = 80, see
     base fit's (the same integral either way).
     """
     from ..inference.smc import smc
+
     ev = ExtendedEvaluator(problem, extension, integrate=integrate)
-    post = smc(ev, prior=ev.prior, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
-               **smc_options)
+    post = smc(ev, prior=ev.prior, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, **smc_options)
     return finish_extended(post, problem, ev)
 
 

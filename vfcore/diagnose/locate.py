@@ -54,6 +54,7 @@ misfit of the model (the mismatch itself) hardly enters ``s``: the residual RMS 
 noise and flag the min area of a fit whose only error is its amplitude. It assumes white noise;
 noise smoothed by the camera or by video compression is underestimated.
 """
+
 from __future__ import annotations
 
 import math
@@ -65,18 +66,31 @@ from ..gawio import noise_sd as recording_noise_sd
 from ..measures import DEFAULT_LEVEL, cycle_boundaries, gaw_measures
 
 PHASES = ("closed", "opening", "peak", "closing")
-SPREAD = "whole cycle"          # dominant_phase when no phase holds a concentrated residual
+SPREAD = "whole cycle"  # dominant_phase when no phase holds a concentrated residual
 MIN_CONCENTRATION = 1.25
 _CODE = {p: i for i, p in enumerate(PHASES)}  # none = -1
 
 #: Measures tested by default (keys of ``gaw_measures``), the issue's list.
-DEFAULT_MEASURES = ("f0_hz", "open_quotient", "speed_quotient", "closing_quotient", "amplitude_quotient_s",
-                    "naq", "glottal_gap_index", "min_area_mm2", "amplitude_mm2", "hrf_db", "shr", "jitter",
-                    "shimmer")
+DEFAULT_MEASURES = (
+    "f0_hz",
+    "open_quotient",
+    "speed_quotient",
+    "closing_quotient",
+    "amplitude_quotient_s",
+    "naq",
+    "glottal_gap_index",
+    "min_area_mm2",
+    "amplitude_mm2",
+    "hrf_db",
+    "shr",
+    "jitter",
+    "shimmer",
+)
 
 
-def phase_labels(obs, fps: float, level: float = DEFAULT_LEVEL, peak_level: float = 0.9,
-                 boundaries=None) -> tuple[np.ndarray, np.ndarray]:
+def phase_labels(
+    obs, fps: float, level: float = DEFAULT_LEVEL, peak_level: float = 0.9, boundaries=None
+) -> tuple[np.ndarray, np.ndarray]:
     """Phase code per sample of the observed GAW (see module docstring).
 
     Returns (codes (n,) int: 0 closed, 1 opening, 2 peak, 3 closing, -1 none; boundaries).
@@ -112,17 +126,16 @@ class LocateReport:
     time_share: dict[str, float]
     n_samples: dict[str, int]
     total_rms: float
-    dominant_phase: str | None      # a phase of PHASES, SPREAD, or None when the residual is 0
-    fold_phase: np.ndarray = field(repr=False)     # (n_bins,) bin centres in [0, 1)
-    fold_mean: np.ndarray = field(repr=False)      # (n_bins,) mean residual per bin (nan if empty)
-    residual: np.ndarray = field(repr=False)       # (n,)
-    codes: np.ndarray = field(repr=False)          # (n,)
+    dominant_phase: str | None  # a phase of PHASES, SPREAD, or None when the residual is 0
+    fold_phase: np.ndarray = field(repr=False)  # (n_bins,) bin centres in [0, 1)
+    fold_mean: np.ndarray = field(repr=False)  # (n_bins,) mean residual per bin (nan if empty)
+    residual: np.ndarray = field(repr=False)  # (n,)
+    codes: np.ndarray = field(repr=False)  # (n,)
     boundaries: np.ndarray = field(repr=False)
 
     def concentration(self) -> dict[str, float]:
         """energy_share / time_share per phase (> 1: residual concentrated there)."""
-        return {p: (self.energy_share[p] / self.time_share[p] if self.time_share[p] > 0 else math.nan)
-                for p in PHASES}
+        return {p: (self.energy_share[p] / self.time_share[p] if self.time_share[p] > 0 else math.nan) for p in PHASES}
 
 
 def _mean_prediction(pred) -> np.ndarray:
@@ -137,8 +150,16 @@ def _mean_prediction(pred) -> np.ndarray:
     return p
 
 
-def locate(obs, pred, fps: float, *, level: float = DEFAULT_LEVEL, peak_level: float = 0.9,
-           n_bins: int | None = None, min_concentration: float = MIN_CONCENTRATION) -> LocateReport:
+def locate(
+    obs,
+    pred,
+    fps: float,
+    *,
+    level: float = DEFAULT_LEVEL,
+    peak_level: float = 0.9,
+    n_bins: int | None = None,
+    min_concentration: float = MIN_CONCENTRATION,
+) -> LocateReport:
     """Phase-folded residual analysis of ``obs`` (n,) against ``pred`` ((k, n) ensemble or (n,) mean).
 
     ``n_bins`` of the folded profile defaults to min(50, shortest cycle in samples), so every bin
@@ -178,10 +199,19 @@ def locate(obs, pred, fps: float, *, level: float = DEFAULT_LEVEL, peak_level: f
         np.add.at(num, j, 1.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         fold = np.where(num > 0, acc / np.maximum(num, 1), np.nan)
-    return LocateReport(phase_rms=rms, energy_share=share, time_share=tshare, n_samples=cnt,
-                        total_rms=float(np.sqrt(np.mean(r ** 2))) if n else math.nan, dominant_phase=dom,
-                        fold_phase=0.5 * (edges[:-1] + edges[1:]), fold_mean=fold, residual=r, codes=codes,
-                        boundaries=b)
+    return LocateReport(
+        phase_rms=rms,
+        energy_share=share,
+        time_share=tshare,
+        n_samples=cnt,
+        total_rms=float(np.sqrt(np.mean(r**2))) if n else math.nan,
+        dominant_phase=dom,
+        fold_phase=0.5 * (edges[:-1] + edges[1:]),
+        fold_mean=fold,
+        residual=r,
+        codes=codes,
+        boundaries=b,
+    )
 
 
 @dataclass(frozen=True)
@@ -190,16 +220,16 @@ class MeasureCheck:
     observed: float
     pred_mean: float
     pred_sd: float
-    p_upper: float      # fraction of draws with T(pred) >= T(obs)
+    p_upper: float  # fraction of draws with T(pred) >= T(obs)
     p_two_sided: float
-    n_draws: int        # draws with a finite value
+    n_draws: int  # draws with a finite value
 
 
 def _ppp(obs_val: float, draws: np.ndarray) -> tuple[float, float]:
     d = draws[np.isfinite(draws)]
     if not math.isfinite(obs_val) or d.size == 0:
         return math.nan, math.nan
-    p = float(np.mean(d > obs_val) + 0.5 * np.mean(d == obs_val))     # mid-p: ties count half
+    p = float(np.mean(d > obs_val) + 0.5 * np.mean(d == obs_val))  # mid-p: ties count half
     return p, min(1.0, 2.0 * min(p, 1.0 - p))
 
 
@@ -227,8 +257,9 @@ def predictive_measures(pred, fps: float, names=DEFAULT_MEASURES) -> dict[str, n
     return out
 
 
-def measure_pvalues(pred, obs, fps: float, names=DEFAULT_MEASURES, *, sigma_e: float | str | None = None,
-                    seed: int = 0) -> dict[str, MeasureCheck]:
+def measure_pvalues(
+    pred, obs, fps: float, names=DEFAULT_MEASURES, *, sigma_e: float | str | None = None, seed: int = 0
+) -> dict[str, MeasureCheck]:
     """Posterior-predictive p-value of each GAW measure (see module docstring).
 
     ``pred`` (k, n) predictive GAWs, ``obs`` (n,). With ``sigma_e`` each draw gets N(0, sigma_e^2)
@@ -251,8 +282,15 @@ def measure_pvalues(pred, obs, fps: float, names=DEFAULT_MEASURES, *, sigma_e: f
         d = draws[n]
         f = d[np.isfinite(d)]
         pu, p2 = _ppp(float(mobs[n]), d)
-        out[n] = MeasureCheck(n, float(mobs[n]), float(f.mean()) if f.size else math.nan,
-                              float(f.std(ddof=1)) if f.size > 1 else math.nan, pu, p2, int(f.size))
+        out[n] = MeasureCheck(
+            n,
+            float(mobs[n]),
+            float(f.mean()) if f.size else math.nan,
+            float(f.std(ddof=1)) if f.size > 1 else math.nan,
+            pu,
+            p2,
+            int(f.size),
+        )
     return out
 
 

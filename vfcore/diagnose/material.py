@@ -11,6 +11,7 @@ dlogZ = 15,385. The diagnosis therefore frees every such combination before it s
 catalogue, and reports the gain of freeing them as its own explanation, "the fixed parameters were
 wrong", judged by the same rule as a catalogue entry (evidence, effect size; :func:`judge`).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -60,8 +61,9 @@ def freed_problem(problem: Problem, names) -> Problem:
     return dataclasses.replace(problem, prior=Prior(bounds, fixed))
 
 
-def judge(pinned_fit: dict, free_fit: dict, *, min_gain: float = 3.0, k_se: float = 3.0,
-          min_rms_gain: float = 0.30) -> dict:
+def judge(
+    pinned_fit: dict, free_fit: dict, *, min_gain: float = 3.0, k_se: float = 3.0, min_rms_gain: float = 0.30
+) -> dict:
     """Whether freeing the pinned parameters explains the mismatch, by the rule that names a
     catalogue entry (:ref:`diagnose-naming`): a log-evidence gain above ``min_gain`` nats and
     ``k_se`` standard errors, and a residual RMS at least ``min_rms_gain`` lower. ``pinned_fit`` and
@@ -77,8 +79,7 @@ def judge(pinned_fit: dict, free_fit: dict, *, min_gain: float = 3.0, k_se: floa
         reason = f"effect size: residual RMS {100 * gain:.0f} % lower, below {100 * min_rms_gain:.0f} %"
     else:
         reason = ""
-    return {"delta": float(d), "delta_se": float(se), "rms_gain": float(gain), "found": not reason,
-            "reason": reason}
+    return {"delta": float(d), "delta_se": float(se), "rms_gain": float(gain), "found": not reason, "reason": reason}
 
 
 def material_first(problem: Problem, base, fit, *, rule: dict):
@@ -99,10 +100,14 @@ def material_first(problem: Problem, base, fit, *, rule: dict):
         extra = [n for n in names if n not in base.names]
         if set(base.names) - set(names) or not extra:
             raise ValueError(f"the base posterior estimates {list(base.names)}; the problem estimates {list(names)}")
-        table = problem.prior.to_params(problem.prior.lo)           # Table 3 or fixed values elsewhere
-        pinned_problem = dataclasses.replace(problem, prior=type(problem.prior)(
-            {n: b for n, b in problem.prior.bounds.items() if n not in extra},
-            {**problem.prior.fixed, **{n: float(getattr(table, n)) for n in extra}}))
+        table = problem.prior.to_params(problem.prior.lo)  # Table 3 or fixed values elsewhere
+        pinned_problem = dataclasses.replace(
+            problem,
+            prior=type(problem.prior)(
+                {n: b for n, b in problem.prior.bounds.items() if n not in extra},
+                {**problem.prior.fixed, **{n: float(getattr(table, n)) for n in extra}},
+            ),
+        )
         free_problem, freed = problem, extra
     else:
         freed = pinned(problem)
@@ -120,9 +125,15 @@ def material_first(problem: Problem, base, fit, *, rule: dict):
     keep_free = not s_free["log_evidence"] < s_pin["log_evidence"]
     table = pinned_problem.prior.to_params(pinned_problem.prior.lo)
     keys = ("log_evidence", "log_evidence_se", "residual_rms", "params")
-    record = {"freed": list(freed), "held_at": {n: float(getattr(table, n)) for n in freed}, "anchor": ANCHOR,
-              **verdict, "kept": "free" if keep_free else "pinned",
-              "pinned": {k: s_pin[k] for k in keys}, "free": {k: s_free[k] for k in keys}}
+    record = {
+        "freed": list(freed),
+        "held_at": {n: float(getattr(table, n)) for n in freed},
+        "anchor": ANCHOR,
+        **verdict,
+        "kept": "free" if keep_free else "pinned",
+        "pinned": {k: s_pin[k] for k in keys},
+        "free": {k: s_free[k] for k in keys},
+    }
     kept, other, pb = (free, pin, free_problem) if keep_free else (pin, free, pinned_problem)
     return pb, kept[0], (kept[0], kept[1], kept[2], kept[3] + other[3], kept[4], kept[5]), record
 
@@ -130,5 +141,7 @@ def material_first(problem: Problem, base, fit, *, rule: dict):
 def material_sentence(m: dict) -> str:
     """One sentence of the material record: what was freed and what it gained."""
     held = ", ".join(f"{n} (held at {v:g})" for n, v in m["held_at"].items())
-    return (f"freeing {held} gives dlogZ = {m['delta']:.2f} +- {m['delta_se']:.2f}, residual RMS "
-            f"{100 * m['rms_gain']:.0f} % lower")
+    return (
+        f"freeing {held} gives dlogZ = {m['delta']:.2f} +- {m['delta_se']:.2f}, residual RMS "
+        f"{100 * m['rms_gain']:.0f} % lower"
+    )

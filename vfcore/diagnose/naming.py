@@ -1,6 +1,7 @@
 """Naming: the refits ranked against the base fit (:mod:`.rank`), with the mode checks, the local
 check, the best-of-all-base-fits rule and the nested check (:mod:`.checks`) run as their triggers
 fire, and the one-standard-error preference last (:ref:`diagnose-naming`)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,12 +19,17 @@ def rank_state(run: Run, st: DiagnosisState) -> RankReport:
     """:func:`.rank.rank_extensions` of the state's refits against its base fit and references, every
     error with the between-run error in quadrature."""
     after, refits = st.after, st.refits
-    return rank_extensions(st.lz(st.base), {n: st.lz(p) for n, p in refits.items()},
-                           residual={n: after[n]["residual_removed"] for n in after},
-                           n_extra={n: len(get(n).params) for n in refits},
-                           rms={n: after[n]["residual_rms"] for n in after}, base_rms=st.before["residual_rms"],
-                           null={n: after[n]["null_consistent"] for n in after}, references=st.references,
-                           **run.rule)
+    return rank_extensions(
+        st.lz(st.base),
+        {n: st.lz(p) for n, p in refits.items()},
+        residual={n: after[n]["residual_removed"] for n in after},
+        n_extra={n: len(get(n).params) for n in refits},
+        rms={n: after[n]["residual_rms"] for n in after},
+        base_rms=st.before["residual_rms"],
+        null={n: after[n]["null_consistent"] for n in after},
+        references=st.references,
+        **run.rule,
+    )
 
 
 def rank_best_of_base_state(run: Run, st: DiagnosisState) -> RankReport:
@@ -41,12 +47,17 @@ def best_of_base_from_summaries(before: dict, after: dict, **rule) -> RankReport
         (before["log_evidence"], before["log_evidence_se"]),
         {n: (v["log_evidence"], v["log_evidence_se"]) for n, v in after.items()},
         base_runs=before.get("base_runs") or [(before["log_evidence"], before["log_evidence_se"])],
-        mode_checks={k: (v["log_evidence_bound"], v["log_evidence_bound_se"], v["residual_rms"])
-                     for k, v in before.get("mode_checks", {}).items()},
+        mode_checks={
+            k: (v["log_evidence_bound"], v["log_evidence_bound_se"], v["residual_rms"])
+            for k, v in before.get("mode_checks", {}).items()
+        },
         residual={n: v["residual_removed"] for n, v in after.items()},
         n_extra={n: len(get(n).params) for n in after},
-        rms={n: v["residual_rms"] for n, v in after.items()}, base_rms=before["residual_rms"],
-        null={n: v["null_consistent"] for n, v in after.items()}, **rule)
+        rms={n: v["residual_rms"] for n, v in after.items()},
+        base_rms=before["residual_rms"],
+        null={n: v["null_consistent"] for n, v in after.items()},
+        **rule,
+    )
 
 
 def name_winner(run: Run, st: DiagnosisState) -> RankReport:
@@ -85,14 +96,23 @@ def _best_of_base(run: Run, st: DiagnosisState) -> RankReport:
     for _ in range(2 if mode_checks > 0 else 0):
         if ranking.winner is None or ranking.winner in tried:
             break
-        tried.add(ranking.winner)                  # the winner's own material mode, re-fitted with the base model
+        tried.add(ranking.winner)  # the winner's own material mode, re-fitted with the base model
         mode_check(run, st, ranking.winner)
         ranking = rank_best_of_base_state(run, st)
     if ranking.winner is not None and mode_checks > 0 and ranking.winner not in tried:
-        ranking.notes.append(f"{ranking.winner}: best of all base fits, but its material mode was not "
-                             "re-fitted with the base model within two mode checks; not named")
+        ranking.notes.append(
+            f"{ranking.winner}: best of all base fits, but its material mode was not "
+            "re-fitted with the base model within two mode checks; not named"
+        )
         w = ranking.winner
-        ranking = dataclasses.replace(ranking, winner=None, rows=[
-            dataclasses.replace(r, found=False, reason="best of all base fits: material mode not re-fitted")
-            if r.name == w else r for r in ranking.rows])
+        ranking = dataclasses.replace(
+            ranking,
+            winner=None,
+            rows=[
+                dataclasses.replace(r, found=False, reason="best of all base fits: material mode not re-fitted")
+                if r.name == w
+                else r
+                for r in ranking.rows
+            ],
+        )
     return ranking

@@ -4,6 +4,7 @@ exposure, frame rate, zipper, phase/amplitude asymmetry), and the two-fold combi
 (:attr:`vfcore.result.SimResult.gaw_hr`, ``HR_OVERSAMPLE`` times the camera rate) so that they stay
 continuous in their parameters (a frame-rate grid would quantise time shifts); :mod:`.fit` applies
 them inside the extended models' likelihood."""
+
 from __future__ import annotations
 
 import math
@@ -67,24 +68,28 @@ def observer(name: str, hr: np.ndarray, fps: float, length_mm: float = 17.0):
             hi = np.clip(t + tau / 2, 0, t[-1])
             w = hi - lo
             return np.where(w > 0, (np.interp(hi, t, c) - np.interp(lo, t, c)) / np.where(w > 0, w, 1), y)
+
         return exposure
     if name == "frame_rate":
         return lambda phi: np.interp(t / phi["rate_ratio"], t, y)
     if name in ("zipper", "asymmetry"):
         T0 = _period_s(y, fps)
-        pad = int(math.ceil(0.5 * T0 * rate)) + 2        # the longest delay of either model, in samples
+        pad = int(math.ceil(0.5 * T0 * rate)) + 2  # the longest delay of either model, in samples
         yp = np.concatenate([np.full(pad, y[0]), y, np.full(pad, y[-1])])
         if name == "asymmetry":
-            return lambda phi: 0.5 * y + 0.5 * phi["lr_amp"] * delayed_copy(yp, pad, y.size, phi["lr_phase"] * T0 * rate)
+            return lambda phi: (
+                0.5 * y + 0.5 * phi["lr_amp"] * delayed_copy(yp, pad, y.size, phi["lr_phase"] * T0 * rate)
+            )
         n = 24
-        ys = (np.arange(n) + 0.5) / n                    # strip centres, fraction of length
+        ys = (np.arange(n) + 0.5) / n  # strip centres, fraction of length
 
         def zipper(phi):
             e = phi["end_fraction"]
             taper = np.ones(n) if e <= 0 else np.minimum(1.0, np.minimum(ys, 1 - ys) / e)
-            shape = ys ** phi["ap_power"] - 0.5              # in [-1/2, 1/2]
+            shape = ys ** phi["ap_power"] - 0.5  # in [-1/2, 1/2]
             # one fused pass per strip (numba; the same sums as shifting each strip, to ~1e-15)
             return strip_sum(y, phi["ap_phase_lag"] * T0 * rate * shape, taper / n)
+
         return zipper
     raise ValueError(f"{name!r} is not an observation-level extension")
 
@@ -94,12 +99,12 @@ def delayed_copy(yp: np.ndarray, pad: int, n: int, d: float) -> np.ndarray:
     interpolation, from ``yp`` = ``y`` padded with ``pad`` copies of its end values on each side
     (so the ends are held, as ``np.interp`` holds them): two shifted slices instead of a search."""
     k = math.floor(d)
-    if abs(k) >= pad - 1:                              # beyond the padding: hold the ends by search
+    if abs(k) >= pad - 1:  # beyond the padding: hold the ends by search
         t = np.arange(n, dtype=float)
-        return np.interp(t - d, t, yp[pad:pad + n])
+        return np.interp(t - d, t, yp[pad : pad + n])
     w = d - k
-    a = yp[pad - k: pad - k + n]                       # y(i - k)
-    b = yp[pad - k - 1: pad - k - 1 + n]               # y(i - k - 1)
+    a = yp[pad - k : pad - k + n]  # y(i - k)
+    b = yp[pad - k - 1 : pad - k - 1 + n]  # y(i - k - 1)
     return (1.0 - w) * a + w * b
 
 
@@ -167,11 +172,10 @@ def pair_observer(left_hr: np.ndarray, right_hr: np.ndarray, fps: float):
     same = yl.shape == yr.shape and bool(np.array_equal(yl, yr))
 
     def observe(lag_cycles: float) -> np.ndarray:
-        if same and float(lag_cycles) == 0.0:      # the pair's null: the fold itself, exactly
+        if same and float(lag_cycles) == 0.0:  # the pair's null: the fold itself, exactly
             return yl.copy()
         c = c0 - float(lag_cycles)
-        at = np.where(c < 0, orr[0] + c * T_R,
-                      np.where(c > top, orr[-1] + (c - top) * T_R, np.interp(c, k_r, orr)))
+        at = np.where(c < 0, orr[0] + c * T_R, np.where(c > top, orr[-1] + (c - top) * T_R, np.interp(c, k_r, orr)))
         out = (at < tr[0]) | (at > tr[-1])
         if out.any():
             cf = c[out]
@@ -179,4 +183,5 @@ def pair_observer(left_hr: np.ndarray, right_hr: np.ndarray, fps: float):
             cf = np.where(cf < 0, cf + np.ceil(-cf), cf)
             at[out] = np.interp(cf, k_r, orr)
         return 0.5 * yl + 0.5 * np.interp(at, tr, yr)
+
     return observe

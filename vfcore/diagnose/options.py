@@ -6,6 +6,7 @@ same diagnosis as the command line and the service. The defaults are the setting
 concealed-effect benchmark measures (``benchmarks/bench_diagnose.py``, :ref:`validation-diagnose`):
 a benchmark run with other settings than the user's would measure another tool.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -23,9 +24,17 @@ OBSERVATION_ENTRIES = 6
 #: ``(low, high)`` of each bounded setting, inclusive; ``None`` is no limit on that side. SMC refuses
 #: fewer than 10 particles (:class:`vfcore.inference.smc.SMCSampler`) and every base fit and refit is
 #: one, so a smaller count would fail the diagnosis when it reaches that stage.
-BOUNDS = {"n_particles": (10, 400), "refit_particles": (10, 400), "max_refits": (0, OBSERVATION_ENTRIES),
-          "continuation_entries": (1, None), "base_runs": (1, None), "mode_checks": (0, None),
-          "escalate_factor": (1, None), "seed": (0, 2**63 - 1), "chunk_size": (1, None)}
+BOUNDS = {
+    "n_particles": (10, 400),
+    "refit_particles": (10, 400),
+    "max_refits": (0, OBSERVATION_ENTRIES),
+    "continuation_entries": (1, None),
+    "base_runs": (1, None),
+    "mode_checks": (0, None),
+    "escalate_factor": (1, None),
+    "seed": (0, 2**63 - 1),
+    "chunk_size": (1, None),
+}
 
 #: How a refit that ended far below the base is refitted (:mod:`.rescue`).
 RESCUE_METHODS = ("reference", "box")
@@ -189,13 +198,17 @@ class DiagnoseOptions:
         if self.rescue_method not in RESCUE_METHODS:
             raise ValueError(f"rescue_method must be 'reference' or 'box', got {self.rescue_method!r}")
         if self.refit_start not in REFIT_STARTS:
-            raise ValueError(f"refit_start must be one of {', '.join(map(repr, REFIT_STARTS))}, "
-                             f"got {self.refit_start!r}")
+            raise ValueError(
+                f"refit_start must be one of {', '.join(map(repr, REFIT_STARTS))}, got {self.refit_start!r}"
+            )
         from ..inference.smc import WHOLE_RUN_OPTIONS
+
         whole = sorted(set(self.smc_options or {}) & set(WHOLE_RUN_OPTIONS))
         if whole and self.refit_start != "prior":
-            raise ValueError(f"refits started from the base posterior run together, so the SMC options {whole} "
-                             "need refit_start='prior'")
+            raise ValueError(
+                f"refits started from the base posterior run together, so the SMC options {whole} "
+                "need refit_start='prior'"
+            )
         for name, (lo, hi) in BOUNDS.items():
             v = getattr(self, name)
             if v is None and name not in ("n_particles", "seed", "base_runs", "chunk_size"):

@@ -20,6 +20,7 @@ the run's settings and the state the stages before it left (:mod:`.state`):
 Everything that costs simulations goes through ``map`` (a process pool's or a Dask client's), so
 the same function runs on a laptop and on a cluster.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -43,8 +44,15 @@ from .state import DiagnosisState, Run
 __all__ = ["diagnose", "plot_diagnosis", "DiagnoseReport"]
 
 
-def diagnose(problem: Problem, options: DiagnoseOptions | None = None, *, map=map, base: Posterior | None = None,
-             progress: Callable[[dict], None] | None = None, **settings) -> DiagnoseReport:
+def diagnose(
+    problem: Problem,
+    options: DiagnoseOptions | None = None,
+    *,
+    map=map,
+    base: Posterior | None = None,
+    progress: Callable[[dict], None] | None = None,
+    **settings,
+) -> DiagnoseReport:
     """Run the whole diagnosis on ``problem`` (see the module docstring).
 
     Parameters
@@ -69,8 +77,12 @@ def diagnose(problem: Problem, options: DiagnoseOptions | None = None, *, map=ma
     """
     opts = (options or DiagnoseOptions()).replace(**settings) if settings else (options or DiagnoseOptions())
     run = Run.start(opts, map, progress)
-    st = DiagnosisState(problem=problem, base=base, refit_n=opts.refit_n,
-                        candidates=[n for n in (opts.candidates or CATALOGUE) if get(n).implemented])
+    st = DiagnosisState(
+        problem=problem,
+        base=base,
+        refit_n=opts.refit_n,
+        candidates=[n for n in (opts.candidates or CATALOGUE) if get(n).implemented],
+    )
     fit_base(run, st)
     check_regularity(run, st)
     if at_noise_floor(run, st):
@@ -85,5 +97,8 @@ def diagnose(problem: Problem, options: DiagnoseOptions | None = None, *, map=ma
 def _repairs(opts: DiagnoseOptions) -> list:
     """The stages that may replace a refit by a better fit of the same entry, in order, as the
     options choose them."""
-    return ([rescue_refits] + ([refit_from_leader] if opts.shared_mode else [])
-            + ([continue_all] if opts.continuation else []))
+    return (
+        [rescue_refits]
+        + ([refit_from_leader] if opts.shared_mode else [])
+        + ([continue_all] if opts.continuation else [])
+    )

@@ -26,6 +26,7 @@ the count is known in advance. Reporting never changes a result: the batch funct
 reach the inner map unchanged (tests/vfcore/inference/test_memo.py). A callback that raises is
 reported once as a warning and then ignored: an hour of simulation is not lost to a display.
 """
+
 from __future__ import annotations
 
 import time
@@ -36,8 +37,18 @@ import numpy as np
 
 __all__ = ["STAGES", "ProgressTracker"]
 
-STAGES = ("base fit", "regularity check", "screening", "refit", "rescue", "shared mode", "continuation",
-          "mode check", "nested check", "done")
+STAGES = (
+    "base fit",
+    "regularity check",
+    "screening",
+    "refit",
+    "rescue",
+    "shared mode",
+    "continuation",
+    "mode check",
+    "nested check",
+    "done",
+)
 
 
 class ProgressTracker:
@@ -52,15 +63,21 @@ class ProgressTracker:
         self.steps: int | None = None
         self.simulations = 0
         self._broken = False
-        self._open = False                  # a stage is being timed
+        self._open = False  # a stage is being timed
         self._since = self.t0
         self._rows_at = 0
         self._stages: dict[str, dict] = {}
         self._entries: dict[str, dict] = {}
 
     def event(self) -> dict:
-        return {"stage": self.stage, "entry": self.entry, "step": self.step, "steps": self.steps,
-                "simulations": self.simulations, "elapsed_s": time.perf_counter() - self.t0}
+        return {
+            "stage": self.stage,
+            "entry": self.entry,
+            "step": self.step,
+            "steps": self.steps,
+            "simulations": self.simulations,
+            "elapsed_s": time.perf_counter() - self.t0,
+        }
 
     def emit(self, **extra) -> None:
         if self.callback is None or self._broken:
@@ -69,8 +86,12 @@ class ProgressTracker:
             self.callback({**self.event(), **extra})
         except Exception as exc:  # noqa: BLE001 - a display must not end a diagnosis
             self._broken = True
-            warnings.warn(f"the progress callback raised {type(exc).__name__}: {exc}; progress is no longer "
-                          "reported for this diagnosis", RuntimeWarning, stacklevel=2)
+            warnings.warn(
+                f"the progress callback raised {type(exc).__name__}: {exc}; progress is no longer "
+                "reported for this diagnosis",
+                RuntimeWarning,
+                stacklevel=2,
+            )
 
     def at(self, stage: str, entry: str | None = None, step: int | None = None, steps: int | None = None) -> None:
         """Enter ``stage`` (one of :data:`STAGES`) and report it."""
@@ -99,8 +120,10 @@ class ProgressTracker:
         entries' refits, run together).
         Rows counted as in the events; screening's own few simulations are in its wall time, not its
         count."""
-        return {"by_stage": {k: dict(v) for k, v in self._stages.items()},
-                "by_entry": {k: dict(v) for k, v in self._entries.items()}}
+        return {
+            "by_stage": {k: dict(v) for k, v in self._stages.items()},
+            "by_entry": {k: dict(v) for k, v in self._entries.items()},
+        }
 
     def wrap(self, inner: Callable) -> Callable:
         """A ``map(fn, parts)`` that passes everything to ``inner`` unchanged and reports after each
@@ -109,16 +132,21 @@ class ProgressTracker:
         A part counts one simulation a row, unless the batch function says what a result cost:
         ``fn.simulations(part, result)`` (a continuation search's row is a start that runs hundreds
         of simulations, and its result carries their number)."""
+
         def counted(fn, parts):
             parts = list(parts)
             out = []
             cost = getattr(fn, "simulations", None)
             for part, result in zip(parts, inner(fn, parts)):
                 out.append(result)
-                self.simulations += int(cost(part, result)) if cost is not None else \
-                    (int(np.shape(part)[0]) if np.ndim(part) >= 1 else 1)
+                self.simulations += (
+                    int(cost(part, result))
+                    if cost is not None
+                    else (int(np.shape(part)[0]) if np.ndim(part) >= 1 else 1)
+                )
                 self.emit()
             if len(out) != len(parts):
                 raise RuntimeError(f"the map returned {len(out)} results for {len(parts)} parts")
             return out
+
         return counted

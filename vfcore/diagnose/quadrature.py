@@ -19,6 +19,7 @@ means h <= 2 s, where the midpoint rule's relative error is about exp(-2 pi^2 s^
 (0.01 nats).
 Peaks away from the best one stay at the coarse resolution (they are lower by construction).
 """
+
 from __future__ import annotations
 
 import math
@@ -36,6 +37,7 @@ class QuadResult:
     ``best``: the point of the largest likelihood read; ``best_ll`` its log-likelihood;
     ``mean`` / ``sd``: conditional posterior mean and sd of each parameter (midpoint weights);
     ``n_evals``: likelihood evaluations."""
+
     log_mean: float
     best: np.ndarray
     best_ll: float
@@ -101,6 +103,6 @@ def integrate_loglik(fn, lo, hi, *, n0=16, split: int = 3, rounds: int = 6, tol:
     var = w @ (centres - mean) ** 2
     # the spread within a cell: a cell of width h holds a uniform of variance h^2 / 12 at most
     hcell = h0[None, :] / float(split) ** level[:, None]
-    var = var + w @ (hcell ** 2 / 12.0)
+    var = var + w @ (hcell**2 / 12.0)
     b = int(np.argmax(terms - log_vol))
     return QuadResult(lm, centres[b].copy(), float(ll[b]), mean, np.sqrt(var), n_evals)

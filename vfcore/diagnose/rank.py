@@ -34,6 +34,7 @@ is "no missing physics found". Each candidate also carries the fraction of the *
 residual it removes: ``1 - E_after / E_before`` with ``E`` the residual energy (sum of squares)
 in the phase where the base fit's residual is concentrated (:func:`residual_removed`).
 """
+
 from __future__ import annotations
 
 import math
@@ -54,8 +55,9 @@ def _lz(x) -> tuple[float, float]:
     return float(v), float(s)
 
 
-def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None, drops=None,
-                    by_drop: bool = False) -> bool:
+def null_consistent(
+    names, mean, sd, extension, null_sd: float = 2.0, only=None, drops=None, by_drop: bool = False
+) -> bool:
     """Whether a fit of ``extension`` (an :class:`.extensions.Extension` or its name) puts every
     extension parameter that has a null value (``ExtParam.null``) within ``null_sd`` posterior
     standard deviations of it. ``names``/``mean``/``sd``: the posterior's parameter names, means
@@ -81,6 +83,7 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
     recording: a phase difference 0.012 +- 0.004 cycles, 2.7 sd, whose null costs 2.2 nats) than its Occam factor
     (~ log(prior width / posterior width), 3 nats there) buys back."""
     from .extensions import get
+
     ext = get(extension) if isinstance(extension, str) else extension
     idx = {n: i for i, n in enumerate(names)}
     checked = False
@@ -96,7 +99,7 @@ def null_consistent(names, mean, sd, extension, null_sd: float = 2.0, only=None,
         has_drop = drops is not None and p.name in drops and math.isfinite(float(drops[p.name]))
         if not (by_drop and has_drop) and abs(m - p.null) > null_sd * s_:
             return False
-        if has_drop and float(drops[p.name]) > 2.0 * null_sd ** 2:
+        if has_drop and float(drops[p.name]) > 2.0 * null_sd**2:
             return False
         checked = True
     return checked
@@ -116,6 +119,7 @@ def residual_removed(before, after, phase: str | None = None) -> float:
 
 def _phase_energy(rep, phase: str) -> float:
     from .locate import PHASES, SPREAD
+
     phases = PHASES if phase == SPREAD else (phase,)
     return float(sum(rep.phase_rms[p] ** 2 * rep.n_samples[p] for p in phases if rep.n_samples[p] > 0))
 
@@ -130,9 +134,9 @@ class CandidateRow:
     n_extra: int | None
     residual_removed: float
     found: bool
-    rms_gain: float = math.nan          # 1 - rms / reference rms (nan: not given)
+    rms_gain: float = math.nan  # 1 - rms / reference rms (nan: not given)
     null_consistent: bool = False
-    reason: str = ""                    # why not found ("" when found)
+    reason: str = ""  # why not found ("" when found)
 
     def fails_only_on_error(self, min_gain: float, min_rms_gain: float, need_rms: bool = True) -> bool:
         """Not found only because ``delta <= k_se * se``: the gain exceeds ``min_gain``, the RMS
@@ -140,21 +144,27 @@ class CandidateRow:
         the fit is not at its null value. (The evidence test is applied first, so its ``reason``
         hides whether the others hold.)"""
         rms_ok = self.rms_gain >= min_rms_gain if math.isfinite(self.rms_gain) else not need_rms
-        return (not self.found and self.reason.startswith("evidence") and math.isfinite(self.delta)
-                and self.delta > min_gain and rms_ok and not self.null_consistent)
+        return (
+            not self.found
+            and self.reason.startswith("evidence")
+            and math.isfinite(self.delta)
+            and self.delta > min_gain
+            and rms_ok
+            and not self.null_consistent
+        )
 
 
 @dataclass
 class RankReport:
     base_log_evidence: float
     base_log_evidence_se: float
-    rows: list[CandidateRow]               # sorted by delta, largest first
+    rows: list[CandidateRow]  # sorted by delta, largest first
     winner: str | None
     min_gain: float
     k_se: float
     notes: list[str] = field(default_factory=list)
     min_rms_gain: float = 0.30
-    reference: str = "base"              # "base" or the null-consistent fit used as the reference
+    reference: str = "base"  # "base" or the null-consistent fit used as the reference
     #: ``(dlogZ, se)`` of the local comparison that named the winner (:func:`.amend.promote_local`), else None
     local: tuple | None = None
 
@@ -164,17 +174,28 @@ class RankReport:
             return NO_FINDING
         r = next(r for r in self.rows if r.name == self.winner)
         # a winner named on the local comparison says so: its global gain is within its error by construction
-        gain = (f"dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}" if self.local is None else
-                f"named on the local comparison: dlogZ = {self.local[0]:.2f} +- {self.local[1]:.2f} against the base "
-                f"model refitted in its material mode, {r.delta:.2f} +- {r.delta_se:.2f} against the reference")
-        return (f"missing physics: {self.physics}"
-                + (f" ({self.winner} model" if self.physics != self.winner else " (")
-                + (", " if self.physics != self.winner else "") + gain
-                + (f", residual RMS {100 * r.rms_gain:.0f} % lower" if math.isfinite(r.rms_gain) else "")
-                + (f", removes {100 * r.residual_removed:.0f} % of the localised residual"
-                   if math.isfinite(r.residual_removed) else "") + ")"
-                + "".join(f"; not distinguishable from {name} (dlogZ {d:.0f} +- {se:.0f} below)"
-                          for name, d, se in self.rivals))
+        gain = (
+            f"dlogZ = {r.delta:.2f} +- {r.delta_se:.2f}"
+            if self.local is None
+            else f"named on the local comparison: dlogZ = {self.local[0]:.2f} +- {self.local[1]:.2f} against the base "
+            f"model refitted in its material mode, {r.delta:.2f} +- {r.delta_se:.2f} against the reference"
+        )
+        return (
+            f"missing physics: {self.physics}"
+            + (f" ({self.winner} model" if self.physics != self.winner else " (")
+            + (", " if self.physics != self.winner else "")
+            + gain
+            + (f", residual RMS {100 * r.rms_gain:.0f} % lower" if math.isfinite(r.rms_gain) else "")
+            + (
+                f", removes {100 * r.residual_removed:.0f} % of the localised residual"
+                if math.isfinite(r.residual_removed)
+                else ""
+            )
+            + ")"
+            + "".join(
+                f"; not distinguishable from {name} (dlogZ {d:.0f} +- {se:.0f} below)" for name, d, se in self.rivals
+            )
+        )
 
     @property
     def rivals(self) -> list[tuple[str, float, float]]:
@@ -188,6 +209,7 @@ class RankReport:
         if self.winner is None:
             return []
         from .extensions import CATALOGUE, physics_of
+
         w = next(r for r in self.rows if r.name == self.winner)
         out, seen = [], {self.physics}
         for r in self.rows:
@@ -206,16 +228,27 @@ class RankReport:
     def physics(self) -> str | None:
         """The physics named: the winner's family (``Extension.physics``), or None."""
         from .extensions import physics_of
+
         return physics_of(self.winner)
 
     def table(self) -> list[dict]:
         return [r.__dict__.copy() for r in self.rows]
 
 
-def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_extra: dict | None = None,
-                    rms: dict | None = None, base_rms: float | None = None, null: dict | None = None,
-                    references: dict | None = None, min_gain: float = 3.0, k_se: float = 3.0,
-                    min_rms_gain: float = 0.30) -> RankReport:
+def rank_extensions(
+    base,
+    candidates: dict,
+    *,
+    residual: dict | None = None,
+    n_extra: dict | None = None,
+    rms: dict | None = None,
+    base_rms: float | None = None,
+    null: dict | None = None,
+    references: dict | None = None,
+    min_gain: float = 3.0,
+    k_se: float = 3.0,
+    min_rms_gain: float = 0.30,
+) -> RankReport:
     """Rank candidate extended fits against ``base`` (module docstring: rule and reference).
 
     Parameters
@@ -237,7 +270,7 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
     rms = dict(rms or {})
     ref, notes = "base", []
     r0 = float(base_rms) if base_rms is not None else math.nan
-    for name, c in candidates.items():          # reference raised by null-consistent fits
+    for name, c in candidates.items():  # reference raised by null-consistent fits
         z, s = _lz(c)
         if null.get(name) and math.isfinite(z) and (not math.isfinite(z0) or z > z0):
             z0, s0, ref = z, s, name
@@ -247,11 +280,15 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
             z0, s0, ref = float(z), float(s), label
             r0 = float(r) if base_rms is not None else r0
     if ref != "base" and ref not in candidates:
-        notes.append(f"{ref}: a base-model fit with a higher log-evidence than the base fit (the base SMC missed "
-                     f"a material mode); gains are measured against it")
+        notes.append(
+            f"{ref}: a base-model fit with a higher log-evidence than the base fit (the base SMC missed "
+            f"a material mode); gains are measured against it"
+        )
     elif ref != "base":
-        notes.append(f"{ref}: the fit sits at its null value (the base model) with a higher log-evidence than "
-                     f"the base fit, so the base SMC missed a material mode; gains are measured against {ref}")
+        notes.append(
+            f"{ref}: the fit sits at its null value (the base model) with a higher log-evidence than "
+            f"the base fit, so the base SMC missed a material mode; gains are measured against {ref}"
+        )
     rows = []
     for name, c in candidates.items():
         z, s = _lz(c)
@@ -269,15 +306,29 @@ def rank_extensions(base, candidates: dict, *, residual: dict | None = None, n_e
             reason = "null value: extension parameters at their null value (a mode-finding gain)"
         else:
             reason = ""
-        rows.append(CandidateRow(name, z, s, d, se, None if n_extra is None else n_extra.get(name),
-                                 float((residual or {}).get(name, math.nan)), reason == "", g, is_null, reason))
+        rows.append(
+            CandidateRow(
+                name,
+                z,
+                s,
+                d,
+                se,
+                None if n_extra is None else n_extra.get(name),
+                float((residual or {}).get(name, math.nan)),
+                reason == "",
+                g,
+                is_null,
+                reason,
+            )
+        )
     rows.sort(key=lambda r: -r.delta if math.isfinite(r.delta) else math.inf)
     winner = next((r.name for r in rows if r.found), None)
     return RankReport(z0, s0, rows, winner, min_gain, k_se, notes, min_rms_gain, ref)
 
 
-def rank_best_of_base(base, candidates: dict, *, base_runs, mode_checks: dict | None = None,
-                      base_rms: float | None = None, **kw) -> RankReport:
+def rank_best_of_base(
+    base, candidates: dict, *, base_runs, mode_checks: dict | None = None, base_rms: float | None = None, **kw
+) -> RankReport:
     """The naming rule of :func:`rank_extensions` against *every* base-model fit, with delta-method
     errors only: the rule for an irregular base fit on which nothing was named (:ref:`diagnose`
     section 3, "Best of all base fits").
@@ -304,14 +355,23 @@ def rank_best_of_base(base, candidates: dict, *, base_runs, mode_checks: dict | 
     for label, (z, s, r) in (mode_checks or {}).items():
         refs[f"base near {label}"] = (float(z), float(s), float(r))
     rep = rank_extensions(base, candidates, base_rms=base_rms, references=refs, **kw)
-    rep.notes.append(f"irregular base fit, nothing named with the between-run error: every extension compared "
-                     f"with the best of {len(refs) + 1} base-model fits by their own errors (reference: "
-                     f"{rep.reference})")
+    rep.notes.append(
+        f"irregular base fit, nothing named with the between-run error: every extension compared "
+        f"with the best of {len(refs) + 1} base-model fits by their own errors (reference: "
+        f"{rep.reference})"
+    )
     return rep
 
 
-def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: float = 3.0,
-                 min_rms_gain: float = 0.30, null_sd: float = 2.0) -> RankReport:
+def compare_fits(
+    base_post,
+    ext_posts: dict,
+    *,
+    min_gain: float = 3.0,
+    k_se: float = 3.0,
+    min_rms_gain: float = 0.30,
+    null_sd: float = 2.0,
+) -> RankReport:
     """:func:`rank_extensions` from fitted posteriors carrying predictions: the localised residual
     fraction and the residual RMS are computed on each posterior's predictive ensemble; the null
     check uses ``post.info["extension"]`` (set by :func:`.fit.fit_extended`) or the dict key."""
@@ -330,9 +390,21 @@ def compare_fits(base_post, ext_posts: dict, *, min_gain: float = 3.0, k_se: flo
     res = {n: residual_removed(r0, rep(p)) for n, p in ext_posts.items()}
     from .extensions import get
     from .fit import null_drops, param_table
+
     nx = {n: len(get(p.info.get("extension", n)).params) for n, p in ext_posts.items()}
-    nul = {n: null_consistent(*param_table(p), p.info.get("extension", n), null_sd, drops=null_drops(p))
-           for n, p in ext_posts.items()}
-    return rank_extensions(base_post, ext_posts, residual=res, n_extra=nx,
-                           rms={n: rms_of(p) for n, p in ext_posts.items()}, base_rms=rms_of(base_post),
-                           null=nul, min_gain=min_gain, k_se=k_se, min_rms_gain=min_rms_gain)
+    nul = {
+        n: null_consistent(*param_table(p), p.info.get("extension", n), null_sd, drops=null_drops(p))
+        for n, p in ext_posts.items()
+    }
+    return rank_extensions(
+        base_post,
+        ext_posts,
+        residual=res,
+        n_extra=nx,
+        rms={n: rms_of(p) for n, p in ext_posts.items()},
+        base_rms=rms_of(base_post),
+        null=nul,
+        min_gain=min_gain,
+        k_se=k_se,
+        min_rms_gain=min_rms_gain,
+    )

@@ -1,6 +1,7 @@
 """The refits: every chosen entry fitted by SMC with the base model's likelihood (base + extension
 parameters; :ref:`diagnose-pipeline-refit`), each summarised against the base fit, and the rule by
 which a later fit of an entry (rescue, shared mode, continuation, nested check) replaces its first."""
+
 from __future__ import annotations
 
 import math
@@ -43,12 +44,24 @@ def refit_chosen(run: Run, st: DiagnosisState) -> None:
         t1 = time.perf_counter()
         run.track.at("refit", st.chosen[0] if len(st.chosen) == 1 else "entries", 1, 1)
         ends: dict[int, float] = {}
-        refs = {name: base_reference(pb, st.base, name, o.rescue_inflate, o.integrate, sd)
-                for name, sd in zip(st.chosen, seeds) if starts_from_base(o.refit_start, name)}
-        jobs = [(name, st.refit_n, sd) + (({"reference": refs[name]},) if name in refs else ())
-                for name, sd in zip(st.chosen, seeds)]
-        posts = fit_extended_many(pb, jobs, map=run.map, chunk_size=o.chunk_size, integrate=o.integrate,
-                                  on_done=lambda i, _: ends.setdefault(i, time.perf_counter()), **smc)
+        refs = {
+            name: base_reference(pb, st.base, name, o.rescue_inflate, o.integrate, sd)
+            for name, sd in zip(st.chosen, seeds)
+            if starts_from_base(o.refit_start, name)
+        }
+        jobs = [
+            (name, st.refit_n, sd) + (({"reference": refs[name]},) if name in refs else ())
+            for name, sd in zip(st.chosen, seeds)
+        ]
+        posts = fit_extended_many(
+            pb,
+            jobs,
+            map=run.map,
+            chunk_size=o.chunk_size,
+            integrate=o.integrate,
+            on_done=lambda i, _: ends.setdefault(i, time.perf_counter()),
+            **smc,
+        )
         for i, (name, post) in enumerate(zip(st.chosen, posts)):
             if name in refs:
                 post = referenced(post, refs[name], o.rescue_inflate)[2]
@@ -61,15 +74,25 @@ def refit_chosen(run: Run, st: DiagnosisState) -> None:
         for i, name in enumerate(st.chosen):
             t1 = time.perf_counter()
             run.track.at("refit", name, i + 1, len(st.chosen))
-            post = fit_extended(pb, name, n_particles=st.refit_n, seed=seeds[i], map=run.map,
-                                chunk_size=o.chunk_size, integrate=o.integrate, **smc)
+            post = fit_extended(
+                pb,
+                name,
+                n_particles=st.refit_n,
+                seed=seeds[i],
+                map=run.map,
+                chunk_size=o.chunk_size,
+                integrate=o.integrate,
+                **smc,
+            )
             st.refits[name] = post
             st.n_simulations += int(post.n_simulations)
             st.after[name] = summarise(run, st, name, post, t1)
     if st.tau > 0.0:
-        st.notes.append(f"between-run Monte Carlo error of a log-evidence: {st.tau:.2f} nats (spread of the "
-                        "independent base runs beyond their reported errors), added in quadrature to every fit's "
-                        "error")
+        st.notes.append(
+            f"between-run Monte Carlo error of a log-evidence: {st.tau:.2f} nats (spread of the "
+            "independent base runs beyond their reported errors), added in quadrature to every fit's "
+            "error"
+        )
 
 
 def summarise(run: Run, st: DiagnosisState, name: str, post: Posterior, t1: float) -> dict:
@@ -87,8 +110,9 @@ def summarise(run: Run, st: DiagnosisState, name: str, post: Posterior, t1: floa
     return s
 
 
-def keep_if_higher(run: Run, st: DiagnosisState, name: str, near: Posterior, zb: float, t1: float,
-                   record: tuple | None = None, **tag) -> dict | None:
+def keep_if_higher(
+    run: Run, st: DiagnosisState, name: str, near: Posterior, zb: float, t1: float, record: tuple | None = None, **tag
+) -> dict | None:
     """A second fit ``near`` of entry ``name`` (log-evidence or its lower bound ``zb``) replaces the
     first when ``zb`` is higher (or the first has none): its evidence is set to ``zb``, ``tag`` goes
     into its ``info``, and its summary into ``st.after``. ``record = (key, dict)``: written to the
@@ -106,8 +130,15 @@ def keep_if_higher(run: Run, st: DiagnosisState, name: str, near: Posterior, zb:
     st.after[name] = summarise(run, st, name, near, t1)
     if record is not None:
         key, extra = record
-        st.after[name][key] = {**extra, "first": None if first is None else {
-            "log_evidence": z1, "log_evidence_se": float(first.log_evidence_se),
-            "n_simulations": int(first.n_simulations)},
-            **({"rescued": prev["rescued"]} if "rescued" in prev else {})}
+        st.after[name][key] = {
+            **extra,
+            "first": None
+            if first is None
+            else {
+                "log_evidence": z1,
+                "log_evidence_se": float(first.log_evidence_se),
+                "n_simulations": int(first.n_simulations),
+            },
+            **({"rescued": prev["rescued"]} if "rescued" in prev else {}),
+        }
     return prev

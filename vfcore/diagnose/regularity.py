@@ -41,6 +41,7 @@ likelihood with a mean and a spread. Two more measures flag it, both on the same
 ``rough`` is set where either exceeds its tolerance (``rough_tol``, ``aperiodic_tol``: 3 nats, the
 gap the 3-run rule of :ref:`inference` reads as a difference); ``smooth`` is neither flag.
 """
+
 from __future__ import annotations
 
 import math
@@ -57,6 +58,7 @@ __all__ = ["Sensitivity", "aperiodicity", "rough_phrase", "sensitivity"]
 class Sensitivity:
     """``loglik``: at the point; ``changes``: ``|loglik(perturbed) - loglik|`` per direction
     (``inf`` where a perturbed run failed); ``irregular``: the largest change exceeds ``tol``."""
+
     step: float
     tol: float
     loglik: float
@@ -95,15 +97,21 @@ def rough_phrase(d: dict) -> str:
     """What a rough verdict measured, in words, from :meth:`Sensitivity.to_dict` (an aperiodicity of NaN, no
     verdict, is left out)."""
     a = d.get("aperiodicity", math.nan)
-    parts = [] if a is None or not math.isfinite(a) else [
-        f"the waveform does not repeat within 4 cycles (a shift of its modulation costs {a:.3g} nats)"]
-    parts.append(f"a relative {d['rough_step']:g} change of the parameters has a second difference of "
-                 f"{d['max_second_difference']:.3g} nats")
+    parts = (
+        []
+        if a is None or not math.isfinite(a)
+        else [f"the waveform does not repeat within 4 cycles (a shift of its modulation costs {a:.3g} nats)"]
+    )
+    parts.append(
+        f"a relative {d['rough_step']:g} change of the parameters has a second difference of "
+        f"{d['max_second_difference']:.3g} nats"
+    )
     return " or ".join(parts)
 
 
-def aperiodicity(gaw_hr, f0: float, fps: float, oversample: int, n_compare: int, sigma_e: float, *,
-                 max_period: int = 4) -> float:
+def aperiodicity(
+    gaw_hr, f0: float, fps: float, oversample: int, n_compare: int, sigma_e: float, *, max_period: int = 4
+) -> float:
     """The module docstring's ``aperiodicity`` (nats) of one oversampled simulated area ``gaw_hr``
     (``oversample`` samples per camera frame at ``fps``) with fundamental ``f0`` (Hz), read over the
     last ``n_compare`` frames before ``max_period`` cycles of the run's end (fewer where the run is
@@ -112,17 +120,17 @@ def aperiodicity(gaw_hr, f0: float, fps: float, oversample: int, n_compare: int,
     x = np.asarray(gaw_hr, dtype=float)
     if not (math.isfinite(f0) and f0 > 0):
         return math.nan
-    period = fps * oversample / f0                  # samples per cycle
+    period = fps * oversample / f0  # samples per cycle
     top = int(math.ceil(1.05 * max_period * period)) + 2
     n = min(int(n_compare) * int(oversample), x.size - top)
     if n < 2 * period:
         return math.nan
     base = x.size - n - top
-    a = x[base: base + n]
+    a = x[base : base + n]
     best = math.inf
     for k in range(1, int(max_period) + 1):
         lags = np.arange(max(1, int(0.95 * k * period)), int(math.ceil(1.05 * k * period)) + 1)
-        mse = np.array([np.mean((a - x[base + lag: base + lag + n]) ** 2) for lag in lags])
+        mse = np.array([np.mean((a - x[base + lag : base + lag + n]) ** 2) for lag in lags])
         i = int(np.argmin(mse))
         m = float(mse[i])
         if 0 < i < mse.size - 1:
@@ -131,17 +139,28 @@ def aperiodicity(gaw_hr, f0: float, fps: float, oversample: int, n_compare: int,
             if c > 0:
                 m = max(0.0, m - (mse[i + 1] - mse[i - 1]) ** 2 / (8.0 * c))
         best = min(best, m)
-    return float(n_compare * best / (2.0 * sigma_e ** 2))
+    return float(n_compare * best / (2.0 * sigma_e**2))
 
 
-def sensitivity(problem: Problem, theta, *, step: float = 1e-6, n_dirs: int = 2, tol: float = 1.0,
-                seed: int = 0, rough_step: float = 1e-4, rough_tol: float = 3.0, aperiodic_tol: float = 3.0,
-                max_period: int = 4) -> Sensitivity:
+def sensitivity(
+    problem: Problem,
+    theta,
+    *,
+    step: float = 1e-6,
+    n_dirs: int = 2,
+    tol: float = 1.0,
+    seed: int = 0,
+    rough_step: float = 1e-4,
+    rough_tol: float = 3.0,
+    aperiodic_tol: float = 3.0,
+    max_period: int = 4,
+) -> Sensitivity:
     """The checks of the module docstring at the free parameters ``theta`` of ``problem.prior``:
     ``1 + 3 n_dirs`` simulations (``1 + n_dirs`` with ``rough_step=0``, which turns the second
     differences off)."""
     from ..batch import simulate_many
     from ..result import HR_OVERSAMPLE
+
     theta = np.asarray(theta, dtype=float).reshape(-1)
     prior = problem.prior
     if theta.size != prior.ndim:
@@ -167,15 +186,25 @@ def sensitivity(problem: Problem, theta, *, step: float = 1e-6, n_dirs: int = 2,
     if not math.isfinite(lls[0]):
         raise RuntimeError("the fitted point itself failed to simulate")
     nd = int(n_dirs)
-    changes = tuple(abs(v - lls[0]) if math.isfinite(v) else math.inf for v in lls[1:1 + nd])
+    changes = tuple(abs(v - lls[0]) if math.isfinite(v) else math.inf for v in lls[1 : 1 + nd])
     second = []
     for j in range(nd if rough_step > 0 else 0):
         up, down = lls[1 + nd + 2 * j], lls[2 + nd + 2 * j]
         second.append(abs(up + down - 2.0 * lls[0]) if math.isfinite(up) and math.isfinite(down) else math.inf)
     r0 = res[0]
-    ap = aperiodicity(r0.gaw_hr, r0.f0, problem.fps, HR_OVERSAMPLE, problem.window[1], problem.sigma_e,
-                      max_period=max_period)
-    rough = bool((second and max(second) > rough_tol) or ap > aperiodic_tol)      # nan: no verdict
-    return Sensitivity(step=float(step), tol=float(tol), loglik=lls[0], changes=changes,
-                       irregular=bool(max(changes) > tol), n_simulations=len(res), rough_step=float(rough_step),
-                       second_differences=tuple(second), aperiodicity=float(ap), rough=rough)
+    ap = aperiodicity(
+        r0.gaw_hr, r0.f0, problem.fps, HR_OVERSAMPLE, problem.window[1], problem.sigma_e, max_period=max_period
+    )
+    rough = bool((second and max(second) > rough_tol) or ap > aperiodic_tol)  # nan: no verdict
+    return Sensitivity(
+        step=float(step),
+        tol=float(tol),
+        loglik=lls[0],
+        changes=changes,
+        irregular=bool(max(changes) > tol),
+        n_simulations=len(res),
+        rough_step=float(rough_step),
+        second_differences=tuple(second),
+        aperiodicity=float(ap),
+        rough=rough,
+    )

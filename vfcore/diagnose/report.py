@@ -1,5 +1,6 @@
 """The diagnosis report: the fits, their summaries, the ranking and the verdict, with the fit check
 (:mod:`.adequacy`) that decides whether the best fit explains the recording at all."""
+
 from __future__ import annotations
 
 import time
@@ -39,13 +40,19 @@ class DiagnoseReport:
     @property
     def verdict(self) -> str:
         if not self.fits:
-            partial = self.ranking.verdict.removeprefix("missing physics: ") if self.ranking.winner else (
-                material_sentence(self.material) if self.material and self.material["found"] else None)
+            partial = (
+                self.ranking.verdict.removeprefix("missing physics: ")
+                if self.ranking.winner
+                else (material_sentence(self.material) if self.material and self.material["found"] else None)
+            )
             return self.fit_check.sentence(partial)
         if self.material and self.material["found"]:
             m = material_sentence(self.material)
-            return (f"{self.ranking.verdict}; and {m}" if self.ranking.winner
-                    else f"the fixed parameters were wrong: {m}; {NO_FINDING}")
+            return (
+                f"{self.ranking.verdict}; and {m}"
+                if self.ranking.winner
+                else f"the fixed parameters were wrong: {m}; {NO_FINDING}"
+            )
         return self.ranking.verdict
 
     @property
@@ -55,16 +62,31 @@ class DiagnoseReport:
     def to_dict(self) -> dict:
         rows = self.ranking.table()
         return {
-            "verdict": self.verdict, "winner": self.winner, "physics": self.ranking.physics if self.fits else None,
-            "material": self.material, "fit_check": None if self.fit_check is None else self.fit_check.to_dict(),
+            "verdict": self.verdict,
+            "winner": self.winner,
+            "physics": self.ranking.physics if self.fits else None,
+            "material": self.material,
+            "fit_check": None if self.fit_check is None else self.fit_check.to_dict(),
             "rivals": [{"physics": f, "gap": g, "se": e} for f, g, e in self.ranking.rivals],
             "base": self.before,
-            "screening": {k: {kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
-                              for kk, vv in v.items()} for k, v in self.screening.items()},
-            "refits": self.after, "ranking": rows, "reference": self.ranking.reference,
-            "local": (None if self.winner is None or self.ranking.local is None else
-                      {"dlogZ": self.ranking.local[0], "se": self.ranking.local[1]}),
-            "n_simulations": self.n_simulations, "wall_s": self.wall_s, "notes": self.notes,
+            "screening": {
+                k: {
+                    kk: (vv if not isinstance(vv, dict) else {a: float(b) for a, b in vv.items()})
+                    for kk, vv in v.items()
+                }
+                for k, v in self.screening.items()
+            },
+            "refits": self.after,
+            "ranking": rows,
+            "reference": self.ranking.reference,
+            "local": (
+                None
+                if self.winner is None or self.ranking.local is None
+                else {"dlogZ": self.ranking.local[0], "se": self.ranking.local[1]}
+            ),
+            "n_simulations": self.n_simulations,
+            "wall_s": self.wall_s,
+            "notes": self.notes,
             "cost": self.cost,
         }
 
@@ -75,9 +97,22 @@ def finish(run: Run, st: DiagnosisState, ranking: RankReport) -> DiagnoseReport:
     checked = None
     after = st.after
     if run.options.max_rms_ratio is not None:
-        checked = check_fit({"base": st.before, **{n: after[n] for n in after if not after[n].get("null_consistent")}},
-                            run.options.max_rms_ratio)
+        checked = check_fit(
+            {"base": st.before, **{n: after[n] for n in after if not after[n].get("null_consistent")}},
+            run.options.max_rms_ratio,
+        )
     run.track.at("done")
-    return DiagnoseReport(base=st.base, before=st.before, screening=st.screening, refits=st.refits, after=after,
-                          ranking=ranking, n_simulations=st.n_simulations, wall_s=time.perf_counter() - run.t0,
-                          notes=st.notes, cost=run.track.cost(), material=st.material, fit_check=checked)
+    return DiagnoseReport(
+        base=st.base,
+        before=st.before,
+        screening=st.screening,
+        refits=st.refits,
+        after=after,
+        ranking=ranking,
+        n_simulations=st.n_simulations,
+        wall_s=time.perf_counter() - run.t0,
+        notes=st.notes,
+        cost=run.track.cost(),
+        material=st.material,
+        fit_check=checked,
+    )

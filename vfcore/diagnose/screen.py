@@ -7,6 +7,7 @@ re-simulated. The score is the best log-likelihood reached minus the best base l
 same particles: an optimistic bound on what the extension can gain at the base's material
 parameters. It only decides which entries are refitted; it never names one.
 """
+
 from __future__ import annotations
 
 import time
@@ -28,15 +29,27 @@ def _sobol(d: int, n: int, seed: int) -> np.ndarray:
     import warnings
 
     from scipy.stats import qmc
-    with warnings.catch_warnings():      # balance is best at powers of 2; any n is still a valid design
+
+    with warnings.catch_warnings():  # balance is best at powers of 2; any n is still a valid design
         warnings.simplefilter("ignore", UserWarning)
         return qmc.Sobol(d, scramble=True, seed=seed).random(n)
 
 
-def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, screen_obs: int = 200,
-           screen_fwd: int = 8, n_theta_fwd: int = 2, seed: int = 0, map=map) -> dict[str, dict]:
+def screen(
+    problem: Problem,
+    base: Posterior,
+    candidates,
+    *,
+    n_theta: int = 6,
+    screen_obs: int = 200,
+    screen_fwd: int = 8,
+    n_theta_fwd: int = 2,
+    seed: int = 0,
+    map=map,
+) -> dict[str, dict]:
     """Screening scores (see module docstring), name -> {"score", "best_phi", "n_simulations"}."""
     from ..batch import simulate_many
+
     thetas = best_particles(base, n_theta)
     params = [problem.prior.to_params(t) for t in thetas]
     res = simulate_many(params, problem.config, block=max(1, len(params)))
@@ -76,9 +89,11 @@ def screen(problem: Problem, base: Posterior, candidates, *, n_theta: int = 6, s
             parts = list(map(ev, np.array_split(rows, max(1, min(len(rows), 2)))))
             lls = np.concatenate([p.loglik for p in parts])
             j = int(np.argmax(lls))
-            out[name] = {"score": float(lls[j] - best_base),
-                         "best_phi": dict(zip(ext.param_names, rows[j, len(thetas[0]):])) if np.isfinite(lls[j])
-                         else None, "n_simulations": int(rows.shape[0])}
+            out[name] = {
+                "score": float(lls[j] - best_base),
+                "best_phi": dict(zip(ext.param_names, rows[j, len(thetas[0]) :])) if np.isfinite(lls[j]) else None,
+                "n_simulations": int(rows.shape[0]),
+            }
     out["_base"] = {"best_base_loglik": best_base, "n_simulations": len(params)}
     return out
 
@@ -96,7 +111,7 @@ def screen_catalogue(run: Run, st: DiagnosisState) -> None:
     st.screening = scr
     ranked = sorted((n for n in cand if np.isfinite(scr[n]["score"])), key=lambda n: -scr[n]["score"])
     obs_ranked = [n for n in ranked if not (o.refit_forward and get(n).kind == "forward")]
-    chosen = [n for n in obs_ranked if o.screen_min is None or scr[n]["score"] > o.screen_min][:o.max_refits]
+    chosen = [n for n in obs_ranked if o.screen_min is None or scr[n]["score"] > o.screen_min][: o.max_refits]
     if o.refit_forward:
         chosen += [n for n in cand if get(n).kind == "forward"]
     if not chosen:

@@ -21,6 +21,7 @@ Gaussian reference about that point, so what the ranking compares is again a log
 model with its Monte Carlo error (the generalized stepping-stone path of
 :mod:`vfcore.inference.reference`), not an optimum.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -33,8 +34,18 @@ from ..inference.importance import map_evaluate
 from ..inference.problem import Evaluation, Problem, ProblemEvaluator
 from ..measures import estimate_f0
 
-__all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "windows", "window_problems",
-           "continuation_search", "continuation_searches", "continued_fit", "continued_fits"]
+__all__ = [
+    "CONTINUATION",
+    "SearchResult",
+    "model_evaluator",
+    "model_prior",
+    "windows",
+    "window_problems",
+    "continuation_search",
+    "continuation_searches",
+    "continued_fit",
+    "continued_fits",
+]
 
 #: default search: Sobol design points, starts kept from it, first window in cycles, Nelder-Mead
 #: evaluations on window k (``maxfev0 + maxfev_step * k``) and its initial simplex step in unit
@@ -46,8 +57,17 @@ __all__ = ["CONTINUATION", "SearchResult", "model_evaluator", "model_prior", "wi
 #: window: on six development searches it halved the simulations and reached the same optimum in
 #: five (the sixth 0.8 nats lower), and it takes a third off the continuation stage of a whole
 #: diagnosis ("Successive halving").
-CONTINUATION = {"n_design": 256, "n_keep": 4, "cycles0": 3.0, "maxfev0": 30, "maxfev_step": 25,
-                "step0": 0.05, "step_ratio": 4.0, "step_min": 5e-4, "halving": True}
+CONTINUATION = {
+    "n_design": 256,
+    "n_keep": 4,
+    "cycles0": 3.0,
+    "maxfev0": 30,
+    "maxfev_step": 25,
+    "step0": 0.05,
+    "step_ratio": 4.0,
+    "step_min": 5e-4,
+    "halving": True,
+}
 
 
 def windows(n: int, frames_per_cycle: float, cycles0: float = 3.0) -> list[int]:
@@ -90,6 +110,7 @@ def model_evaluator(problem: Problem, extension: str | None, integrate: bool = T
     if extension is None:
         return ProblemEvaluator(problem)
     from .fit import ExtendedEvaluator
+
     return ExtendedEvaluator(problem, extension, integrate=integrate)
 
 
@@ -98,6 +119,7 @@ def model_prior(problem: Problem, extension: str | None, integrate: bool = True)
     if extension is None:
         return problem.prior
     from .fit import ExtendedPrior
+
     return ExtendedPrior(bounds={}, base=problem.prior, extension=extension, integrate=bool(integrate))
 
 
@@ -106,6 +128,7 @@ def _polish(ev, u: np.ndarray, k: int, last: bool, s: dict, lo, width, state: li
     returns the new point and the window's optimum (``-inf`` if none was finite). ``state = [n, best_v, best_u]`` is updated in place: simulations made,
     and on the last window the best value seen and its point."""
     from scipy.optimize import minimize
+
     d = u.size
 
     def f(z):
@@ -116,12 +139,22 @@ def _polish(ev, u: np.ndarray, k: int, last: bool, s: dict, lo, width, state: li
         if last and v > state[1]:
             state[1], state[2] = v, np.array(z, dtype=float)
         return -v if math.isfinite(v) else 1e300
+
     step = max(s["step0"] / s["step_ratio"] ** k, s["step_min"])
-    simplex = np.vstack([u] + [np.clip(u + step * e, 0.0, 1.0) if u[j] + step <= 1.0 else u - step * e
-                               for j, e in enumerate(np.eye(d))])
-    r = minimize(f, u, method="Nelder-Mead",
-                 options={"maxfev": int(s["maxfev0"] + s["maxfev_step"] * k),
-                          "initial_simplex": simplex, "xatol": 1e-7, "fatol": 1e-6})
+    simplex = np.vstack(
+        [u] + [np.clip(u + step * e, 0.0, 1.0) if u[j] + step <= 1.0 else u - step * e for j, e in enumerate(np.eye(d))]
+    )
+    r = minimize(
+        f,
+        u,
+        method="Nelder-Mead",
+        options={
+            "maxfev": int(s["maxfev0"] + s["maxfev_step"] * k),
+            "initial_simplex": simplex,
+            "xatol": 1e-7,
+            "fatol": 1e-6,
+        },
+    )
     if math.isfinite(r.fun) and r.fun < 1e299:
         return np.clip(r.x, 0.0, 1.0), -float(r.fun)
     return u, -math.inf
@@ -183,9 +216,9 @@ class _WindowStep:
             if row[d] == 0:
                 u, state = _start_state(self.evaluators[-1], row[:d], lo, width)
             else:
-                u, state = row[:d].copy(), [int(row[d]), float(row[d + 1]), row[d + 2:].copy()]
+                u, state = row[:d].copy(), [int(row[d]), float(row[d + 1]), row[d + 2 :].copy()]
             u, val[i] = _polish(self.evaluators[self.k], u, self.k, last, self.s, lo, width, state)
-            out[i, :d], out[i, d], out[i, d + 1], out[i, d + 2:] = u, state[0], state[1], state[2]
+            out[i, :d], out[i, d], out[i, d + 1], out[i, d + 2 :] = u, state[0], state[1], state[2]
         return Evaluation(loglik=val, ok=np.isfinite(val), extra=out)
 
 
@@ -202,7 +235,7 @@ class _ManyJobs:
     job's own row (padded with nan to the widest)]``, handed to ``jobs[job]`` by :meth:`_one`, which
     returns the row's log-likelihood and ``[simulations spent, the job's result (padded)]``."""
 
-    row_tasks = True        # each row a long search of its own (importance.BalancedMap)
+    row_tasks = True  # each row a long search of its own (importance.BalancedMap)
 
     def __init__(self, jobs):
         self.jobs = jobs
@@ -218,7 +251,7 @@ class _ManyJobs:
         for i, row in enumerate(rows):
             job = self.jobs[int(row[0])]
             ll[i], out = self._one(job, job.s["prior"].ndim, row[1:])
-            extra[i, :out.size] = out
+            extra[i, : out.size] = out
         return Evaluation(loglik=ll, ok=np.isfinite(ll), extra=extra)
 
 
@@ -228,7 +261,7 @@ class _ManyWindowStep(_ManyJobs):
 
     @staticmethod
     def _one(step, d, row):
-        r = step(row[:2 * d + 2][None, :])
+        r = step(row[: 2 * d + 2][None, :])
         return r.loglik[0], np.concatenate([[r.extra[0, d] - row[d]], r.extra[0]])
 
 
@@ -246,14 +279,17 @@ def _halving_searches(evs_list, chosen_list, settings_list, map) -> list[Evaluat
     width = 1 + max(2 * d + 2 for d in dims)
     for k in range(K):
         fn = _ManyWindowStep([_WindowStep(evs, k, st) for evs, st in zip(evs_list, settings_list)])
-        batch = [np.concatenate([[j], r, np.full(width - 1 - r.size, np.nan)])
-                 for j in range(len(rows)) for r in rows[j][alive[j]]]
+        batch = [
+            np.concatenate([[j], r, np.full(width - 1 - r.size, np.nan)])
+            for j in range(len(rows))
+            for r in rows[j][alive[j]]
+        ]
         res = map_evaluate(fn, np.array(batch), map=map, chunk_size=1)
         at = 0
         for j, d in enumerate(dims):
             m = len(alive[j])
-            rows[j][alive[j]] = res.extra[at:at + m, 1:2 * d + 3]
-            val = res.loglik[at:at + m]
+            rows[j][alive[j]] = res.extra[at : at + m, 1 : 2 * d + 3]
+            val = res.loglik[at : at + m]
             at += m
             if k < K - 1 and m > 1:
                 order = np.argsort(-val, kind="stable")
@@ -261,7 +297,7 @@ def _halving_searches(evs_list, chosen_list, settings_list, map) -> list[Evaluat
     out = []
     for r, d in zip(rows, dims):
         ll = r[:, d + 1]
-        out.append(Evaluation(loglik=ll, ok=np.isfinite(ll), extra=np.hstack([r[:, d + 2:], r[:, d:d + 1]])))
+        out.append(Evaluation(loglik=ll, ok=np.isfinite(ll), extra=np.hstack([r[:, d + 2 :], r[:, d : d + 1]])))
     return out
 
 
@@ -270,6 +306,7 @@ class SearchResult:
     """Best point of a continuation search (``theta``, in the prior's parameters ``names``), its
     whole-window log-likelihood (integrated over an extension's integrable parameters, as the
     refit's), the simulations made, the windows (frames) and each start's best log-likelihood."""
+
     names: tuple
     theta: np.ndarray
     loglik: float
@@ -278,9 +315,13 @@ class SearchResult:
     start_logliks: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return {"params": {n: float(v) for n, v in zip(self.names, self.theta)}, "loglik": float(self.loglik),
-                "n_simulations": int(self.n_simulations), "windows": list(self.windows),
-                "start_logliks": [float(v) for v in self.start_logliks]}
+        return {
+            "params": {n: float(v) for n, v in zip(self.names, self.theta)},
+            "loglik": float(self.loglik),
+            "n_simulations": int(self.n_simulations),
+            "windows": list(self.windows),
+            "start_logliks": [float(v) for v in self.start_logliks],
+        }
 
 
 class _ManyContinuer(_ManyJobs):
@@ -294,20 +335,31 @@ class _ManyContinuer(_ManyJobs):
         return r.loglik[0], np.concatenate([[r.extra[0, d]], r.extra[0, :d]])
 
 
-def continuation_search(problem: Problem, extension: str | None = None, *, starts=(), seed: int = 0,
-                        map=map, chunk_size: int = 40, integrate: bool = True, **settings) -> SearchResult:
+def continuation_search(
+    problem: Problem,
+    extension: str | None = None,
+    *,
+    starts=(),
+    seed: int = 0,
+    map=map,
+    chunk_size: int = 40,
+    integrate: bool = True,
+    **settings,
+) -> SearchResult:
     """Window-continuation search (module docstring) for the base model (``extension=None``) or
     the base model plus ``extension`` (its integrable parameters integrated out when
     ``integrate``). ``starts``: further start points (rows in the prior's parameters, e.g. a fit's
     best particle), continued besides the design's ``n_keep`` best. ``settings`` override
     :data:`CONTINUATION`. Deterministic for a given ``seed``; the starts run in parallel through
     ``map``."""
-    return continuation_searches(problem, [(extension, starts, seed)], map=map, chunk_size=chunk_size,
-                                 integrate=integrate, **settings)[0]
+    return continuation_searches(
+        problem, [(extension, starts, seed)], map=map, chunk_size=chunk_size, integrate=integrate, **settings
+    )[0]
 
 
-def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 40, integrate: bool = True,
-                          **settings) -> list[SearchResult]:
+def continuation_searches(
+    problem: Problem, jobs, *, map=map, chunk_size: int = 40, integrate: bool = True, **settings
+) -> list[SearchResult]:
     """:func:`continuation_search` for several models of one recording at once: ``jobs`` is a
     sequence of ``(extension, starts, seed)``. Each job's Sobol design is evaluated in turn, then the
     starts of every job go through ``map`` together, one start a part, so a cluster stays busy while
@@ -317,6 +369,7 @@ def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 
     (``halving=True``) goes window by window, every job's surviving starts together, each job
     dropping its own worse half (:func:`_halving_searches`)."""
     from scipy.stats import qmc
+
     s = {**CONTINUATION, **settings}
     unknown = set(settings) - set(CONTINUATION)
     if unknown:
@@ -327,8 +380,11 @@ def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 
         probs = window_problems(problem, float(s["cycles0"]))
         evs = [model_evaluator(p, extension, integrate) for p in probs]
         d = prior.ndim
-        U = qmc.Sobol(d, scramble=True, seed=int(seed)).random(int(s["n_design"])) if s["n_design"] > 0 else \
-            np.empty((0, d))
+        U = (
+            qmc.Sobol(d, scramble=True, seed=int(seed)).random(int(s["n_design"]))
+            if s["n_design"] > 0
+            else np.empty((0, d))
+        )
         n_sims = 0
         chosen = []
         if len(U):
@@ -343,42 +399,69 @@ def continuation_searches(problem: Problem, jobs, *, map=map, chunk_size: int = 
         plans.append({"prior": prior, "probs": probs, "evs": evs, "chosen": chosen, "n": n_sims, "res": None})
     live = [k for k, pl in enumerate(plans) if pl["chosen"]]
     if live and s["halving"]:
-        got = _halving_searches([plans[k]["evs"] for k in live], [np.array(plans[k]["chosen"]) for k in live],
-                                [{**s, "prior": plans[k]["prior"]} for k in live], map)
+        got = _halving_searches(
+            [plans[k]["evs"] for k in live],
+            [np.array(plans[k]["chosen"]) for k in live],
+            [{**s, "prior": plans[k]["prior"]} for k in live],
+            map,
+        )
         for k, r in zip(live, got):
             plans[k]["res"] = r
     elif live:
         width = 1 + max(plans[k]["prior"].ndim for k in live)
-        rows = [np.concatenate([[pos], u, np.full(width - 1 - u.size, np.nan)])
-                for pos, k in enumerate(live) for u in plans[k]["chosen"]]
+        rows = [
+            np.concatenate([[pos], u, np.full(width - 1 - u.size, np.nan)])
+            for pos, k in enumerate(live)
+            for u in plans[k]["chosen"]
+        ]
         fn = _ManyContinuer([_Continuer(plans[k]["evs"], {**s, "prior": plans[k]["prior"]}) for k in live])
         res = map_evaluate(fn, np.array(rows), map=map, chunk_size=1)
         at = 0
         for k in live:
             pl, m, d = plans[k], len(plans[k]["chosen"]), plans[k]["prior"].ndim
-            ex = res.extra[at:at + m]
-            pl["res"] = Evaluation(loglik=res.loglik[at:at + m], ok=res.ok[at:at + m],
-                                   extra=np.hstack([ex[:, 1:1 + d], ex[:, :1]]))
+            ex = res.extra[at : at + m]
+            pl["res"] = Evaluation(
+                loglik=res.loglik[at : at + m], ok=res.ok[at : at + m], extra=np.hstack([ex[:, 1 : 1 + d], ex[:, :1]])
+            )
             at += m
     out = []
     for pl in plans:
         prior, probs, res = pl["prior"], pl["probs"], pl["res"]
         d = prior.ndim
         if res is None:
-            out.append(SearchResult(tuple(prior.names), np.full(d, np.nan), -math.inf, pl["n"],
-                                    [p.n_compare for p in probs]))
+            out.append(
+                SearchResult(tuple(prior.names), np.full(d, np.nan), -math.inf, pl["n"], [p.n_compare for p in probs])
+            )
             continue
         n_sims = pl["n"] + int(np.nansum(res.extra[:, d]))
         j = int(np.argmax(res.loglik))
         theta = prior.lo + res.extra[j, :d] * prior.width
-        out.append(SearchResult(tuple(prior.names), theta, float(res.loglik[j]), n_sims,
-                                [int(p.obs_gaw.size) for p in probs], [float(v) for v in res.loglik]))
+        out.append(
+            SearchResult(
+                tuple(prior.names),
+                theta,
+                float(res.loglik[j]),
+                n_sims,
+                [int(p.obs_gaw.size) for p in probs],
+                [float(v) for v in res.loglik],
+            )
+        )
     return out
 
 
-def continued_fit(problem: Problem, found: SearchResult, extension: str | None = None, *, n_particles: int,
-                  seed: int, map=map, chunk_size: int = 40, integrate: bool = True, floor: float = 0.002,
-                  **smc_options):
+def continued_fit(
+    problem: Problem,
+    found: SearchResult,
+    extension: str | None = None,
+    *,
+    n_particles: int,
+    seed: int,
+    map=map,
+    chunk_size: int = 40,
+    integrate: bool = True,
+    floor: float = 0.002,
+    **smc_options,
+):
     """SMC fit of the base model (``extension=None``) or of ``extension``, started from a narrow
     Gaussian reference about ``found.theta`` (sd ``floor`` of each prior width, every sampled
     parameter; :class:`vfcore.inference.reference.GaussianReference`), so it estimates the
@@ -391,44 +474,87 @@ def continued_fit(problem: Problem, found: SearchResult, extension: str | None =
     reached -838."""
     from ..inference.smc import smc
     from .fit import fit_extended
+
     ref = _continued_reference(problem, found, extension, integrate, floor, seed)
     if extension is None:
-        post = smc(problem, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, reference=ref,
-                   **smc_options)
+        post = smc(
+            problem, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size, reference=ref, **smc_options
+        )
     else:
-        post = fit_extended(problem, extension, n_particles=n_particles, seed=seed, map=map, chunk_size=chunk_size,
-                            integrate=integrate, reference=ref, **smc_options)
+        post = fit_extended(
+            problem,
+            extension,
+            n_particles=n_particles,
+            seed=seed,
+            map=map,
+            chunk_size=chunk_size,
+            integrate=integrate,
+            reference=ref,
+            **smc_options,
+        )
     post.info["continuation"] = found.to_dict()
     return float(post.log_evidence), float(post.log_evidence_se), post
 
 
-def _continued_reference(problem: Problem, found: SearchResult, extension: str | None, integrate: bool,
-                         floor: float, seed: int):
+def _continued_reference(
+    problem: Problem, found: SearchResult, extension: str | None, integrate: bool, floor: float, seed: int
+):
     """The narrow Gaussian reference of :func:`continued_fit` about the search's optimum."""
     from ..inference.reference import GaussianReference
+
     prior = model_prior(problem, extension, integrate)
     if tuple(found.names) != tuple(prior.names):
         raise ValueError(f"the search was over {found.names}, this model's parameters are {prior.names}")
     if not np.all(np.isfinite(found.theta)):
         raise ValueError("the search found no point with a finite log-likelihood")
-    return GaussianReference(prior, np.asarray(found.theta, dtype=float), np.diag((floor * prior.width) ** 2),
-                             eps=0.1, seed=seed)
+    return GaussianReference(
+        prior, np.asarray(found.theta, dtype=float), np.diag((floor * prior.width) ** 2), eps=0.1, seed=seed
+    )
 
 
-def continued_fits(problem: Problem, jobs, *, n_particles: int, map=map, chunk_size: int = 40,
-                   integrate: bool = True, floor: float = 0.002, **smc_options) -> list[tuple[float, float, object]]:
+def continued_fits(
+    problem: Problem,
+    jobs,
+    *,
+    n_particles: int,
+    map=map,
+    chunk_size: int = 40,
+    integrate: bool = True,
+    floor: float = 0.002,
+    **smc_options,
+) -> list[tuple[float, float, object]]:
     """:func:`continued_fit` of every ``(found, extension, seed)`` of ``jobs`` (entries, not the base model),
     the fits run together (:func:`.together.fit_extended_many`: each as alone, one batch a round), or one
     after another when an SMC option only a whole run takes is given. Returns ``(log Z, se, posterior)``
     per job."""
     from ..inference.smc import WHOLE_RUN_OPTIONS
     from .together import fit_extended_many
+
     if set(smc_options) & set(WHOLE_RUN_OPTIONS):
-        return [continued_fit(problem, f, e, n_particles=n_particles, seed=s, map=map, chunk_size=chunk_size,
-                              integrate=integrate, floor=floor, **smc_options) for f, e, s in jobs]
+        return [
+            continued_fit(
+                problem,
+                f,
+                e,
+                n_particles=n_particles,
+                seed=s,
+                map=map,
+                chunk_size=chunk_size,
+                integrate=integrate,
+                floor=floor,
+                **smc_options,
+            )
+            for f, e, s in jobs
+        ]
     refs = [_continued_reference(problem, f, e, integrate, floor, s) for f, e, s in jobs]
-    posts = fit_extended_many(problem, [(e, n_particles, s, {"reference": r}) for (_, e, s), r in zip(jobs, refs)],
-                              map=map, chunk_size=chunk_size, integrate=integrate, **smc_options)
+    posts = fit_extended_many(
+        problem,
+        [(e, n_particles, s, {"reference": r}) for (_, e, s), r in zip(jobs, refs)],
+        map=map,
+        chunk_size=chunk_size,
+        integrate=integrate,
+        **smc_options,
+    )
     out = []
     for (f, _, _), post in zip(jobs, posts):
         post.info["continuation"] = f.to_dict()

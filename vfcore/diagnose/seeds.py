@@ -6,6 +6,7 @@ whatever the run seed, where seeds made by adding offsets to the run seed collid
 by a multiple of a stride. A child's integer seed is its first 32-bit word, so the samplers, the Sobol designs
 and the regularity check take it as the plain ``int`` seed they already take.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,8 +14,18 @@ import numpy as np
 __all__ = ["STAGES", "spawn_seed", "stage_seed"]
 
 #: The stages with a stream of their own; a stage's key is its position here, so append, never reorder.
-STAGES = ("base", "regularity", "screen", "refit", "rescue", "shared_mode", "mode_check", "mode_check_continued",
-          "nested_check", "continuation")
+STAGES = (
+    "base",
+    "regularity",
+    "screen",
+    "refit",
+    "rescue",
+    "shared_mode",
+    "mode_check",
+    "mode_check_continued",
+    "nested_check",
+    "continuation",
+)
 
 
 def spawn_seed(seed: int, *key: int) -> int:

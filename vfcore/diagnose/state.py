@@ -2,6 +2,7 @@
 results so far (:class:`DiagnosisState`). Every stage is a function ``stage(run, state)`` that reads
 both and adds its results to the state, so what a stage depends on is in its arguments, not in
 variables shared by closures."""
+
 from __future__ import annotations
 
 import math

@@ -1,6 +1,7 @@
 """What a fit says about the recording: its predicted waveforms, its residual and measures, its best
 particles. Every stage of the diagnosis summarises its fits with :func:`fit_summary`, and the report
 carries those summaries."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,15 +35,20 @@ def fit_summary(post: Posterior, obs: np.ndarray, fps: float, sigma_e: float | N
     drops = null_drops(post)
     return {
         "residual_rms": float(np.sqrt(np.mean((y - g.mean(axis=0)) ** 2))),
-        "phase_rms": loc.phase_rms, "dominant_phase": loc.dominant_phase,
+        "phase_rms": loc.phase_rms,
+        "dominant_phase": loc.dominant_phase,
         "concentration": loc.concentration(),
         "pvalues": {k: v.p_two_sided for k, v in pv.items()},
-        "measures": {k: {"observed": v.observed, "predicted": v.pred_mean, "predicted_sd": v.pred_sd}
-                     for k, v in pv.items()},
+        "measures": {
+            k: {"observed": v.observed, "predicted": v.pred_mean, "predicted_sd": v.pred_sd} for k, v in pv.items()
+        },
         "predictive_noise_sd": s_pp,
-        "params": {n: {"mean": float(m), "sd": float(s), **({"null_drop": drops[n]} if n in drops else {})}
-                   for n, m, s in zip(*param_table(post))},
-        "log_evidence": float(post.log_evidence), "log_evidence_se": float(post.log_evidence_se),
+        "params": {
+            n: {"mean": float(m), "sd": float(s), **({"null_drop": drops[n]} if n in drops else {})}
+            for n, m, s in zip(*param_table(post))
+        },
+        "log_evidence": float(post.log_evidence),
+        "log_evidence_se": float(post.log_evidence_se),
         "n_simulations": int(post.n_simulations),
     }
 
@@ -61,4 +67,3 @@ def best_particles(post: Posterior, m: int) -> np.ndarray:
         if len(out) == m:
             break
     return np.array(out)
-

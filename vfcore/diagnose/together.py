@@ -12,6 +12,7 @@ Each fit is the one :func:`.fit.fit_extended` gives alone, bit for bit: an SMC s
 its own seed's (:class:`vfcore.inference.smc.SMCSampler`), and a row's simulation does not depend on
 the rows simulated beside it (``tests/vfcore/test_batch.py``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -61,7 +62,7 @@ class ExtendedPool:
         for k, (b, r) in enumerate(order):
             j, th = batches[b]
             out[k, 0] = j
-            out[k, 1:1 + self.dims[j]] = th[r]
+            out[k, 1 : 1 + self.dims[j]] = th[r]
             where[b].append(k)
         return out, [np.asarray(w, dtype=np.int64) for w in where]
 
@@ -78,7 +79,7 @@ class ExtendedPool:
         for j in np.unique(jobs):
             ev = self.evaluators[j]
             sel = np.flatnonzero(jobs == j)
-            splits, base_params, phis = ev._draws(rows[sel, 1:1 + self.dims[j]])
+            splits, base_params, phis = ev._draws(rows[sel, 1 : 1 + self.dims[j]])
             pairs = bool(ev.integrated)
             r, c, slots = ev._plan(base_params, phis, pairs)
             plans.append((j, sel, splits, phis, slots, len(sim_rows), len(r), pairs))
@@ -89,11 +90,11 @@ class ExtendedPool:
         parts, order = [], []
         for j, sel, splits, phis, slots, at, n, pairs in plans:
             ev = self.evaluators[j]
-            e = ev._score(ev._assemble(sims[at:at + n], slots, phis, pairs), splits)
+            e = ev._score(ev._assemble(sims[at : at + n], slots, phis, pairs), splits)
             if width is not None:
                 x = np.full((len(sel), width), np.nan)
                 if e.extra is not None:
-                    x[:, :e.extra.shape[1]] = e.extra
+                    x[:, : e.extra.shape[1]] = e.extra
                 e = dataclasses.replace(e, extra=x)
             parts.append(e)
             order.append(sel)
@@ -103,23 +104,33 @@ class ExtendedPool:
         return whole.take(inverse)
 
 
-def fit_extended_many(problem: Problem, jobs: Sequence[tuple], *, map: Callable = map,
-                      chunk_size: int = 40, integrate: bool = True,
-                      on_done: Callable[[int, Posterior], None] | None = None, **smc_options) -> list[Posterior]:
+def fit_extended_many(
+    problem: Problem,
+    jobs: Sequence[tuple],
+    *,
+    map: Callable = map,
+    chunk_size: int = 40,
+    integrate: bool = True,
+    on_done: Callable[[int, Posterior], None] | None = None,
+    **smc_options,
+) -> list[Posterior]:
     """The fits :func:`.fit.fit_extended` of ``jobs`` (``(extension, n_particles, seed)`` each, or with a
     fourth item, a dict of that fit's own sampler options such as its ``reference``), run together: at each round the pending batch of every unfinished fit goes to ``map`` as one batch of
     :class:`ExtendedPool` rows. Returns the posteriors in ``jobs`` order, each equal to its fit alone;
     ``on_done(i, posterior)`` is called as fit ``i`` finishes. ``smc_options`` are the sampler's
     (:class:`vfcore.inference.smc.SMCSampler`; ``vfcore.inference.smc.WHOLE_RUN_OPTIONS`` are refused)."""
     from ..inference.smc import SMCSampler, run_together
+
     bad = sorted(set(smc_options) & set(WHOLE_RUN_OPTIONS))
     if bad:
         raise ValueError(f"fits run together take the sampler's options only; not {bad}")
-    smc_options = {k: v for k, v in smc_options.items() if k != "symmetry"}   # no scale group: not a Problem
+    smc_options = {k: v for k, v in smc_options.items() if k != "symmetry"}  # no scale group: not a Problem
     evs = [ExtendedEvaluator(problem, job[0], integrate=integrate) for job in jobs]
     pool = ExtendedPool(evs)
-    samplers = [SMCSampler(ev.prior, int(job[1]), int(job[2]), **{**smc_options, **(job[3] if len(job) > 3 else {})})
-                for ev, job in zip(evs, jobs)]
+    samplers = [
+        SMCSampler(ev.prior, int(job[1]), int(job[2]), **{**smc_options, **(job[3] if len(job) > 3 else {})})
+        for ev, job in zip(evs, jobs)
+    ]
     posts: list = [None] * len(jobs)
 
     def evaluate(pending):
@@ -129,10 +140,11 @@ def fit_extended_many(problem: Problem, jobs: Sequence[tuple], *, map: Callable 
 
     def finish(i: int) -> None:
         post = samplers[i].result()
-        post.area_scale = None                  # what smc() records of a target that is not a Problem
+        post.area_scale = None  # what smc() records of a target that is not a Problem
         post.model = None
         posts[i] = finish_extended(post, problem, evs[i])
         if on_done is not None:
             on_done(i, posts[i])
+
     run_together(samplers, evaluate, finish)
     return posts

@@ -23,6 +23,7 @@ Elements (``ELEMENTS``):
   causes locking, so only the lambda-part is averaged: n_nodes constraints on 2 dofs per node
   instead of one per triangle (~2 per node), which removes the over-constraint.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -78,7 +79,7 @@ class UnitMatrices:
     Dofs are node-interleaved: dof 2*i is x of node i, 2*i + 1 is z.
     """
 
-    K_layers: tuple[sp.csr_matrix, ...]   # one per layer (body, ligament, cover)
+    K_layers: tuple[sp.csr_matrix, ...]  # one per layer (body, ligament, cover)
     D1: sp.csr_matrix
     M1: sp.csr_matrix
     nu: float
@@ -112,7 +113,7 @@ def nodal_volumetric(m: MeshTri, elements: np.ndarray | None = None) -> tuple[sp
     C = sp.csr_matrix(asm(_nodal_div, vec, sca))
     V = asm(_nodal_volume, sca)
     Vsub = V if elements is None else asm(_nodal_volume, Basis(m, ElementTriP1(), elements=elements))
-    return sp.csr_matrix(C.T @ sp.diags(Vsub / V ** 2) @ C), C
+    return sp.csr_matrix(C.T @ sp.diags(Vsub / V**2) @ C), C
 
 
 def assemble_unit(mesh: FoldMesh, nu: float, n_layers: int = 3, element: str = "p1") -> UnitMatrices:

@@ -19,6 +19,7 @@ and the variance of the whole-window statistic is taken as that over ``n_blocks`
 few cycles each, so that cycle-to-cycle variation and measurement noise both enter). The observation's and the
 simulation's variances add. :ref:`validation-continuous-model`.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,7 +33,7 @@ def _autocov(x: np.ndarray, lags: int) -> np.ndarray:
     """Autocovariance of ``x`` (mean removed, divided by the length) at lags 1 .. ``lags``."""
     y = x - x.mean()
     n = y.size
-    return np.array([np.dot(y[:n - k], y[k:]) / n for k in range(1, lags + 1)])
+    return np.array([np.dot(y[: n - k], y[k:]) / n for k in range(1, lags + 1)])
 
 
 def statistics(gaw, n_lags: int, scale: float) -> np.ndarray:
@@ -48,7 +49,7 @@ def block_statistics(gaw, n_lags: int, scale: float, n_blocks: int) -> tuple[np.
     x = np.asarray(gaw, dtype=float)
     whole = statistics(x, n_lags, scale)
     L = x.size // n_blocks
-    per = np.array([statistics(x[b * L:(b + 1) * L], n_lags, scale) for b in range(n_blocks)])
+    per = np.array([statistics(x[b * L : (b + 1) * L], n_lags, scale) for b in range(n_blocks)])
     return whole, per.var(axis=0, ddof=1) / n_blocks
 
 
@@ -62,14 +63,16 @@ class CycleStatsLikelihood:
 
     def __init__(self, obs, fps: float, sigma_e: float, lag_periods: float = 1.5, n_blocks: int = 4):
         from vfcore.cycles import estimate_f0
+
         self.obs = np.asarray(obs, dtype=float)
         f0 = estimate_f0(self.obs, fps)
         if not (f0 is not None and math.isfinite(f0)):
             raise ValueError("observed GAW shows no periodic oscillation (f0 could not be estimated)")
         self.n_lags = max(2, int(math.ceil(lag_periods * fps / f0)))
         if self.obs.size // n_blocks <= self.n_lags + 2:
-            raise ValueError(f"observation of {self.obs.size} frames too short for {n_blocks} blocks of more than "
-                             f"{self.n_lags} lags")
+            raise ValueError(
+                f"observation of {self.obs.size} frames too short for {n_blocks} blocks of more than {self.n_lags} lags"
+            )
         self.scale = max(float(self.obs.std()), 1e-12)
         self.n_blocks = int(n_blocks)
         self.floor = (sigma_e / math.sqrt(self.obs.size)) ** 2

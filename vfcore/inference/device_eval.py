@@ -1,6 +1,7 @@
 """Scoring a Problem's draws with the FE model on a chosen device (:func:`vfcore.batch.simulate_many`'s
 ``device``: "cpu", "cuda" or "auto"): the batch function a sampler or a worker chunk maps, as
 :class:`vfcore.inference.problem.ProblemEvaluator` is on the CPU."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -24,6 +25,7 @@ class DeviceEvaluator:
 
     def __call__(self, thetas) -> Evaluation:
         from vfcore.batch import simulate_many
+
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         results: list = [None] * thetas.shape[0]
         params = []

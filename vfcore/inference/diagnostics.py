@@ -11,6 +11,7 @@ References
   on the log scale by the delta method, ``se(log Z) = sd(L) / (sqrt(N) mean(L))``.
 * Systematic resampling: Kitagawa (1996); Douc, Cappe & Moulines (2005).
 """
+
 from __future__ import annotations
 
 import math
@@ -132,18 +133,23 @@ def weighted_quantiles(x, weights, qs) -> np.ndarray:
     return np.interp(np.asarray(qs, dtype=float), c, x)
 
 
-def degeneracy_warnings(ess_value: float, n: int, k_hat: float, *, ess_min: float = 100.0,
-                        label: str = "importance sampling") -> list[str]:
+def degeneracy_warnings(
+    ess_value: float, n: int, k_hat: float, *, ess_min: float = 100.0, label: str = "importance sampling"
+) -> list[str]:
     """Messages for a degenerate ensemble; each is also emitted as DegenerateEnsembleWarning."""
     msgs = []
     if ess_value < ess_min:
-        msgs.append(f"DEGENERATE ENSEMBLE ({label}): effective sample size {ess_value:.1f} of {n} draws "
-                    f"is below {ess_min:g}; posterior mean/sd are dominated by a few draws and not "
-                    f"trustworthy. Use more draws, a larger sigma_e, or the SMC sampler.")
+        msgs.append(
+            f"DEGENERATE ENSEMBLE ({label}): effective sample size {ess_value:.1f} of {n} draws "
+            f"is below {ess_min:g}; posterior mean/sd are dominated by a few draws and not "
+            f"trustworthy. Use more draws, a larger sigma_e, or the SMC sampler."
+        )
     if math.isfinite(k_hat) and k_hat > PARETO_K_THRESHOLD:
-        msgs.append(f"UNRELIABLE WEIGHTS ({label}): Pareto k = {k_hat:.2f} > {PARETO_K_THRESHOLD} "
-                    f"(Vehtari et al. 2024); the weight distribution is too heavy-tailed for "
-                    f"{n} draws.")
+        msgs.append(
+            f"UNRELIABLE WEIGHTS ({label}): Pareto k = {k_hat:.2f} > {PARETO_K_THRESHOLD} "
+            f"(Vehtari et al. 2024); the weight distribution is too heavy-tailed for "
+            f"{n} draws."
+        )
     for m in msgs:
         warnings.warn(m, DegenerateEnsembleWarning, stacklevel=3)
     return msgs

@@ -1,5 +1,6 @@
 """The per-draw results of a batch of forward evaluations, and how batches combine (concatenated, taken,
 merged row by row). Every batch function of the samplers returns one."""
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -38,8 +39,17 @@ class Evaluation:
     contact_impulse: np.ndarray | None = None
     contact_pressure_in_contact: np.ndarray | None = None
 
-    _ARRAYS = ("loglik", "ok", "gaw", "mean_flow", "mean_contact", "max_contact", "extra",
-               "contact_impulse", "contact_pressure_in_contact")
+    _ARRAYS = (
+        "loglik",
+        "ok",
+        "gaw",
+        "mean_flow",
+        "mean_contact",
+        "max_contact",
+        "extra",
+        "contact_impulse",
+        "contact_pressure_in_contact",
+    )
 
     def __len__(self) -> int:
         return int(self.loglik.shape[0])
@@ -92,8 +102,9 @@ class Evaluation:
     def where(self, mask, other: Evaluation) -> Evaluation:
         """Rows of ``other`` where ``mask`` else rows of ``self`` (same length)."""
         mask = np.asarray(mask, dtype=bool)
-        return self._combine(other, lambda a, b: np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
-                             .astype(a.dtype, copy=False))
+        return self._combine(
+            other, lambda a, b: np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a).astype(a.dtype, copy=False)
+        )
 
     def scatter(self, idx, other: Evaluation) -> Evaluation:
         """Copy of self with rows ``idx`` replaced by the rows of ``other``."""
@@ -103,4 +114,5 @@ class Evaluation:
             a = a.copy()
             a[idx] = b
             return a
+
         return self._combine(other, put)

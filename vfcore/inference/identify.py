@@ -23,6 +23,7 @@ six, or a measurement (``Problem(measurements=...)``).
     their posterior means and sds;
 (d) plain warnings when the common scale is set by the prior's box.
 """
+
 from __future__ import annotations
 
 import math
@@ -40,8 +41,14 @@ from .prior import Prior
 SCALED: tuple[str, ...] = ("E_body", "E_cover", "E_lig", "p_sub", "rho", "eta")
 
 #: Dimensions (kg, m, s) of the scaled parameters: every one carries one power of mass.
-_DIMS = {"E_body": (1, -1, -2), "E_cover": (1, -1, -2), "E_lig": (1, -1, -2), "p_sub": (1, -1, -2),
-         "rho": (1, -3, 0), "eta": (1, -1, -1)}
+_DIMS = {
+    "E_body": (1, -1, -2),
+    "E_cover": (1, -1, -2),
+    "E_lig": (1, -1, -2),
+    "p_sub": (1, -1, -2),
+    "rho": (1, -3, 0),
+    "eta": (1, -1, -1),
+}
 
 #: The posterior sd along the common scale above this fraction of what the prior box allows there
 #: means the box, not the data, sets the scale.
@@ -81,7 +88,7 @@ def _ray_sd(length: float, rate: float) -> float:
     x = rate * length
     if x < 1e-3:
         return length / math.sqrt(12.0)
-    var = 1.0 / rate ** 2 - length ** 2 / (4.0 * math.sinh(0.5 * x) ** 2)
+    var = 1.0 / rate**2 - length**2 / (4.0 * math.sinh(0.5 * x) ** 2)
     return math.sqrt(max(var, 0.0))
 
 
@@ -102,6 +109,7 @@ def _unit(exponents: Mapping[str, float]) -> str:
     def part(sym, e):
         e = int(round(abs(e)))
         return sym if e == 1 else f"{sym}^{e}"
+
     num = [part(sym, e) for sym, e in (("m", m), ("s", s)) if e > 0]
     den = [part(sym, e) for sym, e in (("m", m), ("s", s)) if e < 0]
     if not num and not den:
@@ -113,6 +121,7 @@ def combination_label(exponents: Mapping[str, float]) -> str:
     def part(n, a):
         a = int(round(abs(a)))
         return n if a == 1 else f"{n}^{a}"
+
     num = [part(n, a) for n, a in exponents.items() if a > 0]
     den = [part(n, a) for n, a in exponents.items() if a < 0]
     top = "*".join(num)
@@ -140,32 +149,40 @@ def _wmean_cov(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return m, (d * w[:, None]).T @ d
 
 
-def identify(post, prior: Prior, measurements: Mapping[str, tuple[float, float]] | None = None, *,
-             use: str = "weighted") -> Identifiability:
+def identify(
+    post, prior: Prior, measurements: Mapping[str, tuple[float, float]] | None = None, *, use: str = "weighted"
+) -> Identifiability:
     """The identifiability table of ``post`` (a :class:`~vfcore.inference.posterior.Posterior`) fitted
     under ``prior``; ``measurements`` ``{name: (mean, sd)}`` are those of the problem (they anchor the
     common scale). ``use``: ``"weighted"`` (every draw with its weight) or ``"resampled"`` (the equally
     weighted resampled ensemble)."""
     names, X, w = _draws(post, prior, use)
     measurements = dict(measurements or {})
-    parameters = _parameter_rows(names, X, w, prior)                                  # (a)
+    parameters = _parameter_rows(names, X, w, prior)  # (a)
     lv = _LogView.of(names, X, w, prior)
     free = tuple(n for n in SCALED if n in lv.names)
     v_scale = None
     if len(free) >= 2:
         v_scale = np.array([1.0 / math.sqrt(len(free)) if n in free else 0.0 for n in lv.names])
-    principal = _principal_directions(lv, v_scale)                                   # (b)
+    principal = _principal_directions(lv, v_scale)  # (b)
     anchors = _anchors(names, prior, measurements)
     scale = None
     combinations: list[dict] = []
     warnings: list[str] = []
     if v_scale is not None:
-        scale, piled = _common_scale(lv, w, v_scale, free, names, prior, measurements)   # (c)
+        scale, piled = _common_scale(lv, w, v_scale, free, names, prior, measurements)  # (c)
         if scale["set_by_prior"]:
-            warnings.append(_scale_warning(scale, piled, anchors))                       # (d)
+            warnings.append(_scale_warning(scale, piled, anchors))  # (d)
         combinations = _combinations(lv, w, free)
-    return Identifiability(parameters=parameters, principal=principal, scale=scale, combinations=combinations,
-                           anchors=anchors, warnings=warnings, log_names=list(lv.names))
+    return Identifiability(
+        parameters=parameters,
+        principal=principal,
+        scale=scale,
+        combinations=combinations,
+        anchors=anchors,
+        warnings=warnings,
+        log_names=list(lv.names),
+    )
 
 
 def _draws(post, prior: Prior, use: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
@@ -192,19 +209,27 @@ def _parameter_rows(names, X: np.ndarray, w: np.ndarray, prior: Prior) -> list[d
     mean, cov = _wmean_cov(X, w)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     prior_sd = (prior.hi - prior.lo) / math.sqrt(12.0)
-    return [{"name": n, "unit": PARAM_UNITS[n], "mean": float(mean[i]), "sd": float(sd[i]),
-             "prior_sd": float(prior_sd[i]), "ratio": float(sd[i] / prior_sd[i])}
-            for i, n in enumerate(names)]
+    return [
+        {
+            "name": n,
+            "unit": PARAM_UNITS[n],
+            "mean": float(mean[i]),
+            "sd": float(sd[i]),
+            "prior_sd": float(prior_sd[i]),
+            "ratio": float(sd[i] / prior_sd[i]),
+        }
+        for i, n in enumerate(names)
+    ]
 
 
 @dataclass(frozen=True)
 class _LogView:
     """The draws in log coordinates of the free parameters whose draws are all > 0."""
 
-    cols: list[int]          # their columns in the parameter vector
+    cols: list[int]  # their columns in the parameter vector
     names: list[str]
-    L: np.ndarray            # (n, len(cols)) log draws
-    pvar: np.ndarray         # (len(cols),) prior variance of each log
+    L: np.ndarray  # (n, len(cols)) log draws
+    pvar: np.ndarray  # (len(cols),) prior variance of each log
     mean: np.ndarray
     cov: np.ndarray
 
@@ -231,8 +256,12 @@ def _principal_directions(lv: _LogView, v_scale: np.ndarray | None) -> list[dict
         v = evecs[:, j]
         v = v if v[np.argmax(np.abs(v))] > 0 else -v
         psd, qsd = math.sqrt(max(float(evals[j]), 0.0)), lv.prior_sd_along(v)
-        row = {"sd": psd, "prior_sd": qsd, "ratio": psd / qsd if qsd > 0 else math.nan,
-               "loadings": {n: float(v[i]) for i, n in enumerate(lv.names)}}
+        row = {
+            "sd": psd,
+            "prior_sd": qsd,
+            "ratio": psd / qsd if qsd > 0 else math.nan,
+            "loadings": {n: float(v[i]) for i, n in enumerate(lv.names)},
+        }
         if v_scale is not None:
             row["scale_alignment"] = float(abs(v @ v_scale))
         principal.append(row)
@@ -255,22 +284,24 @@ def _anchors(names, prior: Prior, measurements: Mapping) -> list[str]:
     return anchors
 
 
-def _common_scale(lv: _LogView, w: np.ndarray, v_scale: np.ndarray, free: tuple[str, ...], names,
-                  prior: Prior, measurements: Mapping) -> tuple[dict, bool]:
+def _common_scale(
+    lv: _LogView, w: np.ndarray, v_scale: np.ndarray, free: tuple[str, ...], names, prior: Prior, measurements: Mapping
+) -> tuple[dict, bool]:
     """(c) The posterior along the common scale against the prior and against the box's ray through the
     posterior mean, the mass at the ray's ends, and whether the prior's box sets the scale; and whether the
     posterior piles against an end of the ray."""
     k = len(free)
     idx = [lv.names.index(n) for n in free]
     rate = math.sqrt(k)
-    with np.errstate(divide="ignore"):   # a lower bound of 0 (p_sub) bounds nothing in log
+    with np.errstate(divide="ignore"):  # a lower bound of 0 (p_sub) bounds nothing in log
         llo = np.log(np.array([prior.lo[names.index(n)] for n in free]))
     lhi = np.log(np.array([prior.hi[names.index(n)] for n in free]))
 
-    def ray(x):   # extent along the scale direction of the ray through log point(s) x, in s units
+    def ray(x):  # extent along the scale direction of the ray through log point(s) x, in s units
         d_lo = np.max(llo - x[..., idx], axis=-1)
         d_hi = np.min(lhi - x[..., idx], axis=-1)
         return rate * d_lo, rate * d_hi
+
     s_lo, s_hi = ray(lv.mean)
     ray_len = float(s_hi - s_lo)
     ray_sd = _ray_sd(ray_len, rate)
@@ -286,11 +317,25 @@ def _common_scale(lv: _LogView, w: np.ndarray, v_scale: np.ndarray, free: tuple[
     exact = k == len(SCALED) and not measured
     ray_ratio = post_sd / ray_sd if ray_sd > 0 else math.nan
     set_by_prior = exact or ray_ratio > SCALE_RATIO_WARN or piled
-    return ({"names": list(free), "direction": {n: float(v_scale[i]) for i, n in enumerate(lv.names) if v_scale[i]},
-            "posterior_sd": post_sd, "prior_sd": q_sd, "ratio": post_sd / q_sd if q_sd > 0 else math.nan,
-            "ray_prior_sd": ray_sd, "ray_ratio": ray_ratio, "ray_length": ray_len,
-            "log_c_sd": post_sd / rate, "edge_mass": list(edge), "edge_mass_expected": list(edge_expected),
-            "exact_symmetry": exact, "measured": measured, "set_by_prior": bool(set_by_prior)}, piled)
+    return (
+        {
+            "names": list(free),
+            "direction": {n: float(v_scale[i]) for i, n in enumerate(lv.names) if v_scale[i]},
+            "posterior_sd": post_sd,
+            "prior_sd": q_sd,
+            "ratio": post_sd / q_sd if q_sd > 0 else math.nan,
+            "ray_prior_sd": ray_sd,
+            "ray_ratio": ray_ratio,
+            "ray_length": ray_len,
+            "log_c_sd": post_sd / rate,
+            "edge_mass": list(edge),
+            "edge_mass_expected": list(edge_expected),
+            "exact_symmetry": exact,
+            "measured": measured,
+            "set_by_prior": bool(set_by_prior),
+        },
+        piled,
+    )
 
 
 def _scale_warning(scale: dict, piled: bool, anchors: list[str]) -> str:
@@ -298,28 +343,36 @@ def _scale_warning(scale: dict, piled: bool, anchors: list[str]) -> str:
     :func:`_common_scale`)."""
     free, measured, ray_ratio = scale["names"], scale["measured"], scale["ray_ratio"]
     edge = scale["edge_mass"]
-    how = (f"the posterior sd along it is {ray_ratio:.0%} of what the prior box allows there"
-           + (f", and {max(edge):.0%} of the posterior lies in the outer {EDGE_FRACTION:.0%} of the box "
-              "along it" if piled else "")
-           + "; contact pressure scales with it and flow with its square root")
+    how = (
+        f"the posterior sd along it is {ray_ratio:.0%} of what the prior box allows there"
+        + (
+            f", and {max(edge):.0%} of the posterior lies in the outer {EDGE_FRACTION:.0%} of the box along it"
+            if piled
+            else ""
+        )
+        + "; contact pressure scales with it and flow with its square root"
+    )
     if measured:
         given = "; ".join(a for a in anchors if a.startswith("measured"))
-        subject = (f"the measurements ({given}) narrow" if len(measured) > 1
-                   else f"the measurement ({given}) narrows")
-        return (f"COMMON SCALE: {subject} the common scale of {', '.join(free)} only partly ({how}): absolute "
-                "moduli, p_sub, contact pressure and flow still rest partly on the prior's box along the common "
-                "scale; a tighter measurement, or a second one (--measure rho=MEAN:SD), would anchor them "
-                "(docs/inference.md, 'The common scale')")
+        subject = f"the measurements ({given}) narrow" if len(measured) > 1 else f"the measurement ({given}) narrows"
+        return (
+            f"COMMON SCALE: {subject} the common scale of {', '.join(free)} only partly ({how}): absolute "
+            "moduli, p_sub, contact pressure and flow still rest partly on the prior's box along the common "
+            "scale; a tighter measurement, or a second one (--measure rho=MEAN:SD), would anchor them "
+            "(docs/inference.md, 'The common scale')"
+        )
     if scale["exact_symmetry"]:
         why = "a GAW cannot determine the common scale of E_body, E_cover, E_lig, p_sub, rho and eta"
     elif ray_ratio > SCALE_RATIO_WARN:
-        why = (f"the data barely determine the common scale of {', '.join(free)}"
-               + (f" ({'; '.join(anchors)} anchor{'s' if len(anchors) == 1 else ''} it only weakly)"
-                  if anchors else ""))
+        why = f"the data barely determine the common scale of {', '.join(free)}" + (
+            f" ({'; '.join(anchors)} anchor{'s' if len(anchors) == 1 else ''} it only weakly)" if anchors else ""
+        )
     else:
         why = f"the posterior is pressed against the prior's box along the common scale of {', '.join(free)}"
-    return (f"COMMON SCALE: {why} ({how}): absolute moduli, p_sub, contact pressure and flow are set by the "
-            f"prior's box along the common scale; {ANCHOR_HINT} (docs/inference.md, 'The common scale')")
+    return (
+        f"COMMON SCALE: {why} ({how}): absolute moduli, p_sub, contact pressure and flow are set by the "
+        f"prior's box along the common scale; {ANCHOR_HINT} (docs/inference.md, 'The common scale')"
+    )
 
 
 def _combinations(lv: _LogView, w: np.ndarray, free: tuple[str, ...]) -> list[dict]:
@@ -334,10 +387,20 @@ def _combinations(lv: _LogView, w: np.ndarray, free: tuple[str, ...]) -> list[di
         lsd = float(math.sqrt(max(float(w @ (vals - lm) ** 2), 0.0)))
         qsd = lv.prior_sd_along(a)
         q = weighted_quantiles(vals, w, [0.05, 0.95])
-        combinations.append({"label": combination_label(ex), "exponents": dict(ex), "unit": _unit(ex),
-                             "value": math.exp(lm), "log_mean": lm, "log_sd": lsd, "prior_log_sd": qsd,
-                             "ratio": lsd / qsd if qsd > 0 else math.nan,
-                             "q05": math.exp(float(q[0])), "q95": math.exp(float(q[1]))})
+        combinations.append(
+            {
+                "label": combination_label(ex),
+                "exponents": dict(ex),
+                "unit": _unit(ex),
+                "value": math.exp(lm),
+                "log_mean": lm,
+                "log_sd": lsd,
+                "prior_log_sd": qsd,
+                "ratio": lsd / qsd if qsd > 0 else math.nan,
+                "q05": math.exp(float(q[0])),
+                "q95": math.exp(float(q[1])),
+            }
+        )
     return combinations
 
 
@@ -370,20 +433,42 @@ def at_bounds(post, prior: Prior) -> list[dict]:
     rows = []
     for i, n in enumerate(names):
         edge = BOUND_FRACTION * (hi[i] - lo[i])
-        for side, b, mass in (("lower", lo[i], float(np.sum(w[X[:, i] <= lo[i] + edge]))),
-                              ("upper", hi[i], float(np.sum(w[X[:, i] >= hi[i] - edge])))):
+        for side, b, mass in (
+            ("lower", lo[i], float(np.sum(w[X[:, i] <= lo[i] + edge]))),
+            ("upper", hi[i], float(np.sum(w[X[:, i] >= hi[i] - edge]))),
+        ):
             if mass > BOUND_MASS_WARN:
                 u = PARAM_UNITS[n]
-                rows.append({"name": n, "bound": side, "value": float(b), "mass": mass, "mean": float(mean[i]),
-                             "sd": float(sd[i]), "warning": (
-                                 f"AT PRIOR BOUND: {n} = {mean[i]:.5g} +- {sd[i]:.3g} {u}: {mass:.0%} of the posterior "
-                                 f"lies within {BOUND_FRACTION:.0%} of the prior's {side} bound {b:g} {u} (box "
-                                 f"[{lo[i]:g}, {hi[i]:g}]); the prior, not the data, stops it there, so the "
-                                 "estimate and its sd are not measurements: widen that bound (--prior), or check "
-                                 "the recording against the model's reach (vfinfer reach --check; "
-                                 "docs/inference.md, \"The model's reach\")")})
+                rows.append(
+                    {
+                        "name": n,
+                        "bound": side,
+                        "value": float(b),
+                        "mass": mass,
+                        "mean": float(mean[i]),
+                        "sd": float(sd[i]),
+                        "warning": (
+                            f"AT PRIOR BOUND: {n} = {mean[i]:.5g} +- {sd[i]:.3g} {u}: {mass:.0%} of the posterior "
+                            f"lies within {BOUND_FRACTION:.0%} of the prior's {side} bound {b:g} {u} (box "
+                            f"[{lo[i]:g}, {hi[i]:g}]); the prior, not the data, stops it there, so the "
+                            "estimate and its sd are not measurements: widen that bound (--prior), or check "
+                            "the recording against the model's reach (vfinfer reach --check; "
+                            'docs/inference.md, "The model\'s reach")'
+                        ),
+                    }
+                )
     return rows
 
 
-__all__ = ["SCALED", "BOUND_FRACTION", "BOUND_MASS_WARN", "Identifiability", "at_bounds", "identify", "format_identifiability", "scale_invariant_combinations", "combination_label",
-           "uniform_log_moments"]
+__all__ = [
+    "SCALED",
+    "BOUND_FRACTION",
+    "BOUND_MASS_WARN",
+    "Identifiability",
+    "at_bounds",
+    "identify",
+    "format_identifiability",
+    "scale_invariant_combinations",
+    "combination_label",
+    "uniform_log_moments",
+]

@@ -8,6 +8,7 @@ directly; a systematic resample gives an equally weighted ensemble for predictiv
 The pieces are pure so a distributed worker can run them chunk by chunk:
 ``draw_prior`` -> ``chunks`` -> ``evaluate`` (per chunk) -> ``reduce_importance``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
@@ -40,7 +41,7 @@ def draw_prior(prior: Prior, n: int, seed: int) -> np.ndarray:
 def chunks(thetas: np.ndarray, chunk_size: int) -> list[np.ndarray]:
     """Split rows of ``thetas`` into consecutive chunks of at most ``chunk_size`` rows."""
     chunk_size = max(1, int(chunk_size))
-    return [thetas[i:i + chunk_size] for i in range(0, thetas.shape[0], chunk_size)]
+    return [thetas[i : i + chunk_size] for i in range(0, thetas.shape[0], chunk_size)]
 
 
 def batch_function(target) -> Callable:
@@ -118,9 +119,18 @@ def map_evaluate(fn: Callable, thetas: np.ndarray, map: Callable = map, chunk_si
     return ev
 
 
-def reduce_importance(thetas, logliks, names: Iterable[str], seed: int, *, n_resample: int | None = None,
-                      ess_min: float = 100.0, n_simulations: int | None = None,
-                      obs_gaw=None, fps: float | None = None) -> Posterior:
+def reduce_importance(
+    thetas,
+    logliks,
+    names: Iterable[str],
+    seed: int,
+    *,
+    n_resample: int | None = None,
+    ess_min: float = 100.0,
+    n_simulations: int | None = None,
+    obs_gaw=None,
+    fps: float | None = None,
+) -> Posterior:
     """Turn prior draws and their log-likelihoods (array or Evaluation) into a Posterior.
 
     ``seed`` must be the run seed (the resampling stream is its second SeedSequence child).
@@ -132,11 +142,21 @@ def reduce_importance(thetas, logliks, names: Iterable[str], seed: int, *, n_res
         raise ValueError(f"{thetas.shape[0]} draws but {len(ev)} log-likelihoods")
     logz, logz_se = log_evidence_is(ev.loglik)
     rng = np.random.default_rng(seed_children(seed)[_RESAMPLE])
-    post = Posterior.from_weighted(tuple(names), thetas, ev.loglik, rng=rng, n_resample=n_resample,
-                                   log_evidence=logz, log_evidence_se=logz_se,
-                                   n_simulations=thetas.shape[0] if n_simulations is None else n_simulations,
-                                   n_failed=ev.n_failed, method="importance", ess_min=ess_min,
-                                   obs_gaw=obs_gaw, fps=fps)
+    post = Posterior.from_weighted(
+        tuple(names),
+        thetas,
+        ev.loglik,
+        rng=rng,
+        n_resample=n_resample,
+        log_evidence=logz,
+        log_evidence_se=logz_se,
+        n_simulations=thetas.shape[0] if n_simulations is None else n_simulations,
+        n_failed=ev.n_failed,
+        method="importance",
+        ess_min=ess_min,
+        obs_gaw=obs_gaw,
+        fps=fps,
+    )
     if ev.gaw is not None:
         keep = np.unique(post.resampled)
         post.predictive = ev.take(keep)
@@ -147,9 +167,17 @@ def reduce_importance(thetas, logliks, names: Iterable[str], seed: int, *, n_res
     return post
 
 
-def importance_sample(target, prior: Prior | None = None, n: int = DEFAULT_DRAWS, seed: int = 0, *,
-                      map: Callable = map, chunk_size: int = 256, n_resample: int | None = None,
-                      ess_min: float = 100.0) -> Posterior:
+def importance_sample(
+    target,
+    prior: Prior | None = None,
+    n: int = DEFAULT_DRAWS,
+    seed: int = 0,
+    *,
+    map: Callable = map,
+    chunk_size: int = 256,
+    n_resample: int | None = None,
+    ess_min: float = 100.0,
+) -> Posterior:
     """Prior-as-proposal importance sampling.
 
     ``target``: a ``Problem`` (FE forward model) or a callable ``thetas (k, d) -> loglik (k,)``
@@ -159,9 +187,9 @@ def importance_sample(target, prior: Prior | None = None, n: int = DEFAULT_DRAWS
     prior, obs, fps, fn = resolve_target(target, prior)
     thetas = draw_prior(prior, n, seed)
     ev = map_evaluate(fn, thetas, map=map, chunk_size=chunk_size)
-    post = reduce_importance(thetas, ev, prior.names, seed, n_resample=n_resample, ess_min=ess_min,
-                             obs_gaw=obs, fps=fps)
+    post = reduce_importance(
+        thetas, ev, prior.names, seed, n_resample=n_resample, ess_min=ess_min, obs_gaw=obs, fps=fps
+    )
     post.info["n_draws"] = int(n)
     post.model = model_record(target)
     return post
-

@@ -9,6 +9,7 @@
 
 All in log space; a non-finite residual gives ``-inf``.
 """
+
 from __future__ import annotations
 
 import math
@@ -63,20 +64,32 @@ def log_marginal_rss(R: float, n: int, sigma_lo: float, sigma_hi: float) -> floa
     """:func:`marginal_gaussian_loglik` from the residual sum of squares ``R`` of ``n`` frames:
     ``log ∫ (2 pi s^2)^(-n/2) exp(-R / (2 s^2)) p(s) ds`` with ``p`` log-uniform on the bounds."""
     from scipy.special import gammainc, gammaincc, gammaln
+
     a = 0.5 * n
     log_norm = math.log(math.log(sigma_hi / sigma_lo))
-    if R == 0.0:                     # the integral of s^(-n-1) alone
-        return float(-a * math.log(2 * math.pi) - math.log(n) - n * math.log(sigma_lo)
-                     + math.log1p(-(sigma_lo / sigma_hi) ** n) - log_norm)
-    x_hi, x_lo = R / (2.0 * sigma_lo ** 2), R / (2.0 * sigma_hi ** 2)
+    if R == 0.0:  # the integral of s^(-n-1) alone
+        return float(
+            -a * math.log(2 * math.pi)
+            - math.log(n)
+            - n * math.log(sigma_lo)
+            + math.log1p(-((sigma_lo / sigma_hi) ** n))
+            - log_norm
+        )
+    x_hi, x_lo = R / (2.0 * sigma_lo**2), R / (2.0 * sigma_hi**2)
     if x_hi < a:
         # the fit is closer than sigma_lo: P(a, x) underflows, take its series in logs; the
         # -a log(pi R) of the general form cancels against P's x^a, leaving -a log(2 pi sigma_lo^2)
         lp_hi = _log_p_lower_series(a, x_hi) - a * math.log(x_hi)
         lp_lo = _log_p_lower_series(a, x_lo) - a * math.log(x_lo)
         ratio = math.exp(lp_lo - lp_hi + a * math.log(x_lo / x_hi))
-        return float(-a * math.log(2 * math.pi * sigma_lo ** 2) + gammaln(a) - math.log(2.0) - log_norm
-                     + lp_hi + math.log1p(-ratio))
+        return float(
+            -a * math.log(2 * math.pi * sigma_lo**2)
+            + gammaln(a)
+            - math.log(2.0)
+            - log_norm
+            + lp_hi
+            + math.log1p(-ratio)
+        )
     # P(a, x_hi) - P(a, x_lo), from whichever tail keeps its digits
     mass = gammaincc(a, x_lo) - gammaincc(a, x_hi) if x_lo >= a else gammainc(a, x_hi) - gammainc(a, x_lo)
     if not mass > 0.0:
@@ -88,6 +101,7 @@ def _log_p_lower_series(a: float, x: float) -> float:
     """``log P(a, x)`` for ``0 < x < a`` from ``P = x^a e^-x / Gamma(a+1) sum_k x^k / ((a+1)..(a+k))``
     (Abramowitz & Stegun 6.5.29), which converges geometrically there."""
     from scipy.special import gammaln
+
     term = total = 1.0
     k = 0
     while term > 1e-17 * total and k < 100000:
@@ -116,7 +130,8 @@ def best_area_scale(sim, obs) -> tuple[float, float, float] | None:
 def _log_phi_diff(a: float, b: float) -> float:
     """``log(Phi(b) - Phi(a))`` for ``a <= b``, accurate in either tail (``Phi`` the standard normal CDF)."""
     from scipy.special import log_ndtr
-    if a > 0.0:                       # both in the upper tail: reflect into the lower one
+
+    if a > 0.0:  # both in the upper tail: reflect into the lower one
         a, b = -b, -a
     lb, la = float(log_ndtr(b)), float(log_ndtr(a))
     if not la < lb:
@@ -143,8 +158,13 @@ def scaled_gaussian_loglik(sim, obs, sigma: float, k_lo: float, k_hi: float) -> 
         return gaussian_loglik(sim, obs, sigma)
     n = np.size(obs)
     t = math.sqrt(S) / sigma
-    return float(-0.5 * R / sigma ** 2 - (n - 1) * (math.log(sigma) + 0.5 * math.log(2 * math.pi))
-                 - 0.5 * math.log(S) - math.log(k_hi - k_lo) + _log_phi_diff((k_lo - k) * t, (k_hi - k) * t))
+    return float(
+        -0.5 * R / sigma**2
+        - (n - 1) * (math.log(sigma) + 0.5 * math.log(2 * math.pi))
+        - 0.5 * math.log(S)
+        - math.log(k_hi - k_lo)
+        + _log_phi_diff((k_lo - k) * t, (k_hi - k) * t)
+    )
 
 
 def scaled_marginal_gaussian_loglik(sim, obs, sigma_lo: float, sigma_hi: float, k_lo: float, k_hi: float) -> float:
@@ -172,12 +192,17 @@ def scaled_marginal_gaussian_loglik(sim, obs, sigma_lo: float, sigma_hi: float, 
     base = log_marginal_rss(R, n - 1, sigma_lo, sigma_hi)
     if base == -math.inf:
         return base
-    return float(base - 0.5 * math.log(S) - math.log(k_hi - k_lo)
-                 + _log_mean_box_share(k, S, R, n - 1, sigma_lo, sigma_hi, k_lo, k_hi))
+    return float(
+        base
+        - 0.5 * math.log(S)
+        - math.log(k_hi - k_lo)
+        + _log_mean_box_share(k, S, R, n - 1, sigma_lo, sigma_hi, k_lo, k_hi)
+    )
 
 
-def _log_mean_box_share(k: float, S: float, R: float, nu: int, sigma_lo: float, sigma_hi: float,
-                        k_lo: float, k_hi: float) -> float:
+def _log_mean_box_share(
+    k: float, S: float, R: float, nu: int, sigma_lo: float, sigma_hi: float, k_lo: float, k_hi: float
+) -> float:
     """``log E[D(s)]`` of :func:`scaled_marginal_gaussian_loglik`, ``u = R / (2 s^2)`` ~ Gamma(nu / 2, 1)
     truncated to ``[R / (2 sigma_hi^2), R / (2 sigma_lo^2)]``.
 
@@ -190,16 +215,20 @@ def _log_mean_box_share(k: float, S: float, R: float, nu: int, sigma_lo: float, 
     ``1 - E_full <= 1e-12 (1 - m)`` (then ``1 - E_trunc <= 1e-12``); otherwise ``E[D]`` is integrated
     numerically in ``log u`` over the truncated range (adaptive quadrature of the log-scaled integrand)."""
     from scipy.special import gammainc, gammaincc, stdtr
-    if R == 0.0:                    # a perfect fit at k_hat: the weight s^-(nu+1) piles at sigma_lo (approximate)
+
+    if R == 0.0:  # a perfect fit at k_hat: the weight s^-(nu+1) piles at sigma_lo (approximate)
         t = math.sqrt(S) / sigma_lo
         return _log_phi_diff((k_lo - k) * t, (k_hi - k) * t)
     a = 0.5 * nu
-    x_lo, x_hi = R / (2.0 * sigma_hi ** 2), R / (2.0 * sigma_lo ** 2)
+    x_lo, x_hi = R / (2.0 * sigma_hi**2), R / (2.0 * sigma_lo**2)
     m = float(gammainc(a, x_lo) + gammaincc(a, x_hi))
     scale = math.sqrt(R / (nu * S))
     t_lo, t_hi = (k_lo - k) / scale, (k_hi - k) / scale
-    full = float(stdtr(nu, t_hi) - stdtr(nu, t_lo)) if t_hi <= 0 or t_lo <= 0 else \
-        float(stdtr(nu, -t_lo) - stdtr(nu, -t_hi))
+    full = (
+        float(stdtr(nu, t_hi) - stdtr(nu, t_lo))
+        if t_hi <= 0 or t_lo <= 0
+        else float(stdtr(nu, -t_lo) - stdtr(nu, -t_hi))
+    )
     outside = float(stdtr(nu, t_lo) + stdtr(nu, -t_hi))
     if (m <= 1e-14 and full >= 1e-3) or (k_lo < k < k_hi and outside <= 1e-12 * (1.0 - m)):
         return math.log(full) if full < 1.0 else 0.0
@@ -210,9 +239,9 @@ def _log_mean_box_share_quad(k, S, R, a, x_lo, x_hi, k_lo, k_hi) -> float:
     from scipy.integrate import quad
     from scipy.special import gammaln
 
-    c = math.sqrt(2.0 * S / R)       # z_bound = (k_bound - k_hat) c sqrt(u)
+    c = math.sqrt(2.0 * S / R)  # z_bound = (k_bound - k_hat) c sqrt(u)
 
-    def log_g(t):                    # log Gamma(a) density of u = e^t, times du/dt
+    def log_g(t):  # log Gamma(a) density of u = e^t, times du/dt
         return a * t - math.exp(t) - float(gammaln(a))
 
     def log_d(t):
@@ -233,14 +262,21 @@ def _log_mean_box_share_quad(k, S, R, a, x_lo, x_hi, k_lo, k_hi) -> float:
         hi = grid[min(int(keep[-1]) + 1, grid.size - 1)]
         peak = float(grid[int(np.argmax(h))])
         f = (lambda t: math.exp(log_g(t) + log_d(t) - top)) if with_d else (lambda t: math.exp(log_g(t) - top))
-        val, _ = quad(f, lo, hi, points=[peak] if lo < peak < hi else None, epsabs=0.0, epsrel=1e-13,
-                      limit=400)
+        val, _ = quad(f, lo, hi, points=[peak] if lo < peak < hi else None, epsabs=0.0, epsrel=1e-13, limit=400)
         out.append(top + math.log(val) if val > 0 else -math.inf)
     return min(out[0] - out[1], 0.0)
 
 
-def sample_area_scale(sim, obs, rng: np.random.Generator, k_bounds, *, sigma: float | None = None,
-                      sigma_bounds=None, max_tries: int = 1000) -> float:
+def sample_area_scale(
+    sim,
+    obs,
+    rng: np.random.Generator,
+    k_bounds,
+    *,
+    sigma: float | None = None,
+    sigma_bounds=None,
+    max_tries: int = 1000,
+) -> float:
     """One draw of the area scale ``k`` from its posterior given one draw's aligned segment ``sim``.
 
     Fixed noise (``sigma``): ``k`` is the Gaussian ``N(k_hat, sigma^2 / S)`` truncated to ``k_bounds``.
@@ -251,12 +287,13 @@ def sample_area_scale(sim, obs, rng: np.random.Generator, k_bounds, *, sigma: fl
     ``nan`` when the segment is not finite."""
     from scipy.special import gammainc, gammaincinv
     from scipy.stats import truncnorm
+
     k_lo, k_hi = (float(b) for b in k_bounds)
     fit = best_area_scale(sim, obs)
     if fit is None:
         return math.nan
     k, S, R = fit
-    if S == 0.0:                     # k has no effect: its prior
+    if S == 0.0:  # k has no effect: its prior
         return float(rng.uniform(k_lo, k_hi))
     if sigma is None:
         s_lo, s_hi = (float(b) for b in sigma_bounds)
@@ -264,9 +301,9 @@ def sample_area_scale(sim, obs, rng: np.random.Generator, k_bounds, *, sigma: fl
         if R == 0.0:
             s = s_lo
         else:
-            p_lo, p_hi = float(gammainc(a, R / (2 * s_hi ** 2))), float(gammainc(a, R / (2 * s_lo ** 2)))
+            p_lo, p_hi = float(gammainc(a, R / (2 * s_hi**2))), float(gammainc(a, R / (2 * s_lo**2)))
             for _ in range(max_tries):
-                u = float(gammaincinv(a, rng.uniform(p_lo, p_hi))) if p_hi > p_lo else R / (2 * s_hi ** 2)
+                u = float(gammaincinv(a, rng.uniform(p_lo, p_hi))) if p_hi > p_lo else R / (2 * s_hi**2)
                 s = math.sqrt(R / (2.0 * max(u, 1e-300)))
                 t = math.sqrt(S) / s
                 if math.log(rng.uniform()) < _log_phi_diff((k_lo - k) * t, (k_hi - k) * t):

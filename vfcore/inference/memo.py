@@ -27,6 +27,7 @@ at most every ``NOTE_EVERY_S`` seconds and always after a call's last part), so 
 its last noted part (at most ``NOTE_EVERY_S`` before its last stored one): the part it was
 computing when it died, whose result was lost, is not.
 """
+
 from __future__ import annotations
 
 import functools
@@ -51,6 +52,7 @@ def code_fingerprint() -> str:
     after an upgrade nothing from the old code is read back."""
     import platform
     import sys
+
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
     for f in sorted(root.rglob("*.py")):
@@ -76,6 +78,7 @@ def _fn_digest(fn) -> bytes | None:
 
 def _cloud_dumps(obj) -> bytes:
     import cloudpickle
+
     return cloudpickle.dumps(obj)
 
 
@@ -134,14 +137,16 @@ class CachedMap:
         self.earlier_wall_s = float(sum(earlier))
         self._t0 = self._noted = time.perf_counter()
         self._started = time.time()
-        self._attempt = runs / f"{time.strftime('%Y%m%dT%H%M%S', time.gmtime(self._started))}-{uuid.uuid4().hex[:8]}.json"
+        self._attempt = (
+            runs / f"{time.strftime('%Y%m%dT%H%M%S', time.gmtime(self._started))}-{uuid.uuid4().hex[:8]}.json"
+        )
         self._note_attempt()
 
     @staticmethod
     def _read_attempt(path: Path) -> float:
         try:
             return max(0.0, float(json.loads(path.read_text())["elapsed_s"]))
-        except (OSError, ValueError, KeyError, TypeError):   # unreadable record: counted as 0 s
+        except (OSError, ValueError, KeyError, TypeError):  # unreadable record: counted as 0 s
             return 0.0
 
     def _note_attempt(self, force: bool = True) -> None:
@@ -155,8 +160,13 @@ class CachedMap:
     def resume_summary(self) -> dict:
         """What the store contributed to this run: parts read back, simulated and uncached, the
         attempts before this one and their wall time (each up to its last stored part)."""
-        return {"parts_read": self.hits, "parts_simulated": self.misses, "parts_uncached": self.uncached,
-                "earlier_attempts": self.earlier_attempts, "earlier_wall_s": self.earlier_wall_s}
+        return {
+            "parts_read": self.hits,
+            "parts_simulated": self.misses,
+            "parts_uncached": self.uncached,
+            "earlier_attempts": self.earlier_attempts,
+            "earlier_wall_s": self.earlier_wall_s,
+        }
 
     def _path(self, key: str) -> Path:
         return self.root / key[:2] / f"{key}.pkl"
@@ -202,8 +212,10 @@ class CachedMap:
                 self._stored += 1
                 self._note_attempt(force=n == len(todo))
             if n != len(todo):
-                raise RuntimeError(f"the inner map returned {n} results for {len(todo)} parts; "
-                                   "CachedMap needs a map that gives one result per part")
+                raise RuntimeError(
+                    f"the inner map returned {n} results for {len(todo)} parts; "
+                    "CachedMap needs a map that gives one result per part"
+                )
         return out
 
 

@@ -21,13 +21,22 @@ those) and the second accepts with :func:`delayed_log_acceptance`,
 ``pi_phi`` exactly. The order of the floating-point operations here is the sampler's contract: a run is
 reproducible bit for bit from its seed.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import solve_triangular
 
-__all__ = ["COORDS", "Independence", "RandomWalk", "check_moves", "delayed_log_acceptance", "log_acceptance",
-           "moves_for", "walk_cholesky"]
+__all__ = [
+    "COORDS",
+    "Independence",
+    "RandomWalk",
+    "check_moves",
+    "delayed_log_acceptance",
+    "log_acceptance",
+    "moves_for",
+    "walk_cholesky",
+]
 
 #: Coordinates of the random walk: the parameters themselves, or their logarithms.
 COORDS = ("linear", "log")
@@ -41,8 +50,7 @@ class RandomWalk:
     def __init__(self, coords: str = "linear"):
         self.coords = coords
 
-    def propose(self, theta: np.ndarray, z: np.ndarray, scale: float, chol: np.ndarray,
-                mu: np.ndarray) -> np.ndarray:
+    def propose(self, theta: np.ndarray, z: np.ndarray, scale: float, chol: np.ndarray, mu: np.ndarray) -> np.ndarray:
         """Proposals (n, d) from the particles ``theta`` (n, d) and standard normal draws ``z`` (n, d)."""
         if self.coords == "log":
             return np.exp(np.log(theta) + scale * z @ chol.T)
@@ -63,8 +71,7 @@ class Independence:
     def __init__(self, inflation: float):
         self.inflation = float(inflation)
 
-    def propose(self, theta: np.ndarray, z: np.ndarray, scale: float, chol: np.ndarray,
-                mu: np.ndarray) -> np.ndarray:
+    def propose(self, theta: np.ndarray, z: np.ndarray, scale: float, chol: np.ndarray, mu: np.ndarray) -> np.ndarray:
         return mu + self.inflation * z @ chol.T
 
     def log_jacobian(self, new: np.ndarray, old: np.ndarray) -> None:
@@ -104,8 +111,9 @@ def moves_for(kernel: str, coords: str, inflation: float) -> tuple:
     return {"rw": (rw, rw), "independent": (ind, ind), "mixture": (rw, ind)}[kernel]
 
 
-def walk_cholesky(x: np.ndarray, w: np.ndarray, direction: np.ndarray | None,
-                  span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def walk_cholesky(
+    x: np.ndarray, w: np.ndarray, direction: np.ndarray | None, span: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean (d,) and Cholesky factor (d, d) of the particles ``x`` (n, d) with weights ``w`` (n,),
     in the walk's coordinates; the covariance is projected off the unit vector ``direction`` (a symmetry's
     orbit, sampled by group moves instead) and regularised by ``(1e-9 span)^2`` on its diagonal."""
@@ -123,8 +131,9 @@ def walk_cholesky(x: np.ndarray, w: np.ndarray, direction: np.ndarray | None,
     return mu, chol
 
 
-def log_acceptance(phi: float, ll_new: np.ndarray, ll_old: np.ndarray, *, reference=None, log_q=None,
-                   log_jac=None) -> np.ndarray:
+def log_acceptance(
+    phi: float, ll_new: np.ndarray, ll_old: np.ndarray, *, reference=None, log_q=None, log_jac=None
+) -> np.ndarray:
     """Log Metropolis ratio (k,) of proposals with log-likelihoods ``ll_new`` against ``ll_old`` at
     temperature ``phi``; a failed proposal (non-finite) is refused, a finite one from a failed particle taken.
 
@@ -138,11 +147,12 @@ def log_acceptance(phi: float, ll_new: np.ndarray, ll_old: np.ndarray, *, refere
             log_alpha = log_alpha + log_q[0] - log_q[1]
         if log_jac is not None:
             log_alpha = log_alpha + log_jac
-    return np.where(np.isnan(log_alpha), np.inf, log_alpha)   # old -inf, new finite
+    return np.where(np.isnan(log_alpha), np.inf, log_alpha)  # old -inf, new finite
 
 
-def delayed_log_acceptance(phi: float, ll_new: np.ndarray, ll_old: np.ndarray, lc_new: np.ndarray,
-                           lc_old: np.ndarray) -> np.ndarray:
+def delayed_log_acceptance(
+    phi: float, ll_new: np.ndarray, ll_old: np.ndarray, lc_new: np.ndarray, lc_old: np.ndarray
+) -> np.ndarray:
     """Log ratio (k,) of delayed acceptance's second stage: the full model's ratio corrected by the cheap
     one (``lc_new``, ``lc_old``) that screened the proposals."""
     with np.errstate(invalid="ignore"):

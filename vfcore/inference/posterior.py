@@ -5,6 +5,7 @@ estimate" is ``100 sd / |mean|`` as in Hadwin et al. (2019), Tables 3-5. Quantil
 from the weighted empirical CDF. The resampled ensemble (systematic resampling) is what
 posterior-predictive products and t-tests use.
 """
+
 from __future__ import annotations
 
 import csv
@@ -68,10 +69,23 @@ class Posterior:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_weighted(cls, names, samples, log_weights, *, rng: np.random.Generator, n_resample: int | None = None,
-                      log_evidence: float = math.nan, log_evidence_se: float = math.nan,
-                      n_simulations: int = 0, n_failed: int = 0, method: str = "importance",
-                      ess_min: float = 100.0, check: bool = True, **kw) -> Posterior:
+    def from_weighted(
+        cls,
+        names,
+        samples,
+        log_weights,
+        *,
+        rng: np.random.Generator,
+        n_resample: int | None = None,
+        log_evidence: float = math.nan,
+        log_evidence_se: float = math.nan,
+        n_simulations: int = 0,
+        n_failed: int = 0,
+        method: str = "importance",
+        ess_min: float = 100.0,
+        check: bool = True,
+        **kw,
+    ) -> Posterior:
         samples = np.atleast_2d(np.asarray(samples, dtype=float))
         lw = normalize_log_weights(log_weights)
         if samples.shape != (lw.size, len(names)):
@@ -84,10 +98,21 @@ class Posterior:
         msgs = list(kw.pop("warnings", []))
         if check:
             msgs += degeneracy_warnings(e, lw.size, k, ess_min=ess_min, label=method)
-        return cls(names=tuple(names), samples=samples, log_weights=lw, resampled=res, ess=e, pareto_k=k,
-                   log_evidence=float(log_evidence), log_evidence_se=float(log_evidence_se),
-                   n_simulations=int(n_simulations), n_failed=int(n_failed), method=method,
-                   warnings=msgs, **kw)
+        return cls(
+            names=tuple(names),
+            samples=samples,
+            log_weights=lw,
+            resampled=res,
+            ess=e,
+            pareto_k=k,
+            log_evidence=float(log_evidence),
+            log_evidence_se=float(log_evidence_se),
+            n_simulations=int(n_simulations),
+            n_failed=int(n_failed),
+            method=method,
+            warnings=msgs,
+            **kw,
+        )
 
     # ------------------------------------------------------------------ moments
     @property
@@ -120,8 +145,7 @@ class Posterior:
     def quantile(self, q) -> np.ndarray:
         """Weighted quantiles, shape (len(q), d) (or (d,) for scalar q)."""
         w = self.weights
-        out = np.stack([weighted_quantiles(self.samples[:, j], w, np.atleast_1d(q)) for j in range(self.ndim)],
-                       axis=-1)
+        out = np.stack([weighted_quantiles(self.samples[:, j], w, np.atleast_1d(q)) for j in range(self.ndim)], axis=-1)
         return out[0] if np.ndim(q) == 0 else out
 
     @property
@@ -179,26 +203,49 @@ class Posterior:
         """One row per parameter: mean, sd, % of estimate, 5/50/95% quantiles (paper units)."""
         q = self.quantile([0.05, 0.5, 0.95])
         mean, sd, pct = self.mean, self.sd, self.pct
-        return [{"name": n, "unit": PARAM_UNITS.get(n, ""), "mean": float(mean[i]), "sd": float(sd[i]),
-                 "pct": float(pct[i]), "q05": float(q[0, i]), "q50": float(q[1, i]), "q95": float(q[2, i])}
-                for i, n in enumerate(self.names)]
+        return [
+            {
+                "name": n,
+                "unit": PARAM_UNITS.get(n, ""),
+                "mean": float(mean[i]),
+                "sd": float(sd[i]),
+                "pct": float(pct[i]),
+                "q05": float(q[0, i]),
+                "q50": float(q[1, i]),
+                "q95": float(q[2, i]),
+            }
+            for i, n in enumerate(self.names)
+        ]
 
     def format_summary(self) -> str:
         lines = [f"{'parameter':<9} {'unit':<7} {'mean':>11} {'sd':>10} {'%':>6} {'q05':>11} {'q95':>11}"]
         for r in self.summary_table():
-            lines.append(f"{r['name']:<9} {r['unit']:<7} {r['mean']:11.5g} {r['sd']:10.4g} {r['pct']:6.2f} "
-                         f"{r['q05']:11.5g} {r['q95']:11.5g}")
-        lines.append(f"method={self.method} N={self.samples.shape[0]} ESS={self.ess:.1f} "
-                     f"pareto_k={self.pareto_k:.2f} log_evidence={self.log_evidence:.3f}+-"
-                     f"{self.log_evidence_se:.3f} n_simulations={self.n_simulations} n_failed={self.n_failed}")
+            lines.append(
+                f"{r['name']:<9} {r['unit']:<7} {r['mean']:11.5g} {r['sd']:10.4g} {r['pct']:6.2f} "
+                f"{r['q05']:11.5g} {r['q95']:11.5g}"
+            )
+        lines.append(
+            f"method={self.method} N={self.samples.shape[0]} ESS={self.ess:.1f} "
+            f"pareto_k={self.pareto_k:.2f} log_evidence={self.log_evidence:.3f}+-"
+            f"{self.log_evidence_se:.3f} n_simulations={self.n_simulations} n_failed={self.n_failed}"
+        )
         lines += [f"WARNING: {w}" for w in self.warnings]
         return "\n".join(lines)
 
     def _meta(self) -> dict:
-        return {"names": list(self.names), "method": self.method, "ess": self.ess, "pareto_k": self.pareto_k,
-                "log_evidence": self.log_evidence, "log_evidence_se": self.log_evidence_se,
-                "n_simulations": self.n_simulations, "n_failed": self.n_failed, "warnings": list(self.warnings),
-                "fps": self.fps, "model": self.model}
+        return {
+            "names": list(self.names),
+            "method": self.method,
+            "ess": self.ess,
+            "pareto_k": self.pareto_k,
+            "log_evidence": self.log_evidence,
+            "log_evidence_se": self.log_evidence_se,
+            "n_simulations": self.n_simulations,
+            "n_failed": self.n_failed,
+            "warnings": list(self.warnings),
+            "fps": self.fps,
+            "model": self.model,
+        }
 
     # ------------------------------------------------------------------ ArviZ / NetCDF
     def to_inference_data(self):
@@ -215,8 +262,7 @@ class Posterior:
         res = self.resampled
         post = {n: (("chain", "draw"), self.samples[res, j][None, :]) for j, n in enumerate(self.names)}
         post["sample_index"] = (("chain", "draw"), res[None, :].astype(np.int64))
-        attrs = {k: (json.dumps(v) if isinstance(v, (list, dict)) or v is None else v)
-                 for k, v in self._meta().items()}
+        attrs = {k: (json.dumps(v) if isinstance(v, (list, dict)) or v is None else v) for k, v in self._meta().items()}
         groups = {"posterior": xr.Dataset(post, attrs=attrs)}
         ws = {n: (("sample",), self.samples[:, j]) for j, n in enumerate(self.names)}
         ws["log_weight"] = (("sample",), self.log_weights)
@@ -231,6 +277,7 @@ class Posterior:
         if self.obs_gaw is not None:
             groups["observed_data"] = xr.Dataset({"gaw": (("frame",), np.asarray(self.obs_gaw, dtype=float))})
         import warnings as _w
+
         with _w.catch_warnings():
             _w.simplefilter("ignore")
             return az.InferenceData(**groups)
@@ -251,19 +298,34 @@ class Posterior:
         if "posterior_predictive" in idata.groups():
             pp = idata["posterior_predictive"]
             g = pp["gaw"].values[0]
-            pred = Evaluation(loglik=np.zeros(g.shape[0]), ok=np.all(np.isfinite(g), axis=1),
-                              gaw=g.astype(np.float32), mean_flow=pp["mean_flow"].values[0],
-                              mean_contact=pp["mean_contact"].values[0], max_contact=pp["max_contact"].values[0],
-                              **{nm: pp[nm].values[0] for nm in ("contact_impulse", "contact_pressure_in_contact")
-                                 if nm in pp})
+            pred = Evaluation(
+                loglik=np.zeros(g.shape[0]),
+                ok=np.all(np.isfinite(g), axis=1),
+                gaw=g.astype(np.float32),
+                mean_flow=pp["mean_flow"].values[0],
+                mean_contact=pp["mean_contact"].values[0],
+                max_contact=pp["max_contact"].values[0],
+                **{nm: pp[nm].values[0] for nm in ("contact_impulse", "contact_pressure_in_contact") if nm in pp},
+            )
         obs = idata["observed_data"]["gaw"].values if "observed_data" in idata.groups() else None
         fps = json.loads(attrs["fps"]) if isinstance(attrs.get("fps"), str) else attrs.get("fps")
-        post = cls(names=names, samples=samples, log_weights=ws["log_weight"].values.astype(float), resampled=res,
-                   ess=float(attrs["ess"]), pareto_k=float(attrs["pareto_k"]),
-                   log_evidence=float(attrs["log_evidence"]), log_evidence_se=float(attrs["log_evidence_se"]),
-                   n_simulations=int(attrs["n_simulations"]), n_failed=int(attrs["n_failed"]),
-                   method=str(attrs["method"]), warnings=list(json.loads(attrs["warnings"])),
-                   obs_gaw=obs, fps=fps, model=json.loads(attrs["model"]) if "model" in attrs else None)
+        post = cls(
+            names=names,
+            samples=samples,
+            log_weights=ws["log_weight"].values.astype(float),
+            resampled=res,
+            ess=float(attrs["ess"]),
+            pareto_k=float(attrs["pareto_k"]),
+            log_evidence=float(attrs["log_evidence"]),
+            log_evidence_se=float(attrs["log_evidence_se"]),
+            n_simulations=int(attrs["n_simulations"]),
+            n_failed=int(attrs["n_failed"]),
+            method=str(attrs["method"]),
+            warnings=list(json.loads(attrs["warnings"])),
+            obs_gaw=obs,
+            fps=fps,
+            model=json.loads(attrs["model"]) if "model" in attrs else None,
+        )
         if pred is not None:
             # predictive rows follow the resampled draws (duplicates are identical rows)
             post.predictive = pred
@@ -273,6 +335,7 @@ class Posterior:
     @classmethod
     def from_netcdf(cls, path) -> Posterior:
         import arviz as az
+
         return cls.from_inference_data(az.from_netcdf(str(path)))
 
     # ------------------------------------------------------------------ CSV
@@ -288,8 +351,10 @@ class Posterior:
             wr = csv.writer(fh)
             wr.writerow(list(self.names) + ["log_weight", "weight", "n_resampled"])
             for i in range(self.samples.shape[0]):
-                wr.writerow([repr(float(v)) for v in self.samples[i]]
-                            + [repr(float(self.log_weights[i])), repr(float(w[i])), int(counts[i])])
+                wr.writerow(
+                    [repr(float(v)) for v in self.samples[i]]
+                    + [repr(float(self.log_weights[i])), repr(float(w[i])), int(counts[i])]
+                )
         return path
 
     @classmethod
@@ -306,9 +371,19 @@ class Posterior:
             raise ValueError(f"{path}: header {header} does not match names {names}")
         arr = np.array([[float(v) for v in r[: len(names) + 1]] for r in body])
         counts = np.array([int(r[len(names) + 2]) for r in body])
-        return cls(names=names, samples=arr[:, : len(names)], log_weights=arr[:, len(names)],
-                   resampled=np.repeat(np.arange(len(body)), counts), ess=float(meta["ess"]),
-                   pareto_k=float(meta["pareto_k"]), log_evidence=float(meta["log_evidence"]),
-                   log_evidence_se=float(meta["log_evidence_se"]), n_simulations=int(meta["n_simulations"]),
-                   n_failed=int(meta["n_failed"]), method=meta["method"], warnings=list(meta["warnings"]),
-                   fps=meta.get("fps"), model=meta.get("model"))
+        return cls(
+            names=names,
+            samples=arr[:, : len(names)],
+            log_weights=arr[:, len(names)],
+            resampled=np.repeat(np.arange(len(body)), counts),
+            ess=float(meta["ess"]),
+            pareto_k=float(meta["pareto_k"]),
+            log_evidence=float(meta["log_evidence"]),
+            log_evidence_se=float(meta["log_evidence_se"]),
+            n_simulations=int(meta["n_simulations"]),
+            n_failed=int(meta["n_failed"]),
+            method=meta["method"],
+            warnings=list(meta["warnings"]),
+            fps=meta.get("fps"),
+            model=meta.get("model"),
+        )

@@ -4,6 +4,7 @@ Bounds are in paper units (kPa, Pa, kPa, Pa, kg/m^3, Poise, mm; see ``vfcore.par
 Any parameter may be *fixed* instead of estimated; parameters that are neither
 estimated nor fixed take the measured silicone values of Table 3 (``vfcore.params.TABLE3``).
 """
+
 from __future__ import annotations
 
 import math
@@ -16,13 +17,13 @@ from ..params import FOLD_WIDTH_MM, PARAM_NAMES, PARAM_UNITS, TABLE3, Params
 
 #: Hadwin et al. (2019), Table 2: bounds of the uniform priors (paper units).
 TABLE2_BOUNDS: dict[str, tuple[float, float]] = {
-    "E_body": (9.0, 15.0),       # kPa
-    "E_cover": (250.0, 950.0),   # Pa
-    "E_lig": (0.5, 3.0),         # kPa
-    "p_sub": (400.0, 1800.0),    # Pa
-    "rho": (950.0, 1200.0),      # kg/m^3
-    "eta": (1.0, 7.0),           # Poise
-    "x0": (7.4, 8.4),            # mm
+    "E_body": (9.0, 15.0),  # kPa
+    "E_cover": (250.0, 950.0),  # Pa
+    "E_lig": (0.5, 3.0),  # kPa
+    "p_sub": (400.0, 1800.0),  # Pa
+    "rho": (950.0, 1200.0),  # kg/m^3
+    "eta": (1.0, 7.0),  # Poise
+    "x0": (7.4, 8.4),  # mm
 }
 
 #: Priors for human vocal folds (:ref:`inference-reach-prior-sets`). The 2D section has no longitudinal tension, the
@@ -35,13 +36,13 @@ TABLE2_BOUNDS: dict[str, tuple[float, float]] = {
 #: more compression holds the glottis shut against any phonatory pressure (measured: no draw with x0 < 8.1 mm
 #: phonated out of 2,000 from a first, wider box with Table 2's x0 range).
 HUMAN_BOUNDS: dict[str, tuple[float, float]] = {
-    "E_body": (10.0, 200.0),     # kPa
+    "E_body": (10.0, 200.0),  # kPa
     "E_cover": (1000.0, 10000.0),  # Pa
-    "E_lig": (5.0, 40.0),        # kPa
-    "p_sub": (500.0, 2500.0),    # Pa
-    "rho": (1000.0, 1100.0),     # kg/m^3
-    "eta": (1.0, 7.0),           # Poise
-    "x0": (8.0, 8.4),            # mm
+    "E_lig": (5.0, 40.0),  # kPa
+    "p_sub": (500.0, 2500.0),  # Pa
+    "rho": (1000.0, 1100.0),  # kg/m^3
+    "eta": (1.0, 7.0),  # Poise
+    "x0": (8.0, 8.4),  # mm
 }
 
 #: Named prior sets (``Prior.default(prior_set=...)``, ``vfinfer infer --prior-set``).

@@ -24,6 +24,7 @@ with ``k`` unknown (an uncalibrated video; ``k = (true px/mm / assumed px/mm)^2`
 and integrated out per draw in closed form (:mod:`vfcore.inference.likelihood`; :ref:`inference`, "Unknown
 area scale"). It costs no extra simulation. ``None`` (default): the areas are calibrated.
 """
+
 from __future__ import annotations
 
 import math
@@ -77,18 +78,22 @@ def validate_observation(gaw, fps: float) -> np.ndarray:
         raise ValueError(f"observed GAW has {y.size} frames; at least two cycles are needed")
     bad = ~np.isfinite(y)
     if bad.any():
-        raise ValueError(f"observed GAW contains {int(bad.sum())} NaN/inf value(s) (first at frame "
-                         f"{int(np.argmax(bad))})")
+        raise ValueError(
+            f"observed GAW contains {int(bad.sum())} NaN/inf value(s) (first at frame {int(np.argmax(bad))})"
+        )
     if float(np.ptp(y)) <= 1e-12 * max(1.0, float(np.max(np.abs(y)))):
         raise ValueError("observed GAW is constant: there is no oscillation to fit")
     f0 = estimate_f0(y, fps)
     if not math.isfinite(f0):
-        raise ValueError("observed GAW shows no periodic oscillation (f0 could not be estimated; at least "
-                         "two cycles are needed)")
+        raise ValueError(
+            "observed GAW shows no periodic oscillation (f0 could not be estimated; at least two cycles are needed)"
+        )
     n_cycles = y.size * f0 / fps
     if n_cycles < 2.0:
-        raise ValueError(f"observed GAW spans {n_cycles:.2f} cycles (f0 = {f0:.1f} Hz, {y.size} frames at "
-                         f"{fps:g} fps); at least two cycles are needed")
+        raise ValueError(
+            f"observed GAW spans {n_cycles:.2f} cycles (f0 = {f0:.1f} Hz, {y.size} frames at "
+            f"{fps:g} fps); at least two cycles are needed"
+        )
     return y
 
 
@@ -117,16 +122,19 @@ def validate_measurements(measurements, prior: Prior | None = None) -> dict[str,
                 raise TypeError
             mean, sd = float(pair[0]), float(pair[1])
         except (TypeError, ValueError):
-            raise ValueError(f"measurement of {name} must be a pair (mean, sd) of numbers in "
-                             f"{PARAM_UNITS[name]}, got {pair!r}") from None
+            raise ValueError(
+                f"measurement of {name} must be a pair (mean, sd) of numbers in {PARAM_UNITS[name]}, got {pair!r}"
+            ) from None
         if not (math.isfinite(mean) and math.isfinite(sd)):
             raise ValueError(f"measurement of {name} must have a finite mean and sd, got ({mean}, {sd})")
         if not sd > 0.0:
             raise ValueError(f"measurement of {name} must have sd > 0 {PARAM_UNITS[name]}, got {sd}")
         if prior is not None and name not in prior.names:
             held = "fixed" if name in prior.fixed else "not estimated"
-            raise ValueError(f"measurement of {name}: the parameter is {held} in the prior, so a measurement "
-                             "cannot inform it; estimate it or drop the measurement")
+            raise ValueError(
+                f"measurement of {name}: the parameter is {held} in the prior, so a measurement "
+                "cannot inform it; estimate it or drop the measurement"
+            )
         out[name] = (mean, sd)
     return {n: out[n] for n in PARAM_NAMES if n in out}
 
@@ -231,8 +239,7 @@ class Problem:
         object.__setattr__(self, "measurements", validate_measurements(self.measurements, self.prior))
         object.__setattr__(self, "area_scale", validate_area_scale(self.area_scale))
         # fails (ValueError) here, before any simulation, if the simulation is too short
-        object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config),
-                                                             self.lag_search))
+        object.__setattr__(self, "_window", alignment_window(y, self.fps, n_sim_frames(self.config), self.lag_search))
 
     @property
     def window(self) -> tuple[int, int]:
@@ -249,12 +256,20 @@ class Problem:
         return self.obs_gaw[: self.n_compare]
 
     def to_dict(self) -> dict:
-        return {"obs_gaw": self.obs_gaw.tolist(), "fps": self.fps, "sigma_e": self.sigma_e,
-                "prior": self.prior.to_dict(), "config": self.config.as_dict(), "model": self.model,
-                "alignment": self.alignment, "noise": self.noise, "sigma_bounds": list(self.sigma_bounds),
-                "lag_search": self.lag_search,
-                "measurements": {n: [m, sd] for n, (m, sd) in self.measurements.items()},
-                "area_scale": None if self.area_scale is None else list(self.area_scale)}
+        return {
+            "obs_gaw": self.obs_gaw.tolist(),
+            "fps": self.fps,
+            "sigma_e": self.sigma_e,
+            "prior": self.prior.to_dict(),
+            "config": self.config.as_dict(),
+            "model": self.model,
+            "alignment": self.alignment,
+            "noise": self.noise,
+            "sigma_bounds": list(self.sigma_bounds),
+            "lag_search": self.lag_search,
+            "measurements": {n: [m, sd] for n, (m, sd) in self.measurements.items()},
+            "area_scale": None if self.area_scale is None else list(self.area_scale),
+        }
 
     @classmethod
     def from_dict(cls, d: dict) -> Problem:
@@ -262,14 +277,20 @@ class Problem:
         unknown = set(d) - known
         if unknown:
             raise ValueError(f"unknown Problem field(s): {sorted(unknown)}")
-        return cls(obs_gaw=np.asarray(d["obs_gaw"], dtype=float), fps=d["fps"],
-                   prior=Prior.from_dict(d["prior"]), sigma_e=d.get("sigma_e", 1.0),
-                   config=SimConfig(**d.get("config", {})), model=d.get("model", "fe"),
-                   alignment=d.get("alignment", "profile"), noise=d.get("noise", "fixed"),
-                   sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))),
-                   lag_search=d.get("lag_search", "window"),
-                   measurements=d.get("measurements") or {},
-                   area_scale=d.get("area_scale"))
+        return cls(
+            obs_gaw=np.asarray(d["obs_gaw"], dtype=float),
+            fps=d["fps"],
+            prior=Prior.from_dict(d["prior"]),
+            sigma_e=d.get("sigma_e", 1.0),
+            config=SimConfig(**d.get("config", {})),
+            model=d.get("model", "fe"),
+            alignment=d.get("alignment", "profile"),
+            noise=d.get("noise", "fixed"),
+            sigma_bounds=tuple(d.get("sigma_bounds", (0.01, 100.0))),
+            lag_search=d.get("lag_search", "window"),
+            measurements=d.get("measurements") or {},
+            area_scale=d.get("area_scale"),
+        )
 
     def measurement_loglik(self, params) -> float:
         """The measurements' log density at ``params`` (a ``Params``, ``{name: value}`` or a full
@@ -343,8 +364,15 @@ class Problem:
         for i, h in enumerate(hr):
             k = self._first_scale(segs[i])
             if k is not None:
-                segs[i] = align(h[::oversample], self.obs_gaw / k, self.fps, self.window, method=self.alignment,
-                                sim_hr=h, oversample=oversample)[0]
+                segs[i] = align(
+                    h[::oversample],
+                    self.obs_gaw / k,
+                    self.fps,
+                    self.window,
+                    method=self.alignment,
+                    sim_hr=h,
+                    oversample=oversample,
+                )[0]
         return segs
 
 

@@ -10,6 +10,7 @@
   With posterior samples the p-value shrinks as the ensemble grows, so the standardised
   difference ``(m_a - m_b) / sqrt(sd_a^2 + sd_b^2)`` is reported beside it.
 """
+
 from __future__ import annotations
 
 import math
@@ -29,8 +30,9 @@ def _require_predictive(post: Posterior):
     return rp
 
 
-def predictive_bands(post: Posterior, level: float = 0.9, sigma_e: float | None = None,
-                     seed: int = 0) -> dict[str, np.ndarray]:
+def predictive_bands(
+    post: Posterior, level: float = 0.9, sigma_e: float | None = None, seed: int = 0
+) -> dict[str, np.ndarray]:
     """Pointwise posterior-predictive summary of the aligned GAW.
 
     Returns ``t`` (s), ``mean``, ``median``, ``lo``, ``hi`` (central ``level`` band), ``sd`` and
@@ -46,8 +48,14 @@ def predictive_bands(post: Posterior, level: float = 0.9, sigma_e: float | None 
     a = 0.5 * (1.0 - level)
     lo, med, hi = np.quantile(g, [a, 0.5, 1.0 - a], axis=0)
     fps = post.fps or 1.0
-    out = {"t": np.arange(g.shape[1]) / fps, "mean": g.mean(axis=0), "sd": g.std(axis=0, ddof=1) if g.shape[0] > 1
-           else np.zeros(g.shape[1]), "median": med, "lo": lo, "hi": hi}
+    out = {
+        "t": np.arange(g.shape[1]) / fps,
+        "mean": g.mean(axis=0),
+        "sd": g.std(axis=0, ddof=1) if g.shape[0] > 1 else np.zeros(g.shape[1]),
+        "median": med,
+        "lo": lo,
+        "hi": hi,
+    }
     if post.obs_gaw is not None:
         out["obs"] = np.asarray(post.obs_gaw, dtype=float)[: g.shape[1]]
     return out
@@ -60,20 +68,29 @@ def flow_contact_table(post: Posterior) -> list[dict]:
     "Contact"; labelled so). A quantity the ensemble does not carry is omitted."""
     rp = _require_predictive(post)
     rows = []
-    for key, label, unit, factor in (("mean_flow", "flow rate Q", "mL/s", 1e6),
-                                     ("contact_impulse", "contact impulse per cycle", "mN s/m", 1e3),
-                                     ("contact_pressure_in_contact", "pressure in contact", "Pa", 1.0),
-                                     ("mean_contact", "mean nodal peak contact pressure (not converged)", "Pa",
-                                      1.0),
-                                     ("max_contact", "max nodal contact pressure (not converged)", "Pa", 1.0)):
+    for key, label, unit, factor in (
+        ("mean_flow", "flow rate Q", "mL/s", 1e6),
+        ("contact_impulse", "contact impulse per cycle", "mN s/m", 1e3),
+        ("contact_pressure_in_contact", "pressure in contact", "Pa", 1.0),
+        ("mean_contact", "mean nodal peak contact pressure (not converged)", "Pa", 1.0),
+        ("max_contact", "max nodal contact pressure (not converged)", "Pa", 1.0),
+    ):
         if getattr(rp, key) is None:
             continue
         v = np.asarray(getattr(rp, key), dtype=float)[rp.ok] * factor
         v = v[np.isfinite(v)]
         m = float(v.mean()) if v.size else math.nan
         s = float(v.std(ddof=1)) if v.size > 1 else math.nan
-        rows.append({"quantity": label, "unit": unit, "mean": m, "sd": s,
-                     "pct": 100.0 * s / abs(m) if m else math.nan, "n": int(v.size)})
+        rows.append(
+            {
+                "quantity": label,
+                "unit": unit,
+                "mean": m,
+                "sd": s,
+                "pct": 100.0 * s / abs(m) if m else math.nan,
+                "n": int(v.size),
+            }
+        )
     return rows
 
 
@@ -97,23 +114,36 @@ def compare(post_a: Posterior, post_b: Posterior, names=None, n: int | None = No
         xb = rb[:, post_b.names.index(name)]
         t = stats.ttest_ind(xa, xb, equal_var=False)
         ma, mb, sa, sb = xa.mean(), xb.mean(), xa.std(ddof=1), xb.std(ddof=1)
-        rows.append({"name": name, "unit": PARAM_UNITS.get(name, ""), "mean_a": float(ma), "sd_a": float(sa),
-                     "mean_b": float(mb), "sd_b": float(sb), "t": float(t.statistic), "p": float(t.pvalue),
-                     "df": float(getattr(t, "df", math.nan)),
-                     "standardized_difference": float((ma - mb) / math.hypot(sa, sb)) if (sa or sb) else math.nan})
+        rows.append(
+            {
+                "name": name,
+                "unit": PARAM_UNITS.get(name, ""),
+                "mean_a": float(ma),
+                "sd_a": float(sa),
+                "mean_b": float(mb),
+                "sd_b": float(sb),
+                "t": float(t.statistic),
+                "p": float(t.pvalue),
+                "df": float(getattr(t, "df", math.nan)),
+                "standardized_difference": float((ma - mb) / math.hypot(sa, sb)) if (sa or sb) else math.nan,
+            }
+        )
     return rows
 
 
 # ---------------------------------------------------------------------------- figures
 def _plt():
     import matplotlib
+
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+
     return plt
 
 
-def plot_predictive(post: Posterior, path, level: float = 0.9, sigma_e: float | None = None,
-                    title: str | None = None) -> Path:
+def plot_predictive(
+    post: Posterior, path, level: float = 0.9, sigma_e: float | None = None, title: str | None = None
+) -> Path:
     """Observed GAW with the posterior-predictive mean and band (like Figs. 4-6)."""
     plt = _plt()
     b = predictive_bands(post, level=level, sigma_e=sigma_e)

@@ -39,6 +39,7 @@ This module finds ensembles and checks recordings end to end; the ensemble itsel
 is :mod:`.reach_ensemble`, the comparison and its message :mod:`.reach_verdict`. Their public names are
 re-exported here, the one place callers import them from.
 """
+
 from __future__ import annotations
 
 import os
@@ -82,8 +83,9 @@ def cache_dir() -> Path:
     """Folder of the user's reach ensembles: ``$VFINFER_CACHE_DIR/reach`` or the XDG cache's ``vfinfer/reach``."""
     base = os.environ.get("VFINFER_CACHE_DIR")
     if not base:
-        base = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"),
-                            "vfinfer")
+        base = os.path.join(
+            os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "vfinfer"
+        )
     return Path(base) / "reach"
 
 
@@ -128,6 +130,7 @@ def _contains(wide: Mapping, narrow: Mapping) -> bool:
     """Whether the prior box ``wide`` contains ``narrow`` (fixed values as degenerate intervals); a parameter
     that neither estimates nor fixes is at its Table 3 value."""
     from ..params import TABLE3
+
     w, s = _box(wide), _box(narrow)
     for name in PARAM_NAMES:
         t3 = float(getattr(TABLE3, name))
@@ -164,7 +167,6 @@ def find_ensemble(config: SimConfig, prior: Prior) -> tuple[ReachEnsemble | None
     return best, False
 
 
-
 def origin(ens: ReachEnsemble) -> str:
     """Where ``ens`` came from: "shipped" (``vfcore/data``) or "cached" (the user cache, built earlier)."""
     return "shipped" if Path(ens.source).resolve().parent == SHIPPED_DIR else "cached"
@@ -177,8 +179,9 @@ def first_use_prior(prior: Prior, prior_set: Prior) -> Prior:
     return prior_set if _contains(prior_set.to_dict(), prior.to_dict()) else prior
 
 
-def reach_for(gaw, fps: float, config: SimConfig, prior: Prior,
-              area_scale: tuple[float, float] | None = None) -> ReachVerdict:
+def reach_for(
+    gaw, fps: float, config: SimConfig, prior: Prior, area_scale: tuple[float, float] | None = None
+) -> ReachVerdict:
     """Find the ensemble for ``config`` and ``prior`` and check the recording ``gaw`` at ``fps`` against it
     (``area_scale``: an unknown area scale's box, :func:`check_reach`)."""
     ens, exact = find_ensemble(config, prior)
@@ -191,8 +194,13 @@ def reach_for(gaw, fps: float, config: SimConfig, prior: Prior,
 def build_hint(config: SimConfig, prior: Prior) -> str:
     """The ``vfinfer reach`` command that builds the ensemble for ``config`` and ``prior``."""
     from .prior import PRIOR_SETS
-    args = [f"--mesh {config.mesh}", f"--dt {config.dt:g}", f"--duration {config.duration:g}",
-            f"--discard {config.discard:g}"]
+
+    args = [
+        f"--mesh {config.mesh}",
+        f"--dt {config.dt:g}",
+        f"--duration {config.duration:g}",
+        f"--discard {config.discard:g}",
+    ]
     if config.element != "p1":
         args.append(f"--element {config.element}")
     if config.contact != "projection":
@@ -209,9 +217,34 @@ def build_hint(config: SimConfig, prior: Prior) -> str:
     return f"build it with `vfinfer reach {' '.join(args)}` ({DEFAULT_N} simulations, minutes on one core)"
 
 
-
-__all__ = ["DEFAULT_N", "DEFAULT_SEED", "F0_AGREEMENT", "HARD_MEASURES", "MEASURES", "NEAR_AREA", "NEAR_F0",
-           "PHONATION_MIN_AMPLITUDE", "QUANTILES", "REACH_FPS", "REACH_VERSION", "SUSTAIN_RATIO", "ReachEnsemble",
-           "ReachVerdict", "build_ensemble", "build_hint", "cache_dir", "check_reach", "config_key_dict",
-           "draw_measures", "ensemble_path", "find_ensemble", "first_use_prior", "format_table", "origin",
-           "reach_for", "reach_key", "recording_measures", "save_cached"]
+__all__ = [
+    "DEFAULT_N",
+    "DEFAULT_SEED",
+    "F0_AGREEMENT",
+    "HARD_MEASURES",
+    "MEASURES",
+    "NEAR_AREA",
+    "NEAR_F0",
+    "PHONATION_MIN_AMPLITUDE",
+    "QUANTILES",
+    "REACH_FPS",
+    "REACH_VERSION",
+    "SUSTAIN_RATIO",
+    "ReachEnsemble",
+    "ReachVerdict",
+    "build_ensemble",
+    "build_hint",
+    "cache_dir",
+    "check_reach",
+    "config_key_dict",
+    "draw_measures",
+    "ensemble_path",
+    "find_ensemble",
+    "first_use_prior",
+    "format_table",
+    "origin",
+    "reach_for",
+    "reach_key",
+    "recording_measures",
+    "save_cached",
+]

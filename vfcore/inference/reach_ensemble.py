@@ -7,6 +7,7 @@ phonates (the rule is in :mod:`.reach`'s docstring and :func:`draw_measures`). A
 its metadata in comment lines (:meth:`ReachEnsemble.save`). Where ensembles are looked up and how a recording is
 checked against one live in :mod:`.reach` and :mod:`.reach_verdict`.
 """
+
 from __future__ import annotations
 
 import csv
@@ -61,7 +62,7 @@ def _canonical(x):
     if isinstance(x, (list, tuple)):
         return [_canonical(v) for v in x]
     if isinstance(x, (float, int, np.floating, np.integer)) and not isinstance(x, bool):
-        return repr(float(x))          # 1 and 1.0 are one value; repr keeps every digit
+        return repr(float(x))  # 1 and 1.0 are one value; repr keeps every digit
     return x
 
 
@@ -79,8 +80,11 @@ def config_key_dict(config: SimConfig) -> dict:
 
 def reach_key(config: SimConfig, prior: Prior) -> str:
     """Hex key (16 digits of SHA-256) of the ensemble for ``config`` and ``prior``."""
-    blob = json.dumps({"version": REACH_VERSION, "config": _canonical(config_key_dict(config)),
-                       "prior": _canonical(prior.to_dict())}, sort_keys=True, separators=(",", ":"))
+    blob = json.dumps(
+        {"version": REACH_VERSION, "config": _canonical(config_key_dict(config)), "prior": _canonical(prior.to_dict())},
+        sort_keys=True,
+        separators=(",", ":"),
+    )
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -90,22 +94,21 @@ def config_hash(config: SimConfig) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-
 # ------------------------------------------------------------------------------------------- ensemble
 @dataclass
 class ReachEnsemble:
     """A prior-predictive ensemble: per draw the seven parameters, success, phonation and the measures."""
 
-    config: dict                      # config_key_dict of the SimConfig it was simulated with
-    prior: dict                       # Prior.to_dict()
-    params: np.ndarray                # (N, 7) PARAM_NAMES order, paper units
-    ok: np.ndarray                    # (N,) bool: simulation succeeded
-    phonates: np.ndarray              # (N,) bool
-    measures: dict[str, np.ndarray]   # column -> (N,), nan where undefined
+    config: dict  # config_key_dict of the SimConfig it was simulated with
+    prior: dict  # Prior.to_dict()
+    params: np.ndarray  # (N, 7) PARAM_NAMES order, paper units
+    ok: np.ndarray  # (N,) bool: simulation succeeded
+    phonates: np.ndarray  # (N,) bool
+    measures: dict[str, np.ndarray]  # column -> (N,), nan where undefined
     key: str = ""
     seed: int | None = None
     wall_s: float | None = None
-    source: str = ""                  # where it was read from
+    source: str = ""  # where it was read from
 
     def __post_init__(self) -> None:
         if not self.key:
@@ -133,19 +136,32 @@ class ReachEnsemble:
             v = v[np.isfinite(v)]
             if v.size:
                 q = np.quantile(v, QUANTILES)
-                out[col] = {"q05": float(q[0]), "q50": float(q[1]), "q95": float(q[2]),
-                            "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
+                out[col] = {
+                    "q05": float(q[0]),
+                    "q50": float(q[1]),
+                    "q95": float(q[2]),
+                    "min": float(v.min()),
+                    "max": float(v.max()),
+                    "n": int(v.size),
+                }
             else:
-                out[col] = {"q05": math.nan, "q50": math.nan, "q95": math.nan, "min": math.nan,
-                            "max": math.nan, "n": 0}
+                out[col] = {"q05": math.nan, "q50": math.nan, "q95": math.nan, "min": math.nan, "max": math.nan, "n": 0}
         return out
 
     # -------------------------------------------------------------------------------- CSV
     def to_csv_text(self) -> str:
         buf = io.StringIO()
-        meta = {"reach_version": REACH_VERSION, "key": self.key, "config": self.config, "prior": self.prior,
-                "n_draws": self.n, "seed": self.seed, "wall_s": self.wall_s, "fps": self.sim_config().fps,
-                "phonation_min_amplitude_mm2": PHONATION_MIN_AMPLITUDE}
+        meta = {
+            "reach_version": REACH_VERSION,
+            "key": self.key,
+            "config": self.config,
+            "prior": self.prior,
+            "n_draws": self.n,
+            "seed": self.seed,
+            "wall_s": self.wall_s,
+            "fps": self.sim_config().fps,
+            "phonation_min_amplitude_mm2": PHONATION_MIN_AMPLITUDE,
+        }
         buf.write("# vfinfer reach ensemble (vfcore.inference.reach): prior draws simulated and measured\n")
         for k, v in meta.items():
             buf.write(f"# {k}: {json.dumps(v, sort_keys=True)}\n")
@@ -153,9 +169,14 @@ class ReachEnsemble:
         cols = [col for col, *_ in MEASURES]
         w.writerow([*PARAM_NAMES, "ok", "phonates", *cols])
         for i in range(self.n):
-            w.writerow([*(f"{x:.10g}" for x in self.params[i]), int(self.ok[i]), int(self.phonates[i]),
-                        *("nan" if not math.isfinite(self.measures[c][i]) else f"{self.measures[c][i]:.6g}"
-                          for c in cols)])
+            w.writerow(
+                [
+                    *(f"{x:.10g}" for x in self.params[i]),
+                    int(self.ok[i]),
+                    int(self.phonates[i]),
+                    *("nan" if not math.isfinite(self.measures[c][i]) else f"{self.measures[c][i]:.6g}" for c in cols),
+                ]
+            )
         return buf.getvalue()
 
     def save(self, path: Path) -> Path:
@@ -168,7 +189,7 @@ class ReachEnsemble:
                 f.write(self.to_csv_text())
             umask = os.umask(0)
             os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)          # mkstemp makes it private; an ensemble is not
+            os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; an ensemble is not
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):
@@ -200,11 +221,21 @@ class ReachEnsemble:
         a = np.array([[float(x) for x in row] for row in body], dtype=float).reshape(-1, len(header))
         p = len(PARAM_NAMES)
         cfg = meta["config"]
-        cfg = {k: (tuple(tuple(x) if isinstance(x, list) else x for x in v) if isinstance(v, list) else v)
-               for k, v in cfg.items()}
-        ens = cls(config=cfg, prior=meta["prior"], params=a[:, :p], ok=a[:, p] > 0, phonates=a[:, p + 1] > 0,
-                  measures={c: a[:, p + 2 + j] for j, c in enumerate(cols)}, seed=meta.get("seed"),
-                  wall_s=meta.get("wall_s"), source=str(path))
+        cfg = {
+            k: (tuple(tuple(x) if isinstance(x, list) else x for x in v) if isinstance(v, list) else v)
+            for k, v in cfg.items()
+        }
+        ens = cls(
+            config=cfg,
+            prior=meta["prior"],
+            params=a[:, :p],
+            ok=a[:, p] > 0,
+            phonates=a[:, p + 1] > 0,
+            measures={c: a[:, p + 2 + j] for j, c in enumerate(cols)},
+            seed=meta.get("seed"),
+            wall_s=meta.get("wall_s"),
+            source=str(path),
+        )
         if meta.get("key") and meta["key"] != ens.key:
             raise ValueError(f"{path}: stored key {meta['key']} does not match its configuration and prior ({ens.key})")
         return ens
@@ -213,6 +244,7 @@ class ReachEnsemble:
 def draw_measures(result) -> tuple[bool, dict[str, float]]:
     """(phonates, measures) of one SimResult (module docstring: the phonation rule)."""
     from ..measures import gaw_measures
+
     nan = {col: math.nan for col, *_ in MEASURES}
     if result is None or isinstance(result, BaseException) or not getattr(result, "ok", False):
         return False, nan
@@ -220,12 +252,19 @@ def draw_measures(result) -> tuple[bool, dict[str, float]]:
     if g.size < 4 or not np.all(np.isfinite(g)):
         return False, nan
     from ..measures import cycle_table
+
     m = gaw_measures(g, float(result.fps))
     out = {col: float(m[col]) for col, *_ in MEASURES}
     amp = m["amplitude_mm2"]
     f0, f0_sim = m["f0_hz"], float(getattr(result, "f0", math.nan))
-    if not (m["n_cycles"] >= 2 and math.isfinite(f0) and math.isfinite(amp) and amp >= PHONATION_MIN_AMPLITUDE
-            and math.isfinite(f0_sim) and abs(f0 - f0_sim) <= F0_AGREEMENT * f0_sim):
+    if not (
+        m["n_cycles"] >= 2
+        and math.isfinite(f0)
+        and math.isfinite(amp)
+        and amp >= PHONATION_MIN_AMPLITUDE
+        and math.isfinite(f0_sim)
+        and abs(f0 - f0_sim) <= F0_AGREEMENT * f0_sim
+    ):
         return False, out
     t = cycle_table(g, float(result.fps))
     a = t["a_max"] - t["a_min"]
@@ -233,10 +272,17 @@ def draw_measures(result) -> tuple[bool, dict[str, float]]:
     return bool(a[-k:].mean() >= SUSTAIN_RATIO * a[:k].mean()), out
 
 
-def build_ensemble(config: SimConfig, prior: Prior, n: int = DEFAULT_N, seed: int = DEFAULT_SEED, *,
-                   block: int = 32, progress: Callable[[int, int, float], None] | None = None,
-                   simulate_fn: Callable | None = None,
-                   on_error: Callable[[str], None] | None = None) -> ReachEnsemble:
+def build_ensemble(
+    config: SimConfig,
+    prior: Prior,
+    n: int = DEFAULT_N,
+    seed: int = DEFAULT_SEED,
+    *,
+    block: int = 32,
+    progress: Callable[[int, int, float], None] | None = None,
+    simulate_fn: Callable | None = None,
+    on_error: Callable[[str], None] | None = None,
+) -> ReachEnsemble:
     """Simulate ``n`` prior draws under ``config`` (camera rate set to ``REACH_FPS``) and measure them.
 
     ``progress(done, total, elapsed_s)`` is called after every block, ``on_error(message)`` for a block whose
@@ -255,7 +301,7 @@ def build_ensemble(config: SimConfig, prior: Prior, n: int = DEFAULT_N, seed: in
     t0 = time.perf_counter()
     step = max(1, int(block))
     for s in range(0, n, step):
-        rows = full[s:s + step]
+        rows = full[s : s + step]
         try:
             results = simulate_fn(rows, cfg, block=step)
         except Exception as exc:  # noqa: BLE001 - a failed block is counted as non-phonating draws
@@ -270,5 +316,13 @@ def build_ensemble(config: SimConfig, prior: Prior, n: int = DEFAULT_N, seed: in
                 meas[col][i] = m[col]
         if progress is not None:
             progress(min(s + step, n), n, time.perf_counter() - t0)
-    return ReachEnsemble(config=config_key_dict(cfg), prior=prior.to_dict(), params=full, ok=ok, phonates=phon,
-                         measures=meas, seed=int(seed), wall_s=round(time.perf_counter() - t0, 1))
+    return ReachEnsemble(
+        config=config_key_dict(cfg),
+        prior=prior.to_dict(),
+        params=full,
+        ok=ok,
+        phonates=phon,
+        measures=meas,
+        seed=int(seed),
+        wall_s=round(time.perf_counter() - t0, 1),
+    )

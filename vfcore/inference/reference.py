@@ -25,6 +25,7 @@ a Monte Carlo fraction of ``n_mc`` draws (fixed seed, so the density is determin
 relative variance ``(1 - P) / (P n_mc)`` is reported as ``log_norm_var`` and added to the
 evidence's variance by the sampler.
 """
+
 from __future__ import annotations
 
 import math
@@ -85,7 +86,7 @@ class GaussianReference:
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` draws from ``q`` (rejection for the truncation)."""
-        out = self.prior.sample(n, rng)                    # uniform part, and the defensive draws
+        out = self.prior.sample(n, rng)  # uniform part, and the defensive draws
         k = len(self._chols)
         comp = np.where(rng.random(n) >= self.eps, rng.integers(0, k, n), -1)
         for c, ch in enumerate(self._chols):
@@ -103,11 +104,12 @@ class GaussianReference:
     def logpdf(self, thetas) -> np.ndarray:
         """Normalised log density of ``q`` (``-inf`` outside the prior box)."""
         from scipy.linalg import solve_triangular
+
         x = np.atleast_2d(np.asarray(thetas, dtype=float))
         lp = self.prior.logpdf(x)
         k = len(self._chols)
         # the uniform dimensions of the Gaussian components: the prior's density over them
-        lu = -float(np.sum(np.log(self.prior.width[self.g:])))
+        lu = -float(np.sum(np.log(self.prior.width[self.g :])))
         terms = [math.log(self.eps) + lp]
         for ch, ld, p_in in zip(self._chols, self._log_det, self.p_inside):
             z = solve_triangular(ch, (x[:, : self.g] - self.mean).T, lower=True)
@@ -117,8 +119,16 @@ class GaussianReference:
         return np.where(np.isfinite(lp), out, -np.inf)
 
 
-def reference_from_posterior(prior: Prior, post, *, inflate: float = 2.0, floor: float = 0.01,
-                             wide: float | None = 0.1, eps: float = 0.1, seed: int = 0) -> GaussianReference:
+def reference_from_posterior(
+    prior: Prior,
+    post,
+    *,
+    inflate: float = 2.0,
+    floor: float = 0.01,
+    wide: float | None = 0.1,
+    eps: float = 0.1,
+    seed: int = 0,
+) -> GaussianReference:
     """A :class:`GaussianReference` on ``prior`` from a fitted posterior ``post`` whose parameters
     are the first ones of ``prior`` (a base fit, for an extended model's prior), about the
     weighted mean of ``post``'s particles:
@@ -133,10 +143,11 @@ def reference_from_posterior(prior: Prior, post, *, inflate: float = 2.0, floor:
     The two are mixed with equal weights, and ``eps`` of the prior (module docstring)."""
     g = len(post.names)
     if tuple(prior.names[:g]) != tuple(post.names):
-        raise ValueError(f"the posterior's parameters {tuple(post.names)} are not the first ones of the prior "
-                         f"{tuple(prior.names)}")
+        raise ValueError(
+            f"the posterior's parameters {tuple(post.names)} are not the first ones of the prior {tuple(prior.names)}"
+        )
     mu = np.asarray(post.mean, dtype=float)
-    cov = inflate ** 2 * (np.asarray(post.cov, dtype=float) + np.diag((floor * prior.width[:g]) ** 2))
+    cov = inflate**2 * (np.asarray(post.cov, dtype=float) + np.diag((floor * prior.width[:g]) ** 2))
     covs = [cov]
     if wide is not None:
         covs.append(np.diag(np.maximum((wide * prior.width[:g]) ** 2, np.diag(cov))))

@@ -28,6 +28,7 @@ smooth 57 of 66 (:ref:`validation-inference-calibration-do-the-runs-agree`).
 This is the pragmatic remedy of running several chains and discarding the stuck ones; it does not make a
 thin run of one basin wider, it only stops one run's luck from deciding which basin is reported.
 """
+
 from __future__ import annotations
 
 import math
@@ -64,8 +65,9 @@ def best_loglik(post: Posterior) -> float:
     return float("nan") if v is None else float(v)
 
 
-def pool_runs(posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik", gap: float | None = None
-              ) -> Posterior:
+def pool_runs(
+    posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik", gap: float | None = None
+) -> Posterior:
     """Pool finished runs of the same target by ``rule`` (module docstring), leaving out those more than
     ``gap`` nats (default: the rule's, :data:`RUN_RULES`) below the best run.
 
@@ -101,15 +103,28 @@ def pool_runs(posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik"
     msgs = list(dict.fromkeys(m for p in pooled for m in p.warnings))
     if not kept.all():
         what = "best log-likelihood" if rule == "loglik" else "log evidence"
-        msgs.append(f"RUNS DISAGREE: {int((~kept).sum())} of {len(posts)} independent runs settled more than {gap:g} "
-                    f"nats of {what} below the best ({', '.join(f'{v:.1f}' for v in score)}) and were left out; a "
-                    "sampler that missed a basin once may have missed one in the runs kept too, so the intervals "
-                    "are not calibrated (docs/inference.md, 'Do the runs agree?')")
+        msgs.append(
+            f"RUNS DISAGREE: {int((~kept).sum())} of {len(posts)} independent runs settled more than {gap:g} "
+            f"nats of {what} below the best ({', '.join(f'{v:.1f}' for v in score)}) and were left out; a "
+            "sampler that missed a basin once may have missed one in the runs kept too, so the intervals "
+            "are not calibrated (docs/inference.md, 'Do the runs agree?')"
+        )
     rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(_POOL_KEY,)))
-    post = Posterior.from_weighted(names, samples, logw, rng=rng, log_evidence=log_z, log_evidence_se=se,
-                                   n_simulations=sum(p.n_simulations for p in posts),
-                                   n_failed=sum(p.n_failed for p in posts), method=posts[0].method, check=False,
-                                   warnings=msgs, obs_gaw=posts[0].obs_gaw, fps=posts[0].fps)
+    post = Posterior.from_weighted(
+        names,
+        samples,
+        logw,
+        rng=rng,
+        log_evidence=log_z,
+        log_evidence_se=se,
+        n_simulations=sum(p.n_simulations for p in posts),
+        n_failed=sum(p.n_failed for p in posts),
+        method=posts[0].method,
+        check=False,
+        warnings=msgs,
+        obs_gaw=posts[0].obs_gaw,
+        fps=posts[0].fps,
+    )
     post.ess = float(sum(p.ess for p in pooled))
     post.pareto_k = float("nan")
     if all(p.predictive is not None and p.predictive_index is not None for p in pooled):
@@ -121,10 +136,25 @@ def pool_runs(posts: Sequence[Posterior], *, seed: int = 0, rule: str = "loglik"
     post.model = posts[0].model
     runs = []
     for p, k, b in zip(posts, kept, best):
-        runs.append({"seed": p.info.get("seed"), "log_evidence": float(p.log_evidence),
-                     "log_evidence_se": float(p.log_evidence_se), "n_simulations": int(p.n_simulations),
-                     "n_generations": int(p.info.get("n_generations", 0)), "best_loglik": float(b), "kept": bool(k)})
-    post.info.update({"runs": runs, "runs_kept": len(pooled), "run_rule": rule, "run_gap": float(gap),
-                      "max_loglik": float(np.nanmax(best)) if np.any(np.isfinite(best)) else float("nan"),
-                      "n_particles": sum(int(p.info.get("n_particles", len(p.samples))) for p in pooled)})
+        runs.append(
+            {
+                "seed": p.info.get("seed"),
+                "log_evidence": float(p.log_evidence),
+                "log_evidence_se": float(p.log_evidence_se),
+                "n_simulations": int(p.n_simulations),
+                "n_generations": int(p.info.get("n_generations", 0)),
+                "best_loglik": float(b),
+                "kept": bool(k),
+            }
+        )
+    post.info.update(
+        {
+            "runs": runs,
+            "runs_kept": len(pooled),
+            "run_rule": rule,
+            "run_gap": float(gap),
+            "max_loglik": float(np.nanmax(best)) if np.any(np.isfinite(best)) else float("nan"),
+            "n_particles": sum(int(p.info.get("n_particles", len(p.samples))) for p in pooled),
+        }
+    )
     return post

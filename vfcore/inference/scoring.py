@@ -5,6 +5,7 @@ flow and contact into an :class:`~vfcore.inference.evaluation.Evaluation`.
 Every function takes the problem as an argument and reads only its public methods (``align``, ``loglik``)
 and fields, so this module sits above the problem without importing it.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,8 +20,11 @@ def cycle_means(r) -> tuple[float, float, float]:
     """(mean flow m^3/s, mean contact Pa, max contact Pa) of one successful simulation."""
     c = r.cycles
     if c is not None and np.size(c.period) > 0:
-        return (float(np.mean(c.mean_flow)), float(np.mean(c.mean_contact_pressure)),
-                float(np.max(c.max_contact_pressure)))
+        return (
+            float(np.mean(c.mean_flow)),
+            float(np.mean(c.mean_contact_pressure)),
+            float(np.max(c.max_contact_pressure)),
+        )
     flow = float(np.mean(r.flow)) if np.size(r.flow) else math.nan
     cp = np.asarray(r.contact_pressure)
     if cp.ndim == 2 and cp.size:
@@ -54,6 +58,7 @@ def _simulate_rows(thetas, problem, simulate_fn: Callable | None, block: int):
             out[i] = exc
     if simulate_fn is None and block > 1 and len(params) > 1:
         from vfcore.batch import simulate_many
+
         try:
             res = simulate_many([p for _, p in params], problem.config, block=block)
         except NotImplementedError:
@@ -95,6 +100,7 @@ def aligned_loglik(hr: np.ndarray, problem, params=None) -> tuple[float, np.ndar
     simulation yields (screening, integrated extension parameters). ``params``: the draw's
     parameters, for the measurements' term (:meth:`Problem.loglik`)."""
     from vfcore.result import HR_OVERSAMPLE
+
     seg = problem.align(hr[::HR_OVERSAMPLE], sim_hr=hr, oversample=HR_OVERSAMPLE)
     return problem.loglik(seg, params), seg
 
@@ -104,6 +110,7 @@ def aligned_logliks(hrs, problem) -> tuple[np.ndarray, np.ndarray]:
     one length, the rows of ``hrs``, aligned together (:meth:`Problem.align_many`); each row's value and
     segment are the same bytes as its own call's. Returns (log-likelihoods (m,), segments (m, n_compare))."""
     from vfcore.result import HR_OVERSAMPLE
+
     segs = problem.align_many(hrs, HR_OVERSAMPLE)
     return np.array([problem.loglik(seg) for seg in segs], dtype=float), segs
 
@@ -118,6 +125,7 @@ def score_results(results, problem, observe: Callable | None = None) -> Evaluati
     :mod:`vfcore.diagnose.fit`); the camera-rate series is then read from its output.
     """
     from vfcore.result import HR_OVERSAMPLE
+
     k = len(results)
     max_lag, n_cmp = problem.window
     loglik = np.full(k, -np.inf)
@@ -160,9 +168,17 @@ def score_results(results, problem, observe: Callable | None = None) -> Evaluati
         gaw[i] = seg
         flow[i], cmean[i], cmax[i] = cycle_means(r)
         cimp[i], cin[i] = contact_means(r)
-    return Evaluation(loglik=loglik, ok=ok, gaw=gaw, mean_flow=flow, mean_contact=cmean,
-                      max_contact=cmax, messages=tuple(messages), contact_impulse=cimp,
-                      contact_pressure_in_contact=cin)
+    return Evaluation(
+        loglik=loglik,
+        ok=ok,
+        gaw=gaw,
+        mean_flow=flow,
+        mean_contact=cmean,
+        max_contact=cmax,
+        messages=tuple(messages),
+        contact_impulse=cimp,
+        contact_pressure_in_contact=cin,
+    )
 
 
 class ProblemEvaluator:

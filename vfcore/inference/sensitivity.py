@@ -6,6 +6,7 @@
 * ``numerics_study``: estimates versus time step and mesh density (Fig. 8): the same
   inference rerun for each ``SimConfig``.
 """
+
 from __future__ import annotations
 
 import csv
@@ -37,13 +38,22 @@ def write_table(rows: list[dict], path) -> Path:
 
 def _plt():
     import matplotlib
+
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+
     return plt
 
 
-def ensemble_size_study(post: Posterior, sizes, *, truth: Mapping[str, float] | None = None, n_repeats: int = 5,
-                        seed: int = 0, figure_path=None) -> list[dict]:
+def ensemble_size_study(
+    post: Posterior,
+    sizes,
+    *,
+    truth: Mapping[str, float] | None = None,
+    n_repeats: int = 5,
+    seed: int = 0,
+    figure_path=None,
+) -> list[dict]:
     """Error and uncertainty of the IS estimate versus ensemble size (Fig. 7).
 
     ``post`` must be an importance-sampling posterior (its samples are prior draws and its
@@ -58,7 +68,7 @@ def ensemble_size_study(post: Posterior, sizes, *, truth: Mapping[str, float] | 
     sizes = sorted({int(s) for s in sizes if 1 < int(s) <= N})
     if not sizes:
         raise ValueError(f"no usable ensemble size (need 1 < n <= {N})")
-    ref = (np.array([truth[n] for n in post.names]) if truth is not None else post.mean)
+    ref = np.array([truth[n] for n in post.names]) if truth is not None else post.mean
     rng = np.random.default_rng(seed)
     rows = []
     for n in sizes:
@@ -79,10 +89,18 @@ def ensemble_size_study(post: Posterior, sizes, *, truth: Mapping[str, float] | 
             continue
         est, sds = np.array(est), np.array(sds)
         for j, name in enumerate(post.names):
-            rows.append({"n": n, "name": name, "unit": PARAM_UNITS.get(name, ""), "mean": float(est[:, j].mean()),
-                         "sd": float(sds[:, j].mean()), "error": float(np.mean(np.abs(est[:, j] - ref[j]))),
-                         "spread": float(est[:, j].std(ddof=1)) if est.shape[0] > 1 else 0.0,
-                         "ess": float(np.mean(esss))})
+            rows.append(
+                {
+                    "n": n,
+                    "name": name,
+                    "unit": PARAM_UNITS.get(name, ""),
+                    "mean": float(est[:, j].mean()),
+                    "sd": float(sds[:, j].mean()),
+                    "error": float(np.mean(np.abs(est[:, j] - ref[j]))),
+                    "spread": float(est[:, j].std(ddof=1)) if est.shape[0] > 1 else 0.0,
+                    "ess": float(np.mean(esss)),
+                }
+            )
     if figure_path is not None:
         _plot_vs(rows, post.names, "n", figure_path, xlabel="ensemble size N", logx=True, truth=ref)
     return rows
@@ -98,8 +116,14 @@ def dt_mesh_configs(base: SimConfig, dts=(1e-4, 5e-5, 2.5e-5), meshes=MESHES) ->
     return out
 
 
-def numerics_study(problem: Problem, configs: Mapping[str, SimConfig], sampler: Callable[[Problem], Posterior], *,
-                   truth: Mapping[str, float] | None = None, figure_path=None) -> list[dict]:
+def numerics_study(
+    problem: Problem,
+    configs: Mapping[str, SimConfig],
+    sampler: Callable[[Problem], Posterior],
+    *,
+    truth: Mapping[str, float] | None = None,
+    figure_path=None,
+) -> list[dict]:
     """Rerun the inference for each numerical configuration (Fig. 8).
 
     ``sampler(problem) -> Posterior`` (e.g. ``lambda p: smc(p, seed=1, map=pool.map)``).
@@ -113,13 +137,27 @@ def numerics_study(problem: Problem, configs: Mapping[str, SimConfig], sampler: 
         p = replace(problem, config=cfg)
         post = sampler(p)
         for j, name in enumerate(names):
-            rows.append({"config": label, "name": name, "unit": PARAM_UNITS.get(name, ""),
-                         "mean": float(post.mean[j]), "sd": float(post.sd[j]),
-                         "error": float(abs(post.mean[j] - truth[name])) if truth and name in truth else float("nan"),
-                         "n_simulations": post.n_simulations, "n_failed": post.n_failed})
+            rows.append(
+                {
+                    "config": label,
+                    "name": name,
+                    "unit": PARAM_UNITS.get(name, ""),
+                    "mean": float(post.mean[j]),
+                    "sd": float(post.sd[j]),
+                    "error": float(abs(post.mean[j] - truth[name])) if truth and name in truth else float("nan"),
+                    "n_simulations": post.n_simulations,
+                    "n_failed": post.n_failed,
+                }
+            )
     if figure_path is not None:
-        _plot_vs(rows, names, "config", figure_path, xlabel="numerical configuration",
-                 truth=np.array([truth[n] for n in names]) if truth else None)
+        _plot_vs(
+            rows,
+            names,
+            "config",
+            figure_path,
+            xlabel="numerical configuration",
+            truth=np.array([truth[n] for n in names]) if truth else None,
+        )
     return rows
 
 

@@ -39,6 +39,7 @@ The sampler is an ask/tell state machine (``SMCSampler.ask() -> thetas or None``
 randomness comes from ``SeedSequence(seed, spawn_key=(generation, step, stream))``, so the run
 is deterministic for a seed and independent of how batches were evaluated.
 """
+
 from __future__ import annotations
 
 import math
@@ -73,12 +74,27 @@ class SMCSampler:
     >>> post = s.result()
     """
 
-    def __init__(self, prior: Prior, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *,
-                 ess_fraction: float = 0.5, target_acceptance: float = 0.3, p_move: float = 0.8,
-                 min_moves: int = 2, max_moves: int = 4,
-                 max_generations: int = 200, init_scale: float | None = None, kernel: str = "rw",
-                 independent_inflation: float = 1.5, init_factor: int = 1, reference=None,
-                 delayed: bool = False, coords: str | None = None, symmetry=None):
+    def __init__(
+        self,
+        prior: Prior,
+        n_particles: int = DEFAULT_PARTICLES,
+        seed: int = 0,
+        *,
+        ess_fraction: float = 0.5,
+        target_acceptance: float = 0.3,
+        p_move: float = 0.8,
+        min_moves: int = 2,
+        max_moves: int = 4,
+        max_generations: int = 200,
+        init_scale: float | None = None,
+        kernel: str = "rw",
+        independent_inflation: float = 1.5,
+        init_factor: int = 1,
+        reference=None,
+        delayed: bool = False,
+        coords: str | None = None,
+        symmetry=None,
+    ):
         if not isinstance(prior, Prior):
             raise ValueError("prior must be a Prior")
         if int(n_particles) < 10:
@@ -101,7 +117,7 @@ class SMCSampler:
         self.kernel = kernel
         self.coords = check_moves(kernel, coords, prior, reference, self.delayed, symmetry)
         self.symmetry = symmetry
-        self._moves = moves_for(kernel, self.coords, independent_inflation)   # the proposals of even and odd steps
+        self._moves = moves_for(kernel, self.coords, independent_inflation)  # the proposals of even and odd steps
         self._log_jac: np.ndarray | None = None
         self.independent_inflation = float(independent_inflation)
         self.prior = prior
@@ -112,7 +128,7 @@ class SMCSampler:
         self.p_move = float(p_move)
         self.min_moves, self.max_moves = int(min_moves), int(max_moves)
         self.max_generations = int(max_generations)
-        d_walk = prior.ndim - 1 if symmetry is not None else prior.ndim   # the group move samples the last one
+        d_walk = prior.ndim - 1 if symmetry is not None else prior.ndim  # the group move samples the last one
         self.scale = float(init_scale) if init_scale is not None else 2.38 / math.sqrt(max(d_walk, 1))
         self.phi = 0.0
         self.generation = 0
@@ -124,7 +140,7 @@ class SMCSampler:
         self.n_failed = 0
         self.history: list[dict] = []
         self.last_ess = float(self.n)
-        self._phase = "init"          # init -> move -> ... -> done
+        self._phase = "init"  # init -> move -> ... -> done
         self._pending: np.ndarray | None = None
         self._pending_idx: np.ndarray | None = None
         self._chol: np.ndarray | None = None
@@ -210,10 +226,11 @@ class SMCSampler:
         if self.reference is not None:  # pi_phi ∝ q^(1 - phi) (p L)^phi; p is flat on the box
             lq = self.reference.logpdf(np.concatenate([self.theta[idx], props]))
             with np.errstate(invalid="ignore"):
-                ref = (1.0 - self.phi) * (lq[idx.size:] - lq[: idx.size])
+                ref = (1.0 - self.phi) * (lq[idx.size :] - lq[: idx.size])
         hastings = (self._log_q_old, self._log_q_new) if self._log_q_new is not None else None
-        log_alpha = log_acceptance(self.phi, ev.loglik, self.ev.loglik[idx], reference=ref, log_q=hastings,
-                                   log_jac=self._log_jac)
+        log_alpha = log_acceptance(
+            self.phi, ev.loglik, self.ev.loglik[idx], reference=ref, log_q=hastings, log_jac=self._log_jac
+        )
         u = self._rng(_ACCEPT, self._step).random(idx.size)
         acc = np.log(u) < log_alpha
         self._finish_move(self._accept(idx, props, acc, ev))
@@ -292,8 +309,15 @@ class SMCSampler:
         self.ev = self.ev.take(idx)
         if self.delayed:
             self.ll_cheap = self.ll_cheap[idx]
-        self.history.append({"generation": self.generation, "phi": phi_new, "ess": self.last_ess,
-                             "log_evidence_increment": inc, "n_unique_after_resample": int(np.unique(idx).size)})
+        self.history.append(
+            {
+                "generation": self.generation,
+                "phi": phi_new,
+                "ess": self.last_ess,
+                "log_evidence_increment": inc,
+                "n_unique_after_resample": int(np.unique(idx).size),
+            }
+        )
         self.phi = phi_new
         self._phase = "move"
         self._step = 0
@@ -333,8 +357,10 @@ class SMCSampler:
         """Move every particle along the symmetry's orbit by an exact draw (vfcore.inference.symmetry);
         no simulation: the waveforms stay, the products scale."""
         from .symmetry import move_particles
-        self.theta, self.ev, d = move_particles(self.symmetry, self.theta, self.ev, self.phi,
-                                                self._rng(_GROUP, self._step))
+
+        self.theta, self.ev, d = move_particles(
+            self.symmetry, self.theta, self.ev, self.phi, self._rng(_GROUP, self._step)
+        )
         if self.delayed:
             self.ll_cheap = np.where(np.isfinite(self.ll_cheap), self.ll_cheap + d, self.ll_cheap)
 
@@ -361,9 +387,15 @@ class SMCSampler:
             self._n_moves = int(min(max(n, self.min_moves), self.max_moves))
         if self._step >= self._n_moves:
             h = self.history[-1]
-            h.update({"moves": self._step, "acceptance": float(np.mean(self._gen_acc)), "scale": self.scale,
-                      "n_simulations": self._gen_sims,
-                      "n_unique_after_moves": self._n_distinct()})
+            h.update(
+                {
+                    "moves": self._step,
+                    "acceptance": float(np.mean(self._gen_acc)),
+                    "scale": self.scale,
+                    "n_simulations": self._gen_sims,
+                    "n_unique_after_moves": self._n_distinct(),
+                }
+            )
             self._advance()
 
     # ------------------------------------------------------------------ result
@@ -375,9 +407,21 @@ class SMCSampler:
         return posterior_of(self, rng, obs_gaw=obs_gaw, fps=fps)
 
 
-def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES, seed: int = 0, *, map: Callable = map,
-        chunk_size: int = 32, screen=None, symmetry: str | None = "auto", runs: int = 1, run_rule: str = "loglik",
-        run_gap: float | None = None, **options) -> Posterior:
+def smc(
+    target,
+    prior: Prior | None = None,
+    n_particles: int = DEFAULT_PARTICLES,
+    seed: int = 0,
+    *,
+    map: Callable = map,
+    chunk_size: int = 32,
+    screen=None,
+    symmetry: str | None = "auto",
+    runs: int = 1,
+    run_rule: str = "loglik",
+    run_gap: float | None = None,
+    **options,
+) -> Posterior:
     """Run likelihood-tempered SMC to completion.
 
     ``target``: a ``Problem`` or a callable ``thetas (k, d) -> loglik (k,)`` (then ``prior`` is
@@ -397,9 +441,22 @@ def smc(target, prior: Prior | None = None, n_particles: int = DEFAULT_PARTICLES
     """
     if int(runs) != 1:
         from .runs import pool_runs, run_seeds
+
         seeds = run_seeds(seed, runs)
-        posts = [smc(target, prior, n_particles, s, map=map, chunk_size=chunk_size, screen=screen, symmetry=symmetry,
-                     **options) for s in seeds]
+        posts = [
+            smc(
+                target,
+                prior,
+                n_particles,
+                s,
+                map=map,
+                chunk_size=chunk_size,
+                screen=screen,
+                symmetry=symmetry,
+                **options,
+            )
+            for s in seeds
+        ]
         return pool_runs(posts, seed=seed, rule=run_rule, gap=run_gap)
     prior, obs, fps, fn = resolve_target(target, prior)
     cheap = resolve_target(screen, prior)[3] if screen is not None else None
@@ -417,6 +474,7 @@ def _scale_group(target, prior: Prior, symmetry: str | None):
         raise ValueError(f"symmetry must be 'auto' or None, got {symmetry!r}")
     if symmetry == "auto" and isinstance(target, Problem) and prior.names == target.prior.names:
         from .symmetry import scale_group
+
         return scale_group(target)
     return None
 
@@ -454,9 +512,17 @@ def run_together(samplers: list, evaluate: Callable, on_done: Callable[[int], No
             samplers[i].tell(ev)
 
 
-def smc_many(target, jobs, prior: Prior | None = None, *, map: Callable = map, chunk_size: int = 32,
-             symmetry: str | None = "auto", on_done: Callable[[int, Posterior], None] | None = None,
-             **options) -> list[Posterior]:
+def smc_many(
+    target,
+    jobs,
+    prior: Prior | None = None,
+    *,
+    map: Callable = map,
+    chunk_size: int = 32,
+    symmetry: str | None = "auto",
+    on_done: Callable[[int, Posterior], None] | None = None,
+    **options,
+) -> list[Posterior]:
     """Several runs of :func:`smc` on one target (``jobs``: ``(n_particles, seed)`` each), run together
     (:func:`run_together`): at each round the pending batch of every unfinished run goes to ``map`` as one
     batch, so a worker's lock-step blocks are wider (:ref:`validation-model-speed`) and a cluster has every run's
@@ -480,5 +546,6 @@ def smc_many(target, jobs, prior: Prior | None = None, *, map: Callable = map, c
         posts[i] = _finished(samplers[i], target, obs, fps)
         if on_done is not None:
             on_done(i, posts[i])
+
     run_together(samplers, evaluate, finish)
     return posts

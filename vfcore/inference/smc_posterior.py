@@ -1,5 +1,6 @@
 """A finished SMC run (:class:`.smc.SMCSampler`) as a posterior: its equally weighted particles, evidence,
 per-generation history and the warning of a degenerate final ensemble."""
+
 from __future__ import annotations
 
 import math
@@ -25,15 +26,27 @@ def posterior_of(sampler, rng: np.random.Generator, *, obs_gaw=None, fps: float 
     acc = last.get("acceptance", 1.0)
     uniq = last.get("n_unique_after_moves", s.n)
     if uniq < 0.5 * s.n or acc < 0.05:
-        msgs.append(f"DEGENERATE ENSEMBLE (smc): final generation acceptance {acc:.3f}, {uniq} distinct "
-                    f"particles of {s.n}; increase max_moves or n_particles.")
+        msgs.append(
+            f"DEGENERATE ENSEMBLE (smc): final generation acceptance {acc:.3f}, {uniq} distinct "
+            f"particles of {s.n}; increase max_moves or n_particles."
+        )
         warnings.warn(msgs[-1], DegenerateEnsembleWarning, stacklevel=3)
     logw = np.full(s.n, -math.log(s.n))
-    post = Posterior.from_weighted(s.prior.names, s.theta, logw, rng=rng,
-                                   log_evidence=s.log_evidence,
-                                   log_evidence_se=math.sqrt(s.log_evidence_var),
-                                   n_simulations=s.n_simulations, n_failed=s.n_failed, method="smc",
-                                   check=False, warnings=msgs, obs_gaw=obs_gaw, fps=fps)
+    post = Posterior.from_weighted(
+        s.prior.names,
+        s.theta,
+        logw,
+        rng=rng,
+        log_evidence=s.log_evidence,
+        log_evidence_se=math.sqrt(s.log_evidence_var),
+        n_simulations=s.n_simulations,
+        n_failed=s.n_failed,
+        method="smc",
+        check=False,
+        warnings=msgs,
+        obs_gaw=obs_gaw,
+        fps=fps,
+    )
     post.ess = s.last_ess
     post.pareto_k = float("nan")
     if s.ev is not None and s.ev.gaw is not None:
@@ -41,10 +54,18 @@ def posterior_of(sampler, rng: np.random.Generator, *, obs_gaw=None, fps: float 
         post.predictive_index = np.arange(s.n)
     if s.ev is not None and len(s.ev.loglik):
         post.info["max_loglik"] = float(np.max(s.ev.loglik))
-    post.info.update({"generations": s.history, "n_generations": s.generation,
-                      "n_particles": s.n, "seed": s.seed, "temperatures": [h["phi"] for h in s.history],
-                      "reference": s.reference is not None})
+    post.info.update(
+        {
+            "generations": s.history,
+            "n_generations": s.generation,
+            "n_particles": s.n,
+            "seed": s.seed,
+            "temperatures": [h["phi"] for h in s.history],
+            "reference": s.reference is not None,
+        }
+    )
     if s.delayed:
-        post.info.update({"delayed_acceptance": True, "n_screened": s.n_screened,
-                          "n_screen_rejected": s.n_screen_rejected})
+        post.info.update(
+            {"delayed_acceptance": True, "n_screened": s.n_screened, "n_screen_rejected": s.n_screen_rejected}
+        )
     return post

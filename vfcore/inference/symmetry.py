@@ -23,6 +23,7 @@ log-likelihood, is unchanged, and the products scale in closed form (contact pre
 contact impulse by ``c``, the flow rate by ``sqrt(c)``, because the Bernoulli velocity is
 ``sqrt(2 p_sub / rho_air)`` and the air's density is not one of the six).
 """
+
 from __future__ import annotations
 
 import math
@@ -100,7 +101,9 @@ class ScaleGroup:
         out[:, self.idx] *= np.exp(t)[:, None]
         return out
 
-    def move(self, theta: np.ndarray, phi: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def move(
+        self, theta: np.ndarray, phi: float, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One group move of every row of ``theta`` (n, d) under the tempered target ``p L^phi``.
 
         Returns ``(theta_new, t, d_offset)``: the moved particles, the log-scale each was moved by
@@ -110,7 +113,7 @@ class ScaleGroup:
         n = theta.shape[0]
         k = float(self.idx.size)
         t_lo, t_hi = self.ray(theta)
-        t_lo, t_hi = np.minimum(t_lo, 0.0), np.maximum(t_hi, 0.0)   # a particle on the box's face stays inside
+        t_lo, t_hi = np.minimum(t_lo, 0.0), np.maximum(t_hi, 0.0)  # a particle on the box's face stays inside
         if self.offset is None or phi == 0.0:
             t = _truncated_exponential(k, t_lo, t_hi, rng.random(n))
             return self.scaled(theta, t), t, np.zeros(n)
@@ -131,10 +134,10 @@ class ScaleGroup:
         proposal follows the conditional closely."""
         n, g = theta.shape[0], GRID_CELLS
         frac = (np.arange(g) + 0.5) / g
-        mids = t_lo[:, None] + frac[None, :] * (t_hi - t_lo)[:, None]             # (n, g)
+        mids = t_lo[:, None] + frac[None, :] * (t_hi - t_lo)[:, None]  # (n, g)
         grid = np.repeat(theta, g, axis=0)
         grid[:, self.idx] *= np.exp(mids.reshape(-1))[:, None]
-        log_f_mid = (k * mids + phi * self.offset(grid).reshape(n, g))
+        log_f_mid = k * mids + phi * self.offset(grid).reshape(n, g)
         log_f_mid = np.where(np.isfinite(log_f_mid), log_f_mid, -np.inf)
         m = np.max(log_f_mid, axis=1, keepdims=True)
         cell_w = np.exp(log_f_mid - m)
@@ -205,12 +208,14 @@ def scale_group(problem) -> ScaleGroup | None:
     offset = None
     if problem.measurements:
         from .problem import measurement_terms
+
         meas = dict(problem.measurements)
-        cols = {n: names.index(n) for n in meas}      # measured names are estimated ones
+        cols = {n: names.index(n) for n in meas}  # measured names are estimated ones
 
         def offset(thetas: np.ndarray) -> np.ndarray:
             th = np.atleast_2d(thetas)
             return measurement_terms({n: th[:, j] for n, j in cols.items()}, meas)
+
     return ScaleGroup(prior, idx, offset)
 
 

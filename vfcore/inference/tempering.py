@@ -5,6 +5,7 @@ weights ``L^(phi' - phi)`` equals a target (adaptive tempering, Jasra et al. 201
 the conditional ESS of Zhou, Johansen & Aston 2016). The evidence increment is ``log mean_i L_i^(phi' - phi)``
 (Del Moral, Doucet & Jasra 2006), its variance the delta-method one of the normalised weights.
 """
+
 from __future__ import annotations
 
 import math

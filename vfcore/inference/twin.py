@@ -7,6 +7,7 @@ independent Gaussian noise of standard deviation ``sigma_e``. Truths at which th
 fails or does not phonate (the observation would be rejected by ``validate_observation``)
 are redrawn: the inference presupposes a recording of an oscillating fold.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -21,18 +22,28 @@ from .problem import Problem, validate_observation
 
 @dataclass(frozen=True, eq=False)
 class Twin:
-    truth: np.ndarray            # (d,) estimated parameters, prior.names order
+    truth: np.ndarray  # (d,) estimated parameters, prior.names order
     problem: Problem
-    clean_gaw: np.ndarray        # noise-free observed window
-    n_redraws: int               # truths rejected (failed / not phonating)
+    clean_gaw: np.ndarray  # noise-free observed window
+    n_redraws: int  # truths rejected (failed / not phonating)
 
     @property
     def truth_dict(self) -> dict[str, float]:
         return dict(zip(self.problem.prior.names, map(float, self.truth)))
 
 
-def make_twin(prior: Prior, config: SimConfig, seed: int, *, sigma_e: float = 1.0, n_obs: int = 400,
-              offset: int = 7, truth=None, simulate_fn: Callable | None = None, max_tries: int = 50) -> Twin:
+def make_twin(
+    prior: Prior,
+    config: SimConfig,
+    seed: int,
+    *,
+    sigma_e: float = 1.0,
+    n_obs: int = 400,
+    offset: int = 7,
+    truth=None,
+    simulate_fn: Callable | None = None,
+    max_tries: int = 50,
+) -> Twin:
     """Build a twin data set and its Problem (deterministic in ``seed``)."""
     if simulate_fn is None:
         from vfcore.forward import simulate as simulate_fn
@@ -43,7 +54,7 @@ def make_twin(prior: Prior, config: SimConfig, seed: int, *, sigma_e: float = 1.
         theta = np.asarray(truth, dtype=float) if truth is not None else prior.sample(1, rng_truth)[0]
         r = simulate_fn(prior.to_params(theta), config)
         if r.ok and r.gaw.size >= offset + n_obs:
-            clean = np.asarray(r.gaw[offset:offset + n_obs], dtype=float)
+            clean = np.asarray(r.gaw[offset : offset + n_obs], dtype=float)
             y = clean + sigma_e * rng_noise.standard_normal(n_obs)
             try:
                 validate_observation(clean, config.fps)

@@ -1,4 +1,5 @@
 """Shipped vocal-fold meshes and their boundary topology (SI units: metres)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -84,8 +85,14 @@ def make_fold_mesh(points_mm: np.ndarray, triangles: np.ndarray, layer: np.ndarr
     tol = 1e-9
     fixed = (np.abs(pts[:, 0]) < tol) | (np.abs(pts[:, 1]) < tol)
     surface = _boundary_chain(pts, triangles, fixed)
-    return FoldMesh(points=pts, triangles=np.asarray(triangles, dtype=np.int64),
-                    layer=np.asarray(layer, dtype=np.int64), fixed=fixed, surface=surface, name=name)
+    return FoldMesh(
+        points=pts,
+        triangles=np.asarray(triangles, dtype=np.int64),
+        layer=np.asarray(layer, dtype=np.int64),
+        fixed=fixed,
+        surface=surface,
+        name=name,
+    )
 
 
 @lru_cache(maxsize=8)

@@ -15,19 +15,20 @@ the cover on the medial side (under the 5.2-mm fillet), body elsewhere.
 
 gmsh is needed only to regenerate the shipped meshes (``scripts/make_meshes.py``).
 """
+
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-WIDTH = 8.4            # mm, medial-lateral extent
-HEIGHT = 10.51         # mm, inferior-superior extent
-SLOPE_DEG = 50.0       # inferior surface angle
-R_MEDIAL = 5.2         # mm, lower medial fillet
-R_SUPERIOR = 1.0       # mm, upper medial fillet
-COVER = 1.0            # mm, cover thickness
-LIGAMENT = 0.6         # mm, ligament thickness
+WIDTH = 8.4  # mm, medial-lateral extent
+HEIGHT = 10.51  # mm, inferior-superior extent
+SLOPE_DEG = 50.0  # inferior surface angle
+R_MEDIAL = 5.2  # mm, lower medial fillet
+R_SUPERIOR = 1.0  # mm, upper medial fillet
+COVER = 1.0  # mm, cover thickness
+LIGAMENT = 0.6  # mm, ligament thickness
 
 BODY, LIGAMENT_LAYER, COVER_LAYER = 0, 1, 2
 LAYER_NAMES = ("body", "ligament", "cover")
@@ -36,22 +37,31 @@ LAYER_NAMES = ("body", "ligament", "cover")
 def profile_points() -> dict[str, tuple[float, float]]:
     """Key points of the profile and the layer boundaries (mm)."""
     s, c = math.sin(math.radians(SLOPE_DEG)), math.cos(math.radians(SLOPE_DEG))
-    turn = math.radians(90.0 - SLOPE_DEG)          # angle between inferior line and vertical
-    z_medial = HEIGHT - R_SUPERIOR                  # height of the most-medial point
+    turn = math.radians(90.0 - SLOPE_DEG)  # angle between inferior line and vertical
+    z_medial = HEIGHT - R_SUPERIOR  # height of the most-medial point
     z_corner = z_medial - R_MEDIAL * math.tan(turn / 2)
     b = WIDTH - z_corner / math.tan(math.radians(SLOPE_DEG))
-    c1 = (WIDTH - R_MEDIAL, z_medial)               # centre of the medial fillet
-    c2 = (WIDTH - R_SUPERIOR, z_medial)             # centre of the superior fillet
-    ang = -turn                                     # direction centre -> tangent point on inferior line
+    c1 = (WIDTH - R_MEDIAL, z_medial)  # centre of the medial fillet
+    c2 = (WIDTH - R_SUPERIOR, z_medial)  # centre of the superior fillet
+    ang = -turn  # direction centre -> tangent point on inferior line
 
     def on_c1(r):
         return (c1[0] + r * math.cos(ang), c1[1] + r * math.sin(ang))
 
     pts = {
-        "A": (0.0, 0.0), "B": (b, 0.0), "T1": on_c1(R_MEDIAL), "M": (WIDTH, z_medial),
-        "T4": (c2[0], HEIGHT), "E": (0.0, HEIGHT), "C1": c1, "C2": c2,
-        "Bp": (b - COVER / s, 0.0), "T1p": on_c1(R_MEDIAL - COVER), "Ep": (0.0, HEIGHT - COVER),
-        "Lt": (WIDTH - COVER - LIGAMENT, z_medial), "L1": on_c1(R_MEDIAL - COVER - LIGAMENT),
+        "A": (0.0, 0.0),
+        "B": (b, 0.0),
+        "T1": on_c1(R_MEDIAL),
+        "M": (WIDTH, z_medial),
+        "T4": (c2[0], HEIGHT),
+        "E": (0.0, HEIGHT),
+        "C1": c1,
+        "C2": c2,
+        "Bp": (b - COVER / s, 0.0),
+        "T1p": on_c1(R_MEDIAL - COVER),
+        "Ep": (0.0, HEIGHT - COVER),
+        "Lt": (WIDTH - COVER - LIGAMENT, z_medial),
+        "L1": on_c1(R_MEDIAL - COVER - LIGAMENT),
     }
     # the cover's inner boundary meets the superior fillet centre because R_SUPERIOR == COVER
     assert abs(R_SUPERIOR - COVER) < 1e-12
@@ -75,20 +85,43 @@ def build_mesh(lc: float, algorithm: int = 6) -> tuple[np.ndarray, np.ndarray, n
         tag = {k: geo.addPoint(x, z, 0.0, lc) for k, (x, z) in p.items()}
         L, Arc = geo.addLine, geo.addCircleArc
         c = {
-            "base_in": L(tag["A"], tag["Bp"]), "base_out": L(tag["Bp"], tag["B"]),
-            "inferior": L(tag["B"], tag["T1"]), "medial": Arc(tag["T1"], tag["C1"], tag["M"]),
-            "fillet": Arc(tag["M"], tag["C2"], tag["T4"]), "superior": L(tag["T4"], tag["E"]),
-            "wall_up": L(tag["E"], tag["Ep"]), "wall_lo": L(tag["Ep"], tag["A"]),
-            "cov_inf": L(tag["Bp"], tag["T1p"]), "cov_arc": Arc(tag["T1p"], tag["C1"], tag["C2"]),
-            "lig_top": L(tag["C2"], tag["Lt"]), "cov_sup": L(tag["Lt"], tag["Ep"]),
-            "lig_arc": Arc(tag["Lt"], tag["C1"], tag["L1"]), "lig_inf": L(tag["L1"], tag["T1p"]),
+            "base_in": L(tag["A"], tag["Bp"]),
+            "base_out": L(tag["Bp"], tag["B"]),
+            "inferior": L(tag["B"], tag["T1"]),
+            "medial": Arc(tag["T1"], tag["C1"], tag["M"]),
+            "fillet": Arc(tag["M"], tag["C2"], tag["T4"]),
+            "superior": L(tag["T4"], tag["E"]),
+            "wall_up": L(tag["E"], tag["Ep"]),
+            "wall_lo": L(tag["Ep"], tag["A"]),
+            "cov_inf": L(tag["Bp"], tag["T1p"]),
+            "cov_arc": Arc(tag["T1p"], tag["C1"], tag["C2"]),
+            "lig_top": L(tag["C2"], tag["Lt"]),
+            "cov_sup": L(tag["Lt"], tag["Ep"]),
+            "lig_arc": Arc(tag["Lt"], tag["C1"], tag["L1"]),
+            "lig_inf": L(tag["L1"], tag["T1p"]),
         }
-        cover = geo.addPlaneSurface([geo.addCurveLoop([
-            c["inferior"], c["medial"], c["fillet"], c["superior"], c["wall_up"], -c["cov_sup"],
-            -c["lig_top"], -c["cov_arc"], -c["cov_inf"], c["base_out"]])])
+        cover = geo.addPlaneSurface(
+            [
+                geo.addCurveLoop(
+                    [
+                        c["inferior"],
+                        c["medial"],
+                        c["fillet"],
+                        c["superior"],
+                        c["wall_up"],
+                        -c["cov_sup"],
+                        -c["lig_top"],
+                        -c["cov_arc"],
+                        -c["cov_inf"],
+                        c["base_out"],
+                    ]
+                )
+            ]
+        )
         lig = geo.addPlaneSurface([geo.addCurveLoop([c["cov_arc"], c["lig_top"], c["lig_arc"], c["lig_inf"]])])
-        body = geo.addPlaneSurface([geo.addCurveLoop([
-            c["base_in"], c["cov_inf"], -c["lig_inf"], -c["lig_arc"], c["cov_sup"], c["wall_lo"]])])
+        body = geo.addPlaneSurface(
+            [geo.addCurveLoop([c["base_in"], c["cov_inf"], -c["lig_inf"], -c["lig_arc"], c["cov_sup"], c["wall_lo"]])]
+        )
         geo.synchronize()
         for name, s in (("body", body), ("ligament", lig), ("cover", cover)):
             gmsh.model.addPhysicalGroup(2, [s], name=name)

@@ -6,6 +6,7 @@ a field by name instead of by its place among some fifty positional arguments. S
 sample (the scalar kernel, a GPU thread's columns); the lock-step kernel's per-sample fields carry the sample
 index first (see :func:`._batch_kernels.integrate_many`). n = solver dofs, m = free-surface nodes.
 """
+
 from __future__ import annotations
 
 from collections import namedtuple

@@ -13,12 +13,20 @@ The loop around them is a copy of ``integrate_ws``'s, not shared phase functions
 and argument tuples built per sample and step, which cost the lock-step kernel 5-9 % on the coarse mesh and
 the scalar one 4-8 %.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from ._kernels import contact_correct_ws, contact_layer_ws, projection_impulse, step_coefficients, subglottal_step, surface_loads
+from ._kernels import (
+    contact_correct_ws,
+    contact_layer_ws,
+    projection_impulse,
+    step_coefficients,
+    subglottal_step,
+    surface_loads,
+)
 
 
 @njit(cache=True)
@@ -153,8 +161,9 @@ def integrate_many(stp, pat, mod, cpl, stop, mat, st, out, status):
                     xs[j] = sX[j]
                     zs[j] = sZ[j]
                 gap[j] = xm - xs[j]
-            surface_loads(xs, zs, sX, sZ, gap, p_in[b], p_sup, sep_ratio[b], closed_tol, g_reg, fx[s], fz[s],
-                          pres, flow)
+            surface_loads(
+                xs, zs, sX, sZ, gap, p_in[b], p_sup, sep_ratio[b], closed_tol, g_reg, fx[s], fz[s], pres, flow
+            )
         for i in range(n):
             for s in range(nb):
                 y1[i, s] = m_v * v[i, s] + m_a * a[i, s]
@@ -174,17 +183,37 @@ def integrate_many(stp, pat, mod, cpl, stop, mat, st, out, status):
         chol_solve_many(Lp, Lj, Lx, r, nb)
         for i in range(n):
             for s in range(nb):
-                r[i, s] += u[i, s]          # r is now u_{n+1} before contact
+                r[i, s] += u[i, s]  # r is now u_{n+1} before contact
         for s in range(nb):
             b = orig[s]
             # in place on the sample's (strided) column; returns at once when nothing penetrates
             if layer:
-                settled = contact_layer_ws(r[:, s], u[:, s], h, wl, sdx, sX, x_mid[b], G[b], kc[b], cc[b], lam[s],
-                                           active[s], 50, ws_u0, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb)
+                settled = contact_layer_ws(
+                    r[:, s],
+                    u[:, s],
+                    h,
+                    wl,
+                    sdx,
+                    sX,
+                    x_mid[b],
+                    G[b],
+                    kc[b],
+                    cc[b],
+                    lam[s],
+                    active[s],
+                    50,
+                    ws_u0,
+                    ws_S,
+                    ws_rhs,
+                    ws_idx,
+                    ws_keff,
+                    ws_bb,
+                )
             else:
-                settled = contact_correct_ws(r[:, s], sdx, sX, x_mid[b], G[b], lam[s], active[s], 50, ws_u0, ws_S,
-                                             ws_rhs, ws_idx)
-            unsettled[s] = settled < 0      # contact did not settle: fails with status -k below
+                settled = contact_correct_ws(
+                    r[:, s], sdx, sX, x_mid[b], G[b], lam[s], active[s], 50, ws_u0, ws_S, ws_rhs, ws_idx
+                )
+            unsettled[s] = settled < 0  # contact did not settle: fails with status -k below
         for s in range(nb):
             umax[s] = 0.0
             vmax[s] = 0.0

@@ -23,6 +23,7 @@ Floating point: the kernels use no fast-math, and :func:`launch` compiles with N
 off (``fma=0``; numba exposes no switch for it, see :func:`_no_fma_contraction`), so each product and sum
 is rounded as on the CPU and the GPU reproduces the CPU kernels' bits (docs/gpu.md).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -47,10 +48,56 @@ N_WORK_M = 10
 
 
 @njit(cache=True)
-def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flow, blowup, flow_coef, layer, traj_every,
-               stop_window, stop_width, stop_vel, indptr, indices, Lp, Lj, sdx, sdz, sX, sZ, kdm, Lx, G, uva, spar,
-               sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out, p_in_out, traj_u, traj_v,
-               status, stop_out):
+def run_sample(
+    s,
+    n_steps,
+    h,
+    am,
+    af,
+    beta,
+    gamma,
+    p_sup,
+    closed_tol,
+    g_reg,
+    flow,
+    blowup,
+    flow_coef,
+    layer,
+    traj_every,
+    stop_window,
+    stop_width,
+    stop_vel,
+    indptr,
+    indices,
+    Lp,
+    Lj,
+    sdx,
+    sdz,
+    sX,
+    sZ,
+    kdm,
+    Lx,
+    G,
+    uva,
+    spar,
+    sub_coef,
+    kcc,
+    wn,
+    wm,
+    active,
+    idx,
+    S,
+    subw,
+    width,
+    gsep,
+    lam_out,
+    proj_out,
+    p_in_out,
+    traj_u,
+    traj_v,
+    status,
+    stop_out,
+):
     """Integrate sample ``s`` (a column of the interleaved arrays; see the module docstring) and write its
     status (0, the step it diverged at, or minus the step its contact did not settle at).
 
@@ -64,11 +111,39 @@ def run_sample(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flo
         Stop(stop_window, stop_width, stop_vel),
         Matrices(kdm[0, :, s], kdm[1, :, s], kdm[2, :, s], Lx[:, s], G[:, :, s]),
         State(uva[0, :, s], uva[1, :, s], uva[2, :, s]),
-        Outputs(width[:, s], gsep[:, s], lam_out[:, :, s], proj_out[:, :, s], p_in_out[:, s], traj_every,
-                traj_u[:, :, s], traj_v[:, :, s], stop_out[s:s + 1]),
-        Work(wn[0, :, s], wn[1, :, s], wn[2, :, s], wn[3, :, s], wm[0, :, s], wm[1, :, s], wm[2, :, s], wm[3, :, s],
-             wm[4, :, s], wm[5, :, s], wm[6, :, s], active[:, s], S[:, :, s], wm[7, :, s], idx[:, s], wm[8, :, s],
-             wm[9, :, s], subw[0, :, s], subw[1, :, s]))
+        Outputs(
+            width[:, s],
+            gsep[:, s],
+            lam_out[:, :, s],
+            proj_out[:, :, s],
+            p_in_out[:, s],
+            traj_every,
+            traj_u[:, :, s],
+            traj_v[:, :, s],
+            stop_out[s : s + 1],
+        ),
+        Work(
+            wn[0, :, s],
+            wn[1, :, s],
+            wn[2, :, s],
+            wn[3, :, s],
+            wm[0, :, s],
+            wm[1, :, s],
+            wm[2, :, s],
+            wm[3, :, s],
+            wm[4, :, s],
+            wm[5, :, s],
+            wm[6, :, s],
+            active[:, s],
+            S[:, :, s],
+            wm[7, :, s],
+            idx[:, s],
+            wm[8, :, s],
+            wm[9, :, s],
+            subw[0, :, s],
+            subw[1, :, s],
+        ),
+    )
 
 
 if SIMULATOR:
@@ -85,17 +160,109 @@ else:
 
 
 @cuda.jit
-def integrate_kernel(nb, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flow, blowup, flow_coef, layer,
-                     traj_every, stop_window, stop_width, stop_vel, indptr, indices, Lp, Lj, sdx, sdz, sX, sZ, kdm, Lx,
-                     G, uva, spar, sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out,
-                     p_in_out, traj_u, traj_v, status, stop_out):
+def integrate_kernel(
+    nb,
+    n_steps,
+    h,
+    am,
+    af,
+    beta,
+    gamma,
+    p_sup,
+    closed_tol,
+    g_reg,
+    flow,
+    blowup,
+    flow_coef,
+    layer,
+    traj_every,
+    stop_window,
+    stop_width,
+    stop_vel,
+    indptr,
+    indices,
+    Lp,
+    Lj,
+    sdx,
+    sdz,
+    sX,
+    sZ,
+    kdm,
+    Lx,
+    G,
+    uva,
+    spar,
+    sub_coef,
+    kcc,
+    wn,
+    wm,
+    active,
+    idx,
+    S,
+    subw,
+    width,
+    gsep,
+    lam_out,
+    proj_out,
+    p_in_out,
+    traj_u,
+    traj_v,
+    status,
+    stop_out,
+):
     """One thread per sample; threads past ``nb`` (the last block's padding) do nothing."""
     s = cuda.grid(1)
     if s < nb:
-        _run(s, n_steps, h, am, af, beta, gamma, p_sup, closed_tol, g_reg, flow, blowup, flow_coef, layer, traj_every,
-             stop_window, stop_width, stop_vel, indptr, indices, Lp, Lj, sdx, sdz, sX, sZ, kdm, Lx, G, uva, spar,
-             sub_coef, kcc, wn, wm, active, idx, S, subw, width, gsep, lam_out, proj_out, p_in_out, traj_u, traj_v,
-             status, stop_out)
+        _run(
+            s,
+            n_steps,
+            h,
+            am,
+            af,
+            beta,
+            gamma,
+            p_sup,
+            closed_tol,
+            g_reg,
+            flow,
+            blowup,
+            flow_coef,
+            layer,
+            traj_every,
+            stop_window,
+            stop_width,
+            stop_vel,
+            indptr,
+            indices,
+            Lp,
+            Lj,
+            sdx,
+            sdz,
+            sX,
+            sZ,
+            kdm,
+            Lx,
+            G,
+            uva,
+            spar,
+            sub_coef,
+            kcc,
+            wn,
+            wm,
+            active,
+            idx,
+            S,
+            subw,
+            width,
+            gsep,
+            lam_out,
+            proj_out,
+            p_in_out,
+            traj_u,
+            traj_v,
+            status,
+            stop_out,
+        )
 
 
 @cuda.jit
@@ -122,6 +289,7 @@ def _no_fma_contraction():
     """
     try:
         from numba.cuda.cudadrv import nvvm
+
         orig = nvvm.compile_ir
     except (ImportError, AttributeError):
         yield False

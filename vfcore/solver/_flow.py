@@ -27,6 +27,7 @@ the midline), and the lumping by halves stays the paper's:
 ``w(s) = s^2 (3 - 2 s)`` on [0, 1]. When the glottis is open wider than ``g_reg`` with one narrowest node and no
 narrowing behind the separation, every weight is 0 or 1 and the load equals the paper's to rounding. :ref:`continuous-model`.
 """
+
 from __future__ import annotations
 
 from numba import njit
@@ -76,7 +77,7 @@ def surface_loads_continuous(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, g_r
     gmin = gap[imin]
     dp = p_sub - p_sup
     for i in range(m):
-        pres[i] = 0.0                       # p - p_sup, accumulated
+        pres[i] = 0.0  # p - p_sup, accumulated
     iclose = -1
     gsep = 0.0
     if gmin <= 0.0:

@@ -4,6 +4,7 @@ Factor storage: the lower Cholesky factor L of the effective stiffness in row CS
 (``Lp``, ``Lj``, ``Lx``), columns ascending and the diagonal last in each row, stored as
 its reciprocal (see :func:`sparse_cholesky`).
 """
+
 from __future__ import annotations
 
 import math
@@ -41,13 +42,13 @@ def sparse_cholesky(indptr, indices, vals, Lp, Lj, Lx) -> int:
     Returns 0, or i + 1 when the leading minor of order i + 1 is not positive definite.
     """
     n = Lp.size - 1
-    row = np.zeros(n)                  # dense copy of the row of L being built
+    row = np.zeros(n)  # dense copy of the row of L being built
     for i in range(n):
         for p in range(indptr[i], indptr[i + 1]):
             j = indices[p]
             if j <= i:
                 row[j] = vals[p]
-        end = Lp[i + 1] - 1            # diagonal slot
+        end = Lp[i + 1] - 1  # diagonal slot
         d = row[i]
         for q in range(Lp[i], end):
             j = Lj[q]
@@ -222,8 +223,20 @@ def contact_correct(u, sdx, sX, x_mid, G, lam, active, max_iter):
     Returns the number of active-set iterations, or -1 if it did not settle.
     """
     m = sdx.size
-    return contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, np.empty(u.size), np.empty((m, m)),
-                              np.empty(m), np.empty(m, dtype=np.int64))
+    return contact_correct_ws(
+        u,
+        sdx,
+        sX,
+        x_mid,
+        G,
+        lam,
+        active,
+        max_iter,
+        np.empty(u.size),
+        np.empty((m, m)),
+        np.empty(m),
+        np.empty(m, dtype=np.int64),
+    )
 
 
 @njit(cache=True)
@@ -260,7 +273,7 @@ def contact_correct_ws(u, sdx, sX, x_mid, G, lam, active, max_iter, u0, S, rhs, 
         for j in range(m):
             if sdx[j] < 0:
                 continue
-            if active[j] and lam[j] > 0.0:       # tensile: release
+            if active[j] and lam[j] > 0.0:  # tensile: release
                 active[j] = False
                 changed = True
             elif (not active[j]) and sX[j] + u[sdx[j]] > x_mid * (1.0 + 1e-12):
@@ -326,7 +339,7 @@ def contact_layer_ws(u, un, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, max_i
             d = sdx[j]
             if d < 0:
                 continue
-            if active[j] and lam[j] > 0.0:       # tensile: release
+            if active[j] and lam[j] > 0.0:  # tensile: release
                 active[j] = False
                 changed = True
             elif (not active[j]) and keff[j] * u[d] + bb[j] > 0.0:
@@ -369,9 +382,16 @@ def step_coefficients(h, am, af, beta, gamma):
     c0 = 1.0 / (beta * h * h)
     c2 = 1.0 / (beta * h)
     c3 = 0.5 / beta - 1.0
-    return (c0, c2, c3, (1.0 - am) * c2, (1.0 - am) * c3 - am,
-            -((1.0 - af) * (1.0 - gamma / beta) + af), -(1.0 - af) * h * (1.0 - 0.5 * gamma / beta),
-            1.0 / (1.0 - af))
+    return (
+        c0,
+        c2,
+        c3,
+        (1.0 - am) * c2,
+        (1.0 - am) * c3 - am,
+        -((1.0 - af) * (1.0 - gamma / beta) + af),
+        -(1.0 - af) * h * (1.0 - 0.5 * gamma / beta),
+        1.0 / (1.0 - af),
+    )
 
 
 def subglottal_coefficients(modes, h: float) -> np.ndarray:
@@ -490,9 +510,27 @@ def integrate_coupled(stp, pat, mod, cpl, stop, mat, st, out):
     n = st.u.size
     m = pat.sdx.size
     nmod = cpl.sub_coef.shape[0]
-    ws = Work(np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m), np.empty(m),
-              np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.zeros(m, dtype=np.bool_), np.empty((m, m)),
-              np.empty(m), np.empty(m, dtype=np.int64), np.empty(m), np.empty(m), np.zeros(nmod), np.zeros(nmod))
+    ws = Work(
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(m),
+        np.empty(m),
+        np.empty(m),
+        np.empty(m),
+        np.empty(m),
+        np.empty(m),
+        np.empty(m),
+        np.zeros(m, dtype=np.bool_),
+        np.empty((m, m)),
+        np.empty(m),
+        np.empty(m, dtype=np.int64),
+        np.empty(m),
+        np.empty(m),
+        np.zeros(nmod),
+        np.zeros(nmod),
+    )
     return integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws)
 
 
@@ -513,8 +551,9 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
     kval, mval, dval, Lx, G = mat
     u, v, a = st
     width, gsep_out, lam_out, proj_out, p_in_out, traj_every, traj_u, traj_v, stop_out = out
-    (y1, y2, r, ws_u0, xs, zs, gap, fx, fz, pres, lam, active, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb, sub_p1,
-     sub_p2) = ws
+    (y1, y2, r, ws_u0, xs, zs, gap, fx, fz, pres, lam, active, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb, sub_p1, sub_p2) = (
+        ws
+    )
     n = u.size
     m = sdx.size
     c0, c2, c3, m_v, m_a, d_v, d_a, lam_scale = step_coefficients(h, am, af, beta, gamma)
@@ -559,14 +598,15 @@ def integrate_ws(stp, pat, mod, cpl, stop, mat, st, out, ws):
                 r[sdz[j]] += fz[j]
         chol_solve(Lp, Lj, Lx, r)
         for i in range(n):
-            r[i] += u[i]          # r is now u_{n+1} before contact
+            r[i] += u[i]  # r is now u_{n+1} before contact
         if layer:
-            settled = contact_layer_ws(r, u, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, 50, ws_u0, ws_S, ws_rhs,
-                                       ws_idx, ws_keff, ws_bb)
+            settled = contact_layer_ws(
+                r, u, h, wl, sdx, sX, x_mid, G, kc, cc, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx, ws_keff, ws_bb
+            )
         else:
             settled = contact_correct_ws(r, sdx, sX, x_mid, G, lam, active, 50, ws_u0, ws_S, ws_rhs, ws_idx)
         if settled < 0:
-            return -k          # contact active set did not settle: a failure, never silent penetration
+            return -k  # contact active set did not settle: a failure, never silent penetration
         bad = False
         for i in range(n):
             du = r[i] - u[i]

@@ -10,6 +10,7 @@ lower index, so the order is deterministic). On the shipped meshes it leaves 3,3
 the factor of the medium mesh (2,453 coarse, 4,677 fine) against 6,540 stored and 3,771 filled
 entries of the reverse Cuthill-McKee band used before (docs/model.md, "Speed").
 """
+
 from __future__ import annotations
 
 import heapq
@@ -69,8 +70,9 @@ class System:
     def stiffness_values(self, E_layers) -> np.ndarray:
         return np.tensordot(np.asarray(E_layers, dtype=float), self.k_vals, axes=1)
 
-    def epithelium_values(self, E_kpa: float, h_mm: float, profile=(), eta: float = 0.0
-                          ) -> tuple[np.ndarray, np.ndarray]:
+    def epithelium_values(
+        self, E_kpa: float, h_mm: float, profile=(), eta: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
         """CSR values (on the shared pattern) of the epithelium membrane: (stiffness, damping).
 
         Stiffness ``E' h sum_e c_e k_e`` with E' = E / (1 - nu^2) (plane strain), h in m and c_e the
@@ -80,11 +82,13 @@ class System:
         n_edges = self.ep_vals.shape[0]
         c = np.ones(n_edges) if len(profile) == 0 else np.asarray(profile, dtype=float)
         if c.shape != (n_edges,):
-            raise ValueError(f"epithelium_profile must have one multiplier per free-surface edge of mesh "
-                             f"{self.mesh.name!r}: expected length {n_edges}, got {c.size}")
+            raise ValueError(
+                f"epithelium_profile must have one multiplier per free-surface edge of mesh "
+                f"{self.mesh.name!r}: expected length {n_edges}, got {c.size}"
+            )
         unit = c @ self.ep_vals
         h = h_mm * 1e-3
-        return (E_kpa * 1e3 / (1.0 - self.nu ** 2) * h) * unit, (2.0 / (1.0 - self.nu) * eta * h) * unit
+        return (E_kpa * 1e3 / (1.0 - self.nu**2) * h) * unit, (2.0 / (1.0 - self.nu) * eta * h) * unit
 
     @property
     def nnz_factor(self) -> int:
@@ -132,7 +136,7 @@ def minimum_degree(pattern: sp.csr_matrix) -> np.ndarray:
     costs O(d^2 + log n) rather than a scan of every live vertex.
     """
     n = pattern.shape[0]
-    adj = [set(pattern.indices[pattern.indptr[i]:pattern.indptr[i + 1]].tolist()) - {i} for i in range(n)]
+    adj = [set(pattern.indices[pattern.indptr[i] : pattern.indptr[i + 1]].tolist()) - {i} for i in range(n)]
     alive = np.ones(n, dtype=bool)
     heap = [(len(adj[i]), i) for i in range(n)]
     heapq.heapify(heap)
@@ -165,7 +169,7 @@ def cholesky_pattern(pattern: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     parent = np.full(n, -1, dtype=np.int64)
     ancestor = np.full(n, -1, dtype=np.int64)
     for i in range(n):
-        for j in idx[ptr[i]:ptr[i + 1]]:
+        for j in idx[ptr[i] : ptr[i + 1]]:
             # climb from j to its root, pointing the path at i (path compression)
             while j != -1 and j < i:
                 nxt = ancestor[j]
@@ -178,7 +182,7 @@ def cholesky_pattern(pattern: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     for i in range(n):
         mark[i] = i
         r = []
-        for j in idx[ptr[i]:ptr[i + 1]]:
+        for j in idx[ptr[i] : ptr[i + 1]]:
             while j < i and mark[j] != i:
                 r.append(j)
                 mark[j] = i
@@ -212,10 +216,23 @@ def build_system(mesh: FoldMesh, nu: float, element: str = "p1") -> System:
     where[dofs] = np.arange(dofs.size)
     s = mesh.surface
     return System(
-        mesh=mesh, nu=nu, dofs=dofs, indptr=pattern.indptr.astype(np.int64),
-        indices=pattern.indices.astype(np.int64), k_vals=k_vals, d_vals=d_vals, m_vals=m_vals, Lp=Lp, Lj=Lj,
-        sdx=where[2 * s], sdz=where[2 * s + 1], sX=mesh.points[s, 0].copy(), sZ=mesh.points[s, 1].copy(),
-        ep_vals=ep_vals, element=element)
+        mesh=mesh,
+        nu=nu,
+        dofs=dofs,
+        indptr=pattern.indptr.astype(np.int64),
+        indices=pattern.indices.astype(np.int64),
+        k_vals=k_vals,
+        d_vals=d_vals,
+        m_vals=m_vals,
+        Lp=Lp,
+        Lj=Lj,
+        sdx=where[2 * s],
+        sdz=where[2 * s + 1],
+        sX=mesh.points[s, 0].copy(),
+        sZ=mesh.points[s, 1].copy(),
+        ep_vals=ep_vals,
+        element=element,
+    )
 
 
 @lru_cache(maxsize=16)

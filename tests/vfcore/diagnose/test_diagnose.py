@@ -1,6 +1,7 @@
 """vfcore.diagnose: phase-folded residuals, predictive p-values, extensions, evidence ranking.
 
 Synthetic waveforms with analytically known answers; no FE simulation is run."""
+
 import math
 
 import numpy as np
@@ -27,7 +28,7 @@ FPS = 4000.0
 def gaw_like(oq=0.6, amp=10.0, f0=100.0, n_cycles=8, fps=FPS, shift=0.3):
     """Half-sine pulses of open quotient ``oq`` and zero area in the closed phase."""
     t = np.arange(int(round(n_cycles * fps / f0))) / fps
-    tau = ((t * f0 + shift) % 1.0) / f0          # time within the cycle
+    tau = ((t * f0 + shift) % 1.0) / f0  # time within the cycle
     to = oq / f0
     return np.where(tau < to, amp * np.sin(np.pi * tau / to), 0.0)
 
@@ -37,21 +38,21 @@ def test_phase_labels_partition_cycle():
     g = gaw_like()
     codes, b = phase_labels(g, FPS)
     assert b.size >= 7
-    inside = codes[b[0]:b[-1]]
-    assert np.all(inside >= 0) and np.all(codes[:b[0]] == -1) and np.all(codes[b[-1]:] == -1)
+    inside = codes[b[0] : b[-1]]
+    assert np.all(inside >= 0) and np.all(codes[: b[0]] == -1) and np.all(codes[b[-1] :] == -1)
     # closed fraction of a cycle ~ 1 - OQ (threshold 5 % of the half-sine: arcsin(0.05)/pi each side)
     closed = np.mean(inside == 0)
     assert closed == pytest.approx(0.4 + 0.6 * 2 * math.asin(0.05) / math.pi, abs=0.03)
     # opening precedes peak precedes closing in each cycle
     for k in range(b.size - 1):
-        c = codes[b[k]:b[k + 1]]
+        c = codes[b[k] : b[k + 1]]
         assert np.flatnonzero(c == 1).max() < np.flatnonzero(c == 2).min()
         assert np.flatnonzero(c == 2).max() < np.flatnonzero(c == 3).min()
 
 
 def test_locate_closed_phase_leak_floor():
     base = gaw_like()
-    obs = np.maximum(base, 1.0)            # incomplete closure: the area never drops below 1 mm^2
+    obs = np.maximum(base, 1.0)  # incomplete closure: the area never drops below 1 mm^2
     rep = locate(obs, np.tile(base, (5, 1)), FPS)
     assert rep.dominant_phase == "closed"
     assert rep.energy_share["closed"] > 0.99
@@ -65,7 +66,7 @@ def test_locate_closed_phase_leak_floor():
 
 def test_locate_peak_residual_goes_to_peak():
     base = gaw_like()
-    pred = np.minimum(base, 9.5)          # prediction clipped below the observed peak
+    pred = np.minimum(base, 9.5)  # prediction clipped below the observed peak
     rep = locate(base, pred, FPS)
     assert rep.dominant_phase == "peak"
     assert rep.energy_share["peak"] > 0.99
@@ -76,6 +77,7 @@ def test_locate_constant_offset_is_spread_over_the_cycle():
     """A constant offset has concentration 1 in every phase: no phase is named, and the fraction of
     the residual removed is taken over the whole cycle (halving the offset removes 3/4 of it)."""
     from vfcore.diagnose import SPREAD
+
     base = gaw_like()
     obs = base + 1.0
     rep = locate(obs, base, FPS)
@@ -127,9 +129,18 @@ def _replicates(fn, n, sigma_e, seed=11, noise=0.5):
     """Fraction of ``n`` noisy recordings ``fn(truth) + N(0, noise^2)`` whose two-sided p-value is
     below 0.05, per measure, against a tight posterior-predictive ensemble about the truth."""
     from vfcore.diagnose.locate import DEFAULT_MEASURES
+
     rng = np.random.default_rng(seed)
-    ens = np.array([gaw_like(0.6 + 0.002 * rng.standard_normal(), 10 + 0.02 * rng.standard_normal(),
-                             f0=100 + 0.05 * rng.standard_normal()) for _ in range(40)])
+    ens = np.array(
+        [
+            gaw_like(
+                0.6 + 0.002 * rng.standard_normal(),
+                10 + 0.02 * rng.standard_normal(),
+                f0=100 + 0.05 * rng.standard_normal(),
+            )
+            for _ in range(40)
+        ]
+    )
     truth = gaw_like()
     hits = {m: 0 for m in DEFAULT_MEASURES}
     for r in range(n):
@@ -145,11 +156,12 @@ def test_the_recordings_noise_estimated_from_it_calibrates_the_pvalues():
     sigma_e = 1 mm^2 as the replicates' noise, the noise-sensitive measures are flagged almost
     always. A leak and a scale error are still flagged, on the measures they change."""
     from vfcore.diagnose import noise_sd
+
     truth = gaw_like()
     y = truth + 0.5 * np.random.default_rng(0).standard_normal(truth.size)
     assert noise_sd(y, np.tile(truth, (3, 1))) == pytest.approx(0.5, rel=0.15)
-    assert noise_sd(y + 1.5, truth) == pytest.approx(noise_sd(y, truth), abs=1e-12)    # a constant misfit: none of it
-    assert noise_sd(0.85 * truth + (y - truth), truth) < 0.6                         # a smooth misfit: little
+    assert noise_sd(y + 1.5, truth) == pytest.approx(noise_sd(y, truth), abs=1e-12)  # a constant misfit: none of it
+    assert noise_sd(0.85 * truth + (y - truth), truth) < 0.6  # a smooth misfit: little
 
     est = _replicates(lambda g: g, 40, "estimate")
     nominal = _replicates(lambda g: g, 40, 1.0)
@@ -180,10 +192,10 @@ def test_leak_raises_minimum_exactly():
     g = gaw_like()
     out = get("leak").apply(g, {"leak_mm2": 1.7, "chink_fraction": 0.0}, fps=FPS)
     assert out.min() == pytest.approx(g.min() + 1.7, abs=1e-12)
-    np.testing.assert_allclose(out - g, 1.7)            # a cartilaginous gap: constant
+    np.testing.assert_allclose(out - g, 1.7)  # a cartilaginous gap: constant
     assert M.glottal_gap_index(out, FPS) > 0.1 > M.glottal_gap_index(g, FPS)
     with pytest.raises(ValueError):
-        get("leak").apply(g, {"leak_mm2": 5.0, "chink_fraction": 0.0}, fps=FPS)   # outside its 0-3 mm^2 prior
+        get("leak").apply(g, {"leak_mm2": 5.0, "chink_fraction": 0.0}, fps=FPS)  # outside its 0-3 mm^2 prior
     with pytest.raises(ValueError, match="chink_fraction"):
         get("leak").apply(g, {"leak_mm2": 1.0, "chink_fraction": 1.5}, fps=FPS)
     with pytest.raises(ValueError, match="missing parameters"):
@@ -224,7 +236,7 @@ def test_leak_flow_bernoulli():
 
 
 def test_exposure_sinc_factor():
-    fps, f, n = 2000.0, 500.0, 400           # 100 whole periods
+    fps, f, n = 2000.0, 500.0, 400  # 100 whole periods
     t = np.arange(n) / fps
     x = np.sin(2 * np.pi * f * t + 0.3)
     for e in (0.25, 0.5, 1.0):
@@ -234,7 +246,7 @@ def test_exposure_sinc_factor():
     y = get("exposure").apply(x, {"exposure_fraction": 1.0}, fps=fps)
     mid = slice(n // 4, 3 * n // 4)
     np.testing.assert_allclose(y[mid], np.sinc(f / fps) * x[mid], atol=0.03)
-    assert np.sinc(f / fps) < 0.91    # the factor is not trivially 1
+    assert np.sinc(f / fps) < 0.91  # the factor is not trivially 1
 
 
 def test_scale_scales_area_measures_only():
@@ -243,8 +255,16 @@ def test_scale_scales_area_measures_only():
     m1 = M.gaw_measures(get("scale").apply(g, {"scale": 1.15}, fps=FPS), FPS)
     for k in ("min_area_mm2", "max_area_mm2", "amplitude_mm2"):
         assert m1[k] == pytest.approx(1.15 * m0[k], rel=1e-12)
-    for k in ("open_quotient", "speed_quotient", "closing_quotient", "naq", "amplitude_quotient_s",
-              "glottal_gap_index", "hrf_db", "f0_hz"):
+    for k in (
+        "open_quotient",
+        "speed_quotient",
+        "closing_quotient",
+        "naq",
+        "amplitude_quotient_s",
+        "glottal_gap_index",
+        "hrf_db",
+        "f0_hz",
+    ):
         assert m1[k] == pytest.approx(m0[k], rel=1e-9, abs=1e-12)
 
 
@@ -259,6 +279,7 @@ def test_frame_rate_scales_f0():
 def test_sep_ratio_resimulates_with_config():
     from vfcore import Params, SimConfig
     from vfcore.params import PARAM_NAMES
+
     seen = {}
 
     class Base:
@@ -304,14 +325,16 @@ def test_rank_no_finding_within_noise():
 
 
 def test_rank_names_large_gain():
-    rep = rank_extensions(_Post(-100.0, 0.3), {"scale": _Post(-98.0, 0.3), "leak": _Post(-80.0, 0.4),
-                                               "exposure": _Post(-95.0, 0.3)},
-                          residual={"leak": 0.9})
+    rep = rank_extensions(
+        _Post(-100.0, 0.3),
+        {"scale": _Post(-98.0, 0.3), "leak": _Post(-80.0, 0.4), "exposure": _Post(-95.0, 0.3)},
+        residual={"leak": 0.9},
+    )
     assert rep.winner == "leak"
     assert [r.name for r in rep.rows] == ["leak", "exposure", "scale"]
     assert rep.rows[0].delta_se == pytest.approx(0.5)
     assert "leak" in rep.verdict and "90 %" in rep.verdict
-    assert rep.rows[1].found and not rep.rows[2].found    # exposure: d = 5 > 3 and > 3 * 0.42
+    assert rep.rows[1].found and not rep.rows[2].found  # exposure: d = 5 > 3 and > 3 * 0.42
 
 
 def test_one_standard_error_rule_names_the_simpler_of_two_indistinguishable_fits():
@@ -319,20 +342,26 @@ def test_one_standard_error_rule_names_the_simpler_of_two_indistinguishable_fits
     fewer parameters is named (the richer one stays a rival); a gap beyond one se, equal
     parameter counts, or a simpler fit that was not found leave the winner alone."""
     from vfcore.diagnose.amend import prefer_parsimonious
+
     base = _Post(-1000.0, 0.5)
     nx = {"subglottal": 2, "epithelium": 1, "zipper": 2, "leak": 1}
 
     def rep(z_epith, se=30.0, **kw):
-        fits = {"subglottal": _Post(-500.0, se), "epithelium": _Post(z_epith, se), "zipper": _Post(-520.0, se),
-                "leak": _Post(-990.0, 0.5)}
+        fits = {
+            "subglottal": _Post(-500.0, se),
+            "epithelium": _Post(z_epith, se),
+            "zipper": _Post(-520.0, se),
+            "leak": _Post(-990.0, 0.5),
+        }
         return rank_extensions(base, fits, n_extra=nx, k_se=3.0, **kw)
-    r = rep(-510.0)                                  # 10 +- 42 below: indistinguishable
+
+    r = rep(-510.0)  # 10 +- 42 below: indistinguishable
     assert r.winner == "subglottal"
     p = prefer_parsimonious(r, 1.0)
     assert p.winner == "epithelium" and p.physics == "epithelium"
     assert "one-standard-error" in p.notes[-1] and "subglottal" in p.notes[-1]
     assert "subglottal" in [f for f, _, _ in p.rivals]
-    assert prefer_parsimonious(r, 0.0).winner == "subglottal"          # off
+    assert prefer_parsimonious(r, 0.0).winner == "subglottal"  # off
     assert prefer_parsimonious(rep(-560.0), 1.0).winner == "subglottal"  # 60 +- 42: beyond one se
     # equal counts (zipper, 20 +- 42 below) never displace the winner
     assert prefer_parsimonious(rep(-560.0), 1.0).rows[0].name == "subglottal"
@@ -352,23 +381,28 @@ def test_rank_big_evidence_small_rms_gain_is_not_named():
     rows = {r.name: r for r in rep.rows}
     assert not rows["scale"].found and "effect size" in rows["scale"].reason
     assert rows["scale"].rms_gain == pytest.approx(0.1)
-    assert rows["leak"].found and rows["zipper"].found is False      # 29 % < 30 %
+    assert rows["leak"].found and rows["zipper"].found is False  # 29 % < 30 %
     assert rep.winner == "leak"
     # exactly at the threshold counts; a missing RMS never does once RMS is being checked
     rep = rank_extensions(base, fits, rms={"scale": 0.7}, base_rms=1.0)
     assert rep.winner == "scale"
     assert not any(r.found for r in rep.rows if r.name != "scale")
     # the threshold is a parameter: 0 turns the rule back into evidence only
-    assert rank_extensions(base, fits, rms={"scale": 0.9, "leak": 0.6, "zipper": 0.71}, base_rms=1.0,
-                           min_rms_gain=0.0).winner == "scale"
+    assert (
+        rank_extensions(
+            base, fits, rms={"scale": 0.9, "leak": 0.6, "zipper": 0.71}, base_rms=1.0, min_rms_gain=0.0
+        ).winner
+        == "scale"
+    )
 
 
 def test_null_consistent_posteriors():
     from vfcore.diagnose.rank import null_consistent
+
     names = ("E_body", "leak_mm2")
-    assert null_consistent(names, [10.0, 0.05], [1.0, 0.04], "leak")        # piled up at the bound
-    assert not null_consistent(names, [10.0, 1.5], [1.0, 0.1], "leak")       # a real leak
-    assert null_consistent(names, [10.0, 1.5], [1.0, 0.87], "leak")          # unidentified (~ prior)
+    assert null_consistent(names, [10.0, 0.05], [1.0, 0.04], "leak")  # piled up at the bound
+    assert not null_consistent(names, [10.0, 1.5], [1.0, 0.1], "leak")  # a real leak
+    assert null_consistent(names, [10.0, 1.5], [1.0, 0.87], "leak")  # unidentified (~ prior)
     # every parameter that has a null must sit at it
     names = ("E_body", "lr_phase", "lr_amp")
     assert null_consistent(names, [10.0, 0.01, 1.02], [1.0, 0.01, 0.03], "asymmetry")
@@ -397,17 +431,16 @@ def test_nested_gate_reads_the_likelihood_drop_at_the_null():
     a scale error), one that costs 20 nats does not, and without a measured drop the mean +- 2 sd
     test still applies."""
     from vfcore.diagnose.rank import null_consistent
+
     names = ("E_body", "E_cover", "p_sub", "lr_phase", "lr_amp")
     mean, sd = [12.64, 545.0, 1656.0, 0.0121, 0.744], [1e-8, 1e-6, 1e-5, 0.0045, 0.006]
     drops = {"lr_phase": 2.18, "lr_amp": 1266.0}
     only = ("lr_phase",)
-    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops=drops)       # 2.7 sd: the sd rule
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops=drops)  # 2.7 sd: the sd rule
     assert null_consistent(names, mean, sd, "asymmetry", only=only, drops=drops, by_drop=True)
-    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={**drops, "lr_phase": 20.0},
-                               by_drop=True)
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={**drops, "lr_phase": 20.0}, by_drop=True)
     assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={"lr_amp": 1266.0}, by_drop=True)
-    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={"lr_phase": float("nan")},
-                               by_drop=True)
+    assert not null_consistent(names, mean, sd, "asymmetry", only=only, drops={"lr_phase": float("nan")}, by_drop=True)
 
 
 def test_rank_null_fit_is_not_named_and_raises_the_reference():
@@ -421,12 +454,11 @@ def test_rank_null_fit_is_not_named_and_raises_the_reference():
     assert rep.reference == "sep_ratio" and rep.notes
     assert not rows["sep_ratio"].found and rows["sep_ratio"].delta == pytest.approx(0.0)
     assert rows["leak"].delta == pytest.approx(10.0) and rows["leak"].rms_gain == pytest.approx(1 - 1.1 / 1.2)
-    assert not rows["leak"].found                                        # 8 % against the new reference
+    assert not rows["leak"].found  # 8 % against the new reference
     assert rows["frame_rate"].found and rep.winner == "frame_rate"
     assert rows["frame_rate"].rms_gain == pytest.approx(1 - 0.5 / 1.2)
     # a null fit below the base evidence leaves the reference at the base and is not named
-    rep = rank_extensions(base, {"leak": _Post(-6000.0, 1.0)}, rms={"leak": 0.1}, base_rms=11.9,
-                          null={"leak": True})
+    rep = rank_extensions(base, {"leak": _Post(-6000.0, 1.0)}, rms={"leak": 0.1}, base_rms=11.9, null={"leak": True})
     assert rep.reference == "base" and rep.winner is None and rep.rows[0].null_consistent
 
 
@@ -463,22 +495,34 @@ def test_residual_removed_by_leak_extension():
 
 def _posterior(pred_gaws, obs, logz, se, names=("E_body",)):
     from vfcore.inference import Evaluation, Posterior
+
     k = pred_gaws.shape[0]
     ev = Evaluation(loglik=np.zeros(k), ok=np.ones(k, bool), gaw=pred_gaws.astype(np.float32))
-    return Posterior.from_weighted(names, np.arange(k * len(names), dtype=float).reshape(k, len(names)),
-                                   np.zeros(k), rng=np.random.default_rng(0), log_evidence=logz,
-                                   log_evidence_se=se, check=False, predictive=ev, obs_gaw=obs, fps=FPS)
+    return Posterior.from_weighted(
+        names,
+        np.arange(k * len(names), dtype=float).reshape(k, len(names)),
+        np.zeros(k),
+        rng=np.random.default_rng(0),
+        log_evidence=logz,
+        log_evidence_se=se,
+        check=False,
+        predictive=ev,
+        obs_gaw=obs,
+        fps=FPS,
+    )
 
 
 def test_compare_fits_from_posteriors():
     from vfcore.diagnose import compare_fits, from_posterior
+
     base = gaw_like()
     obs = np.maximum(base, 1.0)
     p0 = _posterior(np.tile(base, (20, 1)), obs, -200.0, 0.3)
-    p1 = _posterior(np.tile(np.maximum(base, 1.0), (20, 1)), obs, -150.0, 0.3,
-                    names=("E_body", "leak_mm2", "chink_fraction"))
-    p1.samples[:, 1] = 1.0 + 0.01 * np.arange(20)      # a leak of ~1 mm^2, far from its null (0)
-    p1.samples[:, 2] = 0.05 * np.arange(20)            # chink fraction unidentified (it has no null)
+    p1 = _posterior(
+        np.tile(np.maximum(base, 1.0), (20, 1)), obs, -150.0, 0.3, names=("E_body", "leak_mm2", "chink_fraction")
+    )
+    p1.samples[:, 1] = 1.0 + 0.01 * np.arange(20)  # a leak of ~1 mm^2, far from its null (0)
+    p1.samples[:, 2] = 0.05 * np.arange(20)  # chink fraction unidentified (it has no null)
     rep, pv = from_posterior(p0)
     assert rep.dominant_phase == "closed"
     assert pv["min_area_mm2"].p_upper == 0.0 and pv["glottal_gap_index"].p_two_sided == 0.0
@@ -496,8 +540,9 @@ def test_between_run_error_from_independent_base_runs():
     """Two runs of the same model whose evidences differ by far more than their reported errors
     give the unexplained spread as an additive error; runs that agree within their errors give 0."""
     from vfcore.diagnose.baseline import between_run_sd
+
     tau = between_run_sd([_Post(-446.0, 0.6), _Post(-440.7, 0.5)])
-    assert tau == pytest.approx(math.sqrt(5.3 ** 2 / 2 - (0.36 + 0.25) / 2))
+    assert tau == pytest.approx(math.sqrt(5.3**2 / 2 - (0.36 + 0.25) / 2))
     assert between_run_sd([_Post(-446.0, 0.6), _Post(-446.2, 0.5)]) == 0.0
     assert between_run_sd([_Post(-446.0, 0.6)]) == 0.0
     assert between_run_sd([_Post(-446.0, math.nan), _Post(-440.0, 0.5)]) == 0.0
@@ -515,31 +560,34 @@ def test_base_fit_escalates_when_runs_disagree(monkeypatch):
     from types import SimpleNamespace
 
     from vfcore.diagnose.baseline import base_fit
-    smc_mod = sys.modules["vfcore.inference.smc"]       # the package re-exports the function under the same name
+
+    smc_mod = sys.modules["vfcore.inference.smc"]  # the package re-exports the function under the same name
     calls = []
 
-    def fake_smc(problem, n_particles, seed, **kw):          # runs told apart by their order, not their seeds
+    def fake_smc(problem, n_particles, seed, **kw):  # runs told apart by their order, not their seeds
         k = len(calls)
         calls.append((n_particles, seed))
         z = (-100.0 - 500.0 * (k % 2)) if n_particles == 40 else -90.0 - 0.1 * (k % 3)
         return SimpleNamespace(log_evidence=z, log_evidence_se=1.0, n_simulations=10 * n_particles)
 
-    def together(fake):                                   # runs made together: each as alone (test_smc_many)
+    def together(fake):  # runs made together: each as alone (test_smc_many)
         return lambda problem, jobs, **kw: [fake(problem, n, s) for n, s in jobs]
 
     monkeypatch.setattr(smc_mod, "smc", fake_smc)
     monkeypatch.setattr(smc_mod, "smc_many", together(fake_smc))
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)
     assert factor == 2 and [c[0] for c in calls] == [40, 40, 80, 80]
-    assert len({c[1] for c in calls}) == 4                        # every run its own seed
+    assert len({c[1] for c in calls}) == 4  # every run its own seed
     assert base.log_evidence > -91 and tau < 1.0 and n == 10 * (40 + 40 + 80 + 80)
     assert any("disagree" in s for s in notes)
 
     calls.clear()
+
     def agreeing(problem, n_particles, seed, **kw):
         k = len(calls)
         calls.append(seed)
         return SimpleNamespace(log_evidence=-100.0 + 0.5 * (k % 2), log_evidence_se=1.0, n_simulations=5)
+
     monkeypatch.setattr(smc_mod, "smc", agreeing)
     monkeypatch.setattr(smc_mod, "smc_many", together(agreeing))
     base, tau, factor, n, notes = base_fit(None, n_particles=40, base_runs=2, seed=0)
@@ -567,8 +615,9 @@ def test_an_escalation_doubles_the_later_fits_particles_unless_told_not_to(monke
     seen = {}
     for flag in (True, False):
         o = DiagnoseOptions(free_material=False, escalate_refits=flag)
-        st = DiagnosisState(problem=SimpleNamespace(noise="fixed", sigma_e=1.0), base=None, refit_n=o.refit_n,
-                            candidates=[])
+        st = DiagnosisState(
+            problem=SimpleNamespace(noise="fixed", sigma_e=1.0), base=None, refit_n=o.refit_n, candidates=[]
+        )
         B.fit_base(Run.start(o, map, None), st)
         seen[flag] = (st.refit_n, st.n_simulations, st.base.log_evidence)
     assert seen[True] == (48, 1234, -90.0) and seen[False] == (24, 1234, -90.0)
@@ -576,11 +625,16 @@ def test_an_escalation_doubles_the_later_fits_particles_unless_told_not_to(monke
 
 def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
     from vfcore.diagnose.amend import promote_local
+
     # a 6,585-nat gain with 82 % RMS gain, but base runs 1,760 nats apart: not found globally
     tau = 1760.0
-    r = rank_extensions((-7175.4, math.hypot(0.5, tau)), {"epithelium": (-590.0, math.hypot(1.0, tau)),
-                                                          "leak": (-6607.0, math.hypot(1.0, tau))},
-                        rms={"epithelium": 1.1, "leak": 5.9}, base_rms=6.17, null={})
+    r = rank_extensions(
+        (-7175.4, math.hypot(0.5, tau)),
+        {"epithelium": (-590.0, math.hypot(1.0, tau)), "leak": (-6607.0, math.hypot(1.0, tau))},
+        rms={"epithelium": 1.1, "leak": 5.9},
+        base_rms=6.17,
+        null={},
+    )
     assert r.winner is None
     row = next(x for x in r.rows if x.name == "epithelium")
     assert row.reason.startswith("evidence") and row.rms_gain > 0.8
@@ -588,44 +642,69 @@ def test_promote_local_names_a_gain_swamped_only_by_the_between_run_error():
     assert p.winner == "epithelium" and p.physics == "epithelium" and "local comparison" in p.notes[-1]
     # the verdict gives the comparison that named it, and the global gain with its swamping error beside it
     row = next(x for x in p.rows if x.name == "epithelium")
-    assert ("named on the local comparison: dlogZ = 5000.00 +- 1.50" in p.verdict
-            and f"{row.delta:.2f} +- {row.delta_se:.2f} against the reference" in p.verdict)
+    assert (
+        "named on the local comparison: dlogZ = 5000.00 +- 1.50" in p.verdict
+        and f"{row.delta:.2f} +- {row.delta_se:.2f} against the reference" in p.verdict
+    )
     assert "local comparison" not in r.verdict
     # a later rule that names another entry drops the local basis with it
     from vfcore.diagnose.amend import prefer_nested
+
     q = prefer_nested(p, "leak", "epithelium", "nested")
     assert q.winner == "leak" and q.local is None and "local comparison" not in q.verdict
     assert next(x for x in p.rows if x.name == "epithelium").found
     assert not next(x for x in p.rows if x.name == "leak").found
-    assert r.winner is None                       # the original report is unchanged
+    assert r.winner is None  # the original report is unchanged
 
 
 def test_rivals_within_the_errors_are_reported_not_named():
     # winner 3,106 +- 55, runner-up of another physics 147 nats lower: 147 < 3 * 78 -> a rival
-    r = rank_extensions((-5000.0, 1.0), {"subglottal": (-1894.0, 55.0), "epithelium": (-2041.0, 55.0),
-                                          "leak": (-4000.0, 55.0), "lr_stiffness": (-1950.0, 55.0),
-                                          "asymmetry": (-1960.0, 55.0)},
-                        rms={"subglottal": 1.0, "epithelium": 1.2, "leak": 3.0, "lr_stiffness": 1.3,
-                             "asymmetry": 1.3}, base_rms=4.0, null={})
+    r = rank_extensions(
+        (-5000.0, 1.0),
+        {
+            "subglottal": (-1894.0, 55.0),
+            "epithelium": (-2041.0, 55.0),
+            "leak": (-4000.0, 55.0),
+            "lr_stiffness": (-1950.0, 55.0),
+            "asymmetry": (-1960.0, 55.0),
+        },
+        rms={"subglottal": 1.0, "epithelium": 1.2, "leak": 3.0, "lr_stiffness": 1.3, "asymmetry": 1.3},
+        base_rms=4.0,
+        null={},
+    )
     assert r.winner == "subglottal"
     names = [x[0] for x in r.rivals]
-    assert names == ["asymmetry", "epithelium"]       # one entry per family, leak is far below
+    assert names == ["asymmetry", "epithelium"]  # one entry per family, leak is far below
     assert "not distinguishable from asymmetry" in r.verdict and "epithelium" in r.verdict
-    far = rank_extensions((-5000.0, 1.0), {"subglottal": (-1894.0, 5.0), "epithelium": (-2041.0, 5.0)},
-                          rms={"subglottal": 1.0, "epithelium": 1.2}, base_rms=4.0, null={})
+    far = rank_extensions(
+        (-5000.0, 1.0),
+        {"subglottal": (-1894.0, 5.0), "epithelium": (-2041.0, 5.0)},
+        rms={"subglottal": 1.0, "epithelium": 1.2},
+        base_rms=4.0,
+        null={},
+    )
     assert far.rivals == [] and "distinguishable" not in far.verdict
 
 
 def test_confusable_entries_are_always_rivals():
     # zipper vs the phase/amplitude asymmetry: 9 nats apart with 1.4-nat errors (a concealed zipper case)
-    r = rank_extensions((-3000.0, 1.0), {"asymmetry": (-2560.7, 1.0), "zipper": (-2570.0, 1.0),
-                                          "leak": (-2945.0, 1.0)},
-                        rms={"asymmetry": 1.65, "zipper": 1.63, "leak": 3.1}, base_rms=3.25, null={})
+    r = rank_extensions(
+        (-3000.0, 1.0),
+        {"asymmetry": (-2560.7, 1.0), "zipper": (-2570.0, 1.0), "leak": (-2945.0, 1.0)},
+        rms={"asymmetry": 1.65, "zipper": 1.63, "leak": 3.1},
+        base_rms=3.25,
+        null={},
+    )
     assert r.winner == "asymmetry" and [x[0] for x in r.rivals] == ["zipper"]
-    assert r.rivals[0][1] > 3 * r.rivals[0][2]             # beyond the errors, listed anyway
+    assert r.rivals[0][1] > 3 * r.rivals[0][2]  # beyond the errors, listed anyway
     # not confusable: the same gap between sep_ratio and epithelium is not a rivalry
-    r2 = rank_extensions((-3000.0, 1.0), {"sep_ratio": (-2560.7, 1.0), "epithelium": (-2570.0, 1.0)},
-                         rms={"sep_ratio": 1.65, "epithelium": 1.63}, base_rms=3.25, null={})
+    r2 = rank_extensions(
+        (-3000.0, 1.0),
+        {"sep_ratio": (-2560.7, 1.0), "epithelium": (-2570.0, 1.0)},
+        rms={"sep_ratio": 1.65, "epithelium": 1.63},
+        base_rms=3.25,
+        null={},
+    )
     assert r2.rivals == []
 
 
@@ -635,20 +714,25 @@ def test_in_phase_asymmetry_is_a_scale_error_and_the_simpler_entry_is_preferred(
     from vfcore.diagnose.amend import prefer_nested
     from vfcore.diagnose.extensions import get
     from vfcore.diagnose.fit import observe_extended
+
     assert get("asymmetry").nests == (("scale", ("lr_phase",)),)
     t = np.arange(6000) / 20000.0
     y = 8.0 * np.maximum(np.sin(2 * np.pi * 120.0 * t), 0.0)
     a = observe_extended("asymmetry", y, 2000.0, {"lr_phase": 0.0, "lr_amp": 1.27})
     np.testing.assert_allclose(a, observe_extended("scale", y, 2000.0, {"scale": 1.135}), atol=1e-12)
     # a concealed scale case: asymmetry at lr_phase 0.009 +- 0.005 named; scale refitted in its mode
-    r = rank_extensions((-565.4, 0.6), {"asymmetry": (-395.8, 1.0), "scale": (-397.0, 1.0),
-                                        "frame_rate": (-410.9, 1.0)},
-                        rms={"asymmetry": 0.512, "scale": 0.515, "frame_rate": 0.605}, base_rms=1.102, null={})
+    r = rank_extensions(
+        (-565.4, 0.6),
+        {"asymmetry": (-395.8, 1.0), "scale": (-397.0, 1.0), "frame_rate": (-410.9, 1.0)},
+        rms={"asymmetry": 0.512, "scale": 0.515, "frame_rate": 0.605},
+        base_rms=1.102,
+        null={},
+    )
     assert r.winner == "asymmetry"
     p = prefer_nested(r, "scale", "asymmetry", "scale: named instead of asymmetry")
     assert p.winner == "scale" and p.physics == "scale" and p.notes[-1].startswith("scale: named instead")
     assert "not distinguishable from asymmetry" in p.verdict
-    assert r.winner == "asymmetry"                      # the original report is unchanged
+    assert r.winner == "asymmetry"  # the original report is unchanged
 
 
 def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter_swamped():
@@ -657,20 +741,26 @@ def test_best_of_base_names_a_gain_far_above_every_base_fit_that_the_run_scatter
     59 % lower. With the between-run error in quadrature the 1,260-nat gain is 2.2 se and not
     named; against the best of all base fits by their own errors it is."""
     from vfcore.diagnose.rank import rank_best_of_base
+
     runs = [(-2506.1, 0.5), (-2378.2, 0.7), (-2481.7, 0.5), (-1903.7, 0.4)]
     tau = 408.75
     fits = {"scale": (-644.0, 0.44), "asymmetry": (-870.8, 0.5), "leak": (-1880.5, 0.5)}
     rms = {"scale": 1.117, "asymmetry": 1.518, "leak": 2.71}
-    shipped = rank_extensions((-1903.7, math.hypot(0.4, tau)), {k: (z, math.hypot(s, tau)) for k, (z, s) in fits.items()},
-                              rms=rms, base_rms=2.746)
+    shipped = rank_extensions(
+        (-1903.7, math.hypot(0.4, tau)),
+        {k: (z, math.hypot(s, tau)) for k, (z, s) in fits.items()},
+        rms=rms,
+        base_rms=2.746,
+    )
     assert shipped.winner is None and "evidence" in shipped.rows[0].reason
     r = rank_best_of_base((-1903.7, 0.4), fits, base_runs=runs, rms=rms, base_rms=2.746)
     assert r.winner == "scale" and r.reference == "base"
     w = r.rows[0]
     assert abs(w.delta - 1259.7) < 0.1 and w.delta_se < 1.0 and abs(w.rms_gain - (1 - 1.117 / 2.746)) < 1e-12
     # the base refitted around scale's material mode, as good as the scale fit: nothing is named
-    r = rank_best_of_base((-1903.7, 0.4), fits, base_runs=runs, rms=rms, base_rms=2.746,
-                          mode_checks={"scale": (-646.0, 0.5, 1.13)})
+    r = rank_best_of_base(
+        (-1903.7, 0.4), fits, base_runs=runs, rms=rms, base_rms=2.746, mode_checks={"scale": (-646.0, 0.5, 1.13)}
+    )
     assert r.winner is None and r.reference == "base near scale"
     # a base run above the kept one (never from base_fit, which keeps the largest) becomes the reference
     r = rank_best_of_base((-1903.7, 0.4), fits, base_runs=runs + [(-600.0, 0.5)], rms=rms, base_rms=2.746)
@@ -682,16 +772,29 @@ def test_best_of_base_keeps_the_effect_size_against_a_null_consistent_reference(
     above every base-model fit and 40 % lower in RMS than the base, but only 26 % lower than the
     reference (the exposure refit at its null value, a better base-model fit). Not named."""
     from vfcore.diagnose.rank import rank_best_of_base
+
     fits = {"asymmetry": (-1000.0, 0.7), "exposure": (-1394.0, 0.5)}
     rms = {"asymmetry": 0.60, "exposure": 0.81}
-    r = rank_best_of_base((-1500.0, 0.5), fits, base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)], rms=rms, base_rms=1.0,
-                          null={"asymmetry": False, "exposure": True})
+    r = rank_best_of_base(
+        (-1500.0, 0.5),
+        fits,
+        base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)],
+        rms=rms,
+        base_rms=1.0,
+        null={"asymmetry": False, "exposure": True},
+    )
     assert r.reference == "exposure" and r.winner is None
     row = next(x for x in r.rows if x.name == "asymmetry")
     assert abs(row.delta - 394.0) < 1e-9 and "effect size" in row.reason
     # the same fits with the exposure refit off its null: it is no reference, and asymmetry is named
-    r = rank_best_of_base((-1500.0, 0.5), fits, base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)], rms=rms, base_rms=1.0,
-                          null={"asymmetry": False, "exposure": False})
+    r = rank_best_of_base(
+        (-1500.0, 0.5),
+        fits,
+        base_runs=[(-1500.0, 0.5), (-2300.0, 0.6)],
+        rms=rms,
+        base_rms=1.0,
+        null={"asymmetry": False, "exposure": False},
+    )
     assert r.winner == "asymmetry"
 
 
@@ -699,11 +802,16 @@ def test_strip_sum_equals_interpolated_delays_with_held_ends():
     """The zipper's fused kernel: sum_k w_k y(i - d_k) equals np.interp of each delayed
     copy (ends held) for delays inside, beyond and exactly at whole samples, to rounding."""
     from vfcore.diagnose._kernels import strip_sum
+
     rng = np.random.default_rng(4)
     y = np.cumsum(rng.standard_normal(500))
     i = np.arange(y.size, dtype=float)
-    for delays in (rng.uniform(-3, 3, 24), rng.uniform(-700, 700, 24), np.round(rng.uniform(-50, 50, 24)),
-                   np.array([0.0, 499.0, -499.0, 0.5])):
+    for delays in (
+        rng.uniform(-3, 3, 24),
+        rng.uniform(-700, 700, 24),
+        np.round(rng.uniform(-50, 50, 24)),
+        np.array([0.0, 499.0, -499.0, 0.5]),
+    ):
         w = rng.random(delays.size)
         ref = sum(wk * np.interp(i - dk, i, y) for dk, wk in zip(delays, w))
         assert np.max(np.abs(strip_sum(y, delays, w) - ref)) < 1e-12 * np.max(np.abs(ref))

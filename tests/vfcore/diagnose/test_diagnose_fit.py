@@ -1,4 +1,5 @@
 """Extended fits (vfcore.diagnose.fit) and the diagnosis (vfcore.diagnose.pipeline and its stages)."""
+
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -32,9 +33,10 @@ def route_refits(monkeypatch, fit_one):
             if on_done is not None:
                 on_done(i, posts[-1])
         return posts
+
     monkeypatch.setattr(refits, "fit_extended", fit_one)
     monkeypatch.setattr(refits, "fit_extended_many", many)
-    monkeypatch.setattr(together, "fit_extended_many", many)        # the rescues run together
+    monkeypatch.setattr(together, "fit_extended_many", many)  # the rescues run together
     monkeypatch.setattr(mode_fits, "fit_extended", fit_one)
 
 
@@ -43,10 +45,17 @@ def base_run():
     return simulate(TABLE3, CFG)
 
 
-@pytest.mark.parametrize("name,phi", [
-    ("leak", {"leak_mm2": 0.0, "chink_fraction": 0.7}), ("scale", {"scale": 1.0}), ("exposure", {"exposure_fraction": 0.0}),
-    ("frame_rate", {"rate_ratio": 1.0}), ("zipper", {"ap_phase_lag": 0.0, "end_fraction": 0.0, "ap_power": 2.2}),
-    ("asymmetry", {"lr_phase": 0.0, "lr_amp": 1.0})])
+@pytest.mark.parametrize(
+    "name,phi",
+    [
+        ("leak", {"leak_mm2": 0.0, "chink_fraction": 0.7}),
+        ("scale", {"scale": 1.0}),
+        ("exposure", {"exposure_fraction": 0.0}),
+        ("frame_rate", {"rate_ratio": 1.0}),
+        ("zipper", {"ap_phase_lag": 0.0, "end_fraction": 0.0, "ap_power": 2.2}),
+        ("asymmetry", {"lr_phase": 0.0, "lr_amp": 1.0}),
+    ],
+)
 def test_observation_extensions_reduce_to_the_base_model(base_run, name, phi):
     hr = np.asarray(base_run.gaw_hr)
     np.testing.assert_allclose(observe_extended(name, hr, FPS, phi), hr, atol=1e-12)
@@ -56,8 +65,9 @@ def test_observation_operators_against_analytic_answers(base_run):
     hr = np.asarray(base_run.gaw_hr)
     assert np.allclose(observe_extended("leak", hr, FPS, {"leak_mm2": 1.25, "chink_fraction": 0.0}), hr + 1.25)
     # a chink along the whole length: the area cannot fall below it, and is unchanged above it
-    np.testing.assert_allclose(observe_extended("leak", hr, FPS, {"leak_mm2": 1.25, "chink_fraction": 1.0}),
-                               np.maximum(hr, 1.25))
+    np.testing.assert_allclose(
+        observe_extended("leak", hr, FPS, {"leak_mm2": 1.25, "chink_fraction": 1.0}), np.maximum(hr, 1.25)
+    )
     assert np.allclose(observe_extended("scale", hr, FPS, {"scale": 0.9}), 0.9 * hr)
     # a boxcar leaves a straight line unchanged away from the ends, and scales a sine by sinc(f tau)
     rate = HR_OVERSAMPLE * FPS
@@ -79,10 +89,10 @@ def test_observation_operators_against_analytic_answers(base_run):
     coef = {}
     for p in (1.0, 2.5):
         zip_ = observe_extended("zipper", tone, FPS, {"ap_phase_lag": lag, "end_fraction": 0.0, "ap_power": p})
-        c = np.mean(np.exp(-2j * np.pi * lag * (y_k ** p - 0.5)))
+        c = np.mean(np.exp(-2j * np.pi * lag * (y_k**p - 0.5)))
         coef[p] = np.linalg.lstsq(basis, zip_[4000:12000] - 5.0, rcond=None)[0]
         np.testing.assert_allclose(coef[p], [c.real, c.imag], atol=2e-3)
-    assert np.abs(coef[2.5] - coef[1.0]).max() > 0.05      # the delay shape changes the waveform
+    assert np.abs(coef[2.5] - coef[1.0]).max() > 0.05  # the delay shape changes the waveform
     # half the fold delayed by half a period: the sum of two copies of a pure tone cancels
     tone = 5.0 + np.sin(2 * np.pi * 50.0 * t[:4000])
     asym = observe_extended("asymmetry", np.tile(tone, 4), FPS, {"lr_phase": 0.5, "lr_amp": 1.0})
@@ -132,25 +142,45 @@ def test_diagnose_names_a_hidden_leak_and_finds_nothing_in_a_clean_recording(bas
     """Blind runs (small but real): a 1.5 mm^2 leak is named with a large evidence gain and a >= 30 %
     smaller residual; the same recording without the leak gives 'no missing physics found'."""
     from vfcore.diagnose.pipeline import diagnose
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(11)
     clean = np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200])
     noise = 0.4 * rng.standard_normal(200)
     with ProcessPoolExecutor(2) as ex:
-        rep = diagnose(Problem(clean + 1.5 + noise, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2, **SMC_ONLY,
-                       map=ex.map, chunk_size=12, candidates=["leak", "scale", "sep_ratio"], max_refits=1)
+        rep = diagnose(
+            Problem(clean + 1.5 + noise, FPS, prior, config=CFG),
+            free_material=False,
+            n_particles=24,
+            seed=2,
+            **SMC_ONLY,
+            map=ex.map,
+            chunk_size=12,
+            candidates=["leak", "scale", "sep_ratio"],
+            max_refits=1,
+        )
         # floor_stop off: the control's base fit is at the noise and would stop before the catalogue, and
         # this test checks what screening and refits do on it
-        ctl = diagnose(Problem(clean + noise, FPS, prior, config=CFG), free_material=False, floor_stop=False,
-                       n_particles=24, seed=2, **SMC_ONLY,
-                       map=ex.map, chunk_size=12, candidates=["leak", "scale", "sep_ratio"], max_refits=1)
+        ctl = diagnose(
+            Problem(clean + noise, FPS, prior, config=CFG),
+            free_material=False,
+            floor_stop=False,
+            n_particles=24,
+            seed=2,
+            **SMC_ONLY,
+            map=ex.map,
+            chunk_size=12,
+            candidates=["leak", "scale", "sep_ratio"],
+            max_refits=1,
+        )
     assert rep.winner == "leak", rep.to_dict()["ranking"]
     assert rep.after["leak"]["rms_improvement"] >= 0.3
     from vfcore.diagnose.fit import param_table
-    names, mean, sd = param_table(rep.refits["leak"])          # leak integrated per simulation
+
+    names, mean, sd = param_table(rep.refits["leak"])  # leak integrated per simulation
     i = names.index("leak_mm2")
     assert abs(mean[i] - 1.5) < 0.3 and sd[i] < 0.3
-    assert mean[names.index("chink_fraction")] < 0.25      # a constant leak: no chink hidden by the opening
+    assert mean[names.index("chink_fraction")] < 0.25  # a constant leak: no chink hidden by the opening
     # the report carries the leak's null drop: no leak at all is far below the best (200 frames
     # 1.5 mm^2 off, sigma_e 1: ~200 * 1.5^2 / 2 = 225 nats), so the fit is not null-consistent
     drop = rep.after["leak"]["params"]["leak_mm2"]["null_drop"]
@@ -172,6 +202,7 @@ def _pulses(t, f0, oq=0.6, amp=10.0):
 
 def test_entrain_pair_identity_and_lag_against_analytic_answers(base_run):
     from vfcore.diagnose.fit import entrain_pair
+
     hr = np.asarray(base_run.gaw_hr, dtype=float)
     # the identical fold at lag 0 returns the left fold's area exactly, and a copy that differs by
     # round-off (another array, so no shortcut) returns it to round-off over the whole record: the
@@ -190,7 +221,7 @@ def test_entrain_pair_identity_and_lag_against_analytic_answers(base_run):
     t = np.arange(4001) / rate
     left = _pulses(t, 100.0)
     # a right fold at another f0 is entrained on the left's cycles: at lag 0 the same pulse shape
-    right = _pulses(t + 0.0003, 125.0)                      # other f0, other start
+    right = _pulses(t + 0.0003, 125.0)  # other f0, other start
     out = entrain_pair(left, right, FPS, 0.0)
     inner = slice(400, 3600)
     np.testing.assert_allclose(out[inner], left[inner], atol=0.05)
@@ -203,6 +234,7 @@ def test_entrain_pair_identity_and_lag_against_analytic_answers(base_run):
 def test_lr_stiffness_is_two_folds_and_the_base_model_at_its_null(base_run):
     from vfcore.diagnose.extensions import get
     from vfcore.diagnose.fit import right_fold_params
+
     assert get("lr_stiffness").physics == "asymmetry" and get("asymmetry").physics == "asymmetry"
     assert get("leak").physics == "leak"
     r = right_fold_params(TABLE3, 1.0)
@@ -217,7 +249,7 @@ def test_lr_stiffness_is_two_folds_and_the_base_model_at_its_null(base_run):
     base = evaluate(th[:1, :1], pb).loglik[0]
     # at the null the pair is the base fold: the same log-likelihood, bit for bit
     assert ev.loglik[0] == base
-    assert ev.loglik[1] < ev.loglik[0] - 50          # a stiffer, lagging right fold is a different GAW
+    assert ev.loglik[1] < ev.loglik[0] - 50  # a stiffer, lagging right fold is a different GAW
 
 
 def test_box_refit_of_an_extension_recovers_it_and_bounds_its_evidence(base_run):
@@ -229,6 +261,7 @@ def test_box_refit_of_an_extension_recovers_it_and_bounds_its_evidence(base_run)
 
     from vfcore.diagnose.fit import param_table
     from vfcore.diagnose.mode_fits import base_near
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(12)
     y = 1.1 * np.asarray(base_run.gaw_hr[41::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -249,12 +282,20 @@ def test_nested_check_names_a_hidden_scale_found_by_the_asymmetry_refit(base_run
     refitted: the asymmetry screens first (it contains every scale), its fit sits at zero phase
     difference, so the nested check refits scale in that mode and scale is named."""
     from vfcore.diagnose.pipeline import diagnose
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(11)
     y = 1.12 * np.asarray(base_run.gaw_hr[37::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
-    rep = diagnose(Problem(y, FPS, prior, config=CFG), free_material=False, n_particles=24, seed=2, **SMC_ONLY,
-                   candidates=["asymmetry", "scale"],
-                   max_refits=1, refit_forward=False)
+    rep = diagnose(
+        Problem(y, FPS, prior, config=CFG),
+        free_material=False,
+        n_particles=24,
+        seed=2,
+        **SMC_ONLY,
+        candidates=["asymmetry", "scale"],
+        max_refits=1,
+        refit_forward=False,
+    )
     assert rep.screening["asymmetry"]["score"] > rep.screening["scale"]["score"]
     assert rep.winner == "scale", rep.verdict
     assert rep.after["scale"]["box_refit_of"] == "asymmetry"
@@ -273,6 +314,7 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
     import math
 
     from vfcore.diagnose import fit, pipeline
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(5)
     run = simulate(TABLE3, dc.replace(CFG, sep_ratio=1.1))
@@ -286,24 +328,35 @@ def test_rescue_refits_a_forward_refit_that_missed_the_base_region(base_run, mon
             post.log_evidence = float(post.log_evidence) - 5000.0
         return post
 
-    route_refits(monkeypatch, failing_first)          # the first refits and the refits near a mode
+    route_refits(monkeypatch, failing_first)  # the first refits and the refits near a mode
     pb = Problem(y, FPS, prior, config=CFG)
     fail = True
-    rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1, rescue_method="box")
+    rep = pipeline.diagnose(
+        pb,
+        **SMC_ONLY,
+        free_material=False,
+        n_particles=16,
+        seed=4,
+        candidates=["sep_ratio"],
+        base_runs=1,
+        rescue_method="box",
+    )
     assert calls == ["sep_ratio", "sep_ratio"], calls
     res = rep.after["sep_ratio"]["rescued"]
     lo, hi = res["boxes"][0]["E_cover"]
-    m, h = float(rep.base.mean[0]), 0.15 * (950.0 - 250.0)     # +- 15 % of the prior width, clipped to it
+    m, h = float(rep.base.mean[0]), 0.15 * (950.0 - 250.0)  # +- 15 % of the prior width, clipped to it
     assert abs(lo - max(250.0, m - h)) < 1e-9 and abs(hi - min(950.0, m + h)) < 1e-9
     assert res["first_log_evidence"] < float(rep.base.log_evidence) - 1000.0
     assert res["first_n_simulations"] > 0
     assert float(rep.refits["sep_ratio"].log_evidence) > float(rep.base.log_evidence)
     assert any(n.startswith("rescue: the sep_ratio refit") for n in rep.notes)
     assert rep.winner == "sep_ratio", rep.to_dict()["ranking"]
-    assert rep.after["sep_ratio"]["params"]["sep_ratio"]["mean"] < 1.2     # moved off the model's 1.3
+    assert rep.after["sep_ratio"]["params"]["sep_ratio"]["mean"] < 1.2  # moved off the model's 1.3
     calls.clear()
     fail = False
-    rep2 = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1)
+    rep2 = pipeline.diagnose(
+        pb, **SMC_ONLY, free_material=False, n_particles=16, seed=4, candidates=["sep_ratio"], base_runs=1
+    )
     assert calls == ["sep_ratio"] and "rescued" not in rep2.after["sep_ratio"]
     assert abs(rep2.after["sep_ratio"]["params"]["sep_ratio"]["mean"] - 1.1) < 0.05
     # the rescue's value is a lower bound: not above the whole-prior estimate beyond the errors
@@ -324,6 +377,7 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
     until the posterior is off its edges, and both rescues recover the truth.
     With ``rescue_observation=False`` the failed refit stays and nothing is named."""
     from vfcore.diagnose import fit, pipeline
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -336,29 +390,49 @@ def test_rescue_also_refits_an_observation_level_refit_that_missed_the_base_regi
             post.log_evidence = float(post.log_evidence) - 5000.0
         return post
 
-    route_refits(monkeypatch, failing_first)          # the first refits and the refits near a mode
+    route_refits(monkeypatch, failing_first)  # the first refits and the refits near a mode
     pb = Problem(y, FPS, prior, config=CFG)
-    rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1)
+    rep = pipeline.diagnose(
+        pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1
+    )
     assert calls == ["scale", "scale"], calls
     res = rep.after["scale"]["rescued"]
     assert res["method"] == "reference"
     assert res["first_log_evidence"] < float(rep.base.log_evidence) - 1000.0
     assert any(n.startswith("rescue: the scale refit") for n in rep.notes)
     assert rep.winner == "scale", rep.to_dict()["ranking"]
-    assert rep.base.mean[0] < 0.85 * TABLE3.E_cover            # the base absorbed the scale
+    assert rep.base.mean[0] < 0.85 * TABLE3.E_cover  # the base absorbed the scale
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     assert abs(rep.after["scale"]["params"]["E_cover"]["mean"] - TABLE3.E_cover) < 0.1 * TABLE3.E_cover
     calls.clear()
-    box = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_method="box")
+    box = pipeline.diagnose(
+        pb,
+        **SMC_ONLY,
+        free_material=False,
+        n_particles=16,
+        seed=6,
+        candidates=["scale"],
+        base_runs=1,
+        rescue_method="box",
+    )
     boxes = box.after["scale"]["rescued"]["boxes"]
-    assert calls == ["scale"] * (1 + len(boxes)) and box.winner == "scale"      # one refit per box tried
-    assert boxes[0]["E_cover"][1] < TABLE3.E_cover                 # the first box cut the mode off
+    assert calls == ["scale"] * (1 + len(boxes)) and box.winner == "scale"  # one refit per box tried
+    assert boxes[0]["E_cover"][1] < TABLE3.E_cover  # the first box cut the mode off
     lo, hi = box.after["scale"]["rescued"]["box"]["E_cover"]
-    assert len(boxes) > 1 and lo < TABLE3.E_cover < hi            # the last one holds it
+    assert len(boxes) > 1 and lo < TABLE3.E_cover < hi  # the last one holds it
     assert abs(box.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
-    assert box.after["scale"]["rms_improvement"] > 0.45           # far from the 30 % naming threshold
+    assert box.after["scale"]["rms_improvement"] > 0.45  # far from the 30 % naming threshold
     calls.clear()
-    off = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"], base_runs=1, rescue_observation=False)
+    off = pipeline.diagnose(
+        pb,
+        **SMC_ONLY,
+        free_material=False,
+        n_particles=16,
+        seed=6,
+        candidates=["scale"],
+        base_runs=1,
+        rescue_observation=False,
+    )
     assert calls == ["scale"] and "rescued" not in off.after["scale"]
     assert off.winner is None
 
@@ -370,6 +444,7 @@ def test_refits_started_from_the_base_posterior_name_a_hidden_scale_without_a_re
     with a softer cover) is named from the first and only fit of the entry, its value and the true
     cover recovered, and no rescue runs after it."""
     from vfcore.diagnose import fit, pipeline
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -381,12 +456,20 @@ def test_refits_started_from_the_base_posterior_name_a_hidden_scale_without_a_re
 
     route_refits(monkeypatch, recording)
     pb = Problem(y, FPS, prior, config=CFG)
-    rep = pipeline.diagnose(pb, **SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale"],
-                            base_runs=1, refit_start="base")
+    rep = pipeline.diagnose(
+        pb,
+        **SMC_ONLY,
+        free_material=False,
+        n_particles=16,
+        seed=6,
+        candidates=["scale"],
+        base_runs=1,
+        refit_start="base",
+    )
     assert calls == [("scale", True)], calls
     assert "rescued" not in rep.after["scale"] and not any(n.startswith("rescue:") for n in rep.notes)
     assert rep.refits["scale"].info["reference_refit_of"] == "base"
-    assert rep.base.mean[0] < 0.85 * TABLE3.E_cover            # the base absorbed the scale
+    assert rep.base.mean[0] < 0.85 * TABLE3.E_cover  # the base absorbed the scale
     assert rep.winner == "scale", rep.to_dict()["ranking"]
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.12) < 0.03
     assert abs(rep.after["scale"]["params"]["E_cover"]["mean"] - TABLE3.E_cover) < 0.1 * TABLE3.E_cover
@@ -396,6 +479,7 @@ def test_refit_start_is_checked_and_chooses_the_entries_started_from_the_base():
     from vfcore.diagnose.extensions import implemented
     from vfcore.diagnose.options import DiagnoseOptions
     from vfcore.diagnose.refits import starts_from_base
+
     with pytest.raises(ValueError, match="refit_start must be one of 'prior', 'base', 'mixed', got 'posterior'"):
         DiagnoseOptions(refit_start="posterior")
     with pytest.raises(ValueError, match=r"SMC options \['runs'\] need refit_start='prior'"):
@@ -416,6 +500,7 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
     (E_cover within 5 % of the leader's), its evidence is far above the stuck one and replaces it,
     and the report records both. With ``shared_mode=False`` (the default) the stuck fit stays."""
     from vfcore.diagnose import baseline, fit, pipeline
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     y = 1.12 * np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200]) + 0.4 * rng.standard_normal(200)
@@ -436,10 +521,18 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
         base_z["z"] = float(out[0].log_evidence)
         return out
 
-    route_refits(monkeypatch, stuck_asymmetry)          # the first refits and the refits near a mode
+    route_refits(monkeypatch, stuck_asymmetry)  # the first refits and the refits near a mode
     monkeypatch.setattr(baseline, "base_fit", base_fit)
     pb = Problem(y, FPS, prior, config=CFG)
-    kw = dict(SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale", "asymmetry"], base_runs=1, nested_check=False)
+    kw = dict(
+        SMC_ONLY,
+        free_material=False,
+        n_particles=16,
+        seed=6,
+        candidates=["scale", "asymmetry"],
+        base_runs=1,
+        nested_check=False,
+    )
     rep = pipeline.diagnose(pb, shared_mode=True, **kw)
     assert rep.before["shared_mode_leader"] == "scale"
     assert sorted(calls) == ["asymmetry", "asymmetry", "scale"], calls
@@ -457,8 +550,9 @@ def test_shared_mode_refits_an_entry_from_the_leading_refit_s_material_mode(base
 
 
 @pytest.mark.slow
-def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(base_run,
-                                                                                                 monkeypatch):
+def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clean_recording_quiet(
+    base_run, monkeypatch
+):
     """Blind runs through the whole pipeline. The base fit is made to look as it does on
     an irregular vibration of a concealed recording: its runs scattered (further runs 3,000 and
     9,000 nats below the kept one, between-run error 5,000 nats) and a roughness of 10,000 nats.
@@ -467,6 +561,7 @@ def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clea
     re-fitted with the base model first. The same fakery on a clean recording names nothing."""
     from vfcore.diagnose import baseline, pipeline, regularity
     from vfcore.diagnose.regularity import Sensitivity
+
     real_base_fit = baseline.base_fit
 
     def scattered(problem, *, runs_out=None, **kw):
@@ -476,12 +571,25 @@ def test_best_of_base_on_an_irregular_base_names_a_hidden_scale_and_keeps_a_clea
         return base, 5000.0, factor, n, notes
 
     monkeypatch.setattr(baseline, "base_fit", scattered)
-    monkeypatch.setattr(regularity, "sensitivity", lambda problem, theta, seed=0, **kw: Sensitivity(
-        step=1e-6, tol=1.0, loglik=0.0, changes=[10000.0, 50.0], irregular=True, n_simulations=0))
+    monkeypatch.setattr(
+        regularity,
+        "sensitivity",
+        lambda problem, theta, seed=0, **kw: Sensitivity(
+            step=1e-6, tol=1.0, loglik=0.0, changes=[10000.0, 50.0], irregular=True, n_simulations=0
+        ),
+    )
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(21)
     clean = np.asarray(base_run.gaw_hr[43::HR_OVERSAMPLE][:200])
-    kw = dict(SMC_ONLY, free_material=False, n_particles=16, seed=6, candidates=["scale", "leak"], base_runs=1, refit_forward=False)
+    kw = dict(
+        SMC_ONLY,
+        free_material=False,
+        n_particles=16,
+        seed=6,
+        candidates=["scale", "leak"],
+        base_runs=1,
+        refit_forward=False,
+    )
     pb = Problem(1.12 * clean + 0.4 * rng.standard_normal(200), FPS, prior, config=CFG)
     old = pipeline.diagnose(pb, best_of_base=False, **kw)
     assert old.winner is None and old.before["regularity"]["irregular"]
@@ -500,14 +608,16 @@ def test_leak_on_a_simulation_adds_the_bernoulli_flow_of_the_open_part_of_the_ch
     plus ``extra * sqrt(2 (p_sub - p_sup) / rho)`` frame by frame, where ``extra`` is the part of
     the chink the opening does not hide; where the opening hides it all the flow is unchanged."""
     from vfcore.diagnose.extensions import RHO_AIR, get
+
     a, f = 1.5, 0.4
     out = get("leak").apply(base_run, {"leak_mm2": a, "chink_fraction": f})
     A = np.asarray(base_run.gaw)
     extra = np.maximum(0.0, a - f * A)
     np.testing.assert_allclose(out["gaw"], A + extra)
     dp = TABLE3.p_sub - base_run.config.p_sup
-    np.testing.assert_allclose(out["flow"] - np.asarray(base_run.flow), extra * 1e-6 * np.sqrt(2 * dp / RHO_AIR),
-                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        out["flow"] - np.asarray(base_run.flow), extra * 1e-6 * np.sqrt(2 * dp / RHO_AIR), rtol=1e-12, atol=1e-15
+    )
     hidden = A > a / f
     assert hidden.any() and (~hidden).any()
     np.testing.assert_array_equal(out["flow"][hidden], np.asarray(base_run.flow)[hidden])

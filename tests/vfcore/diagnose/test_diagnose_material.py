@@ -1,4 +1,5 @@
 """Material first (vfcore.diagnose.material) and the "no fit" verdict (vfcore.diagnose.adequacy)."""
+
 from __future__ import annotations
 
 import math
@@ -39,8 +40,10 @@ def test_pinned_are_the_scaled_parameters_held_at_table3_but_the_anchor(clean):
     # a value the user chose is not pinned, and it anchors the scale: the density is then free too
     assert pinned(_problem(clean, ("E_body", "E_cover"), fixed={"p_sub": 1000.0})) == ["E_lig", "rho", "eta"]
     # a measurement anchors the scale as well
-    assert pinned(_problem(clean, ("E_body", "E_cover", "p_sub", "rho"), measurements={"rho": (1050.0, 20.0)})) \
-        == ["E_lig", "eta"]
+    assert pinned(_problem(clean, ("E_body", "E_cover", "p_sub", "rho"), measurements={"rho": (1050.0, 20.0)})) == [
+        "E_lig",
+        "eta",
+    ]
     # x0 is geometric, not one of the scaled six: never freed
     assert "x0" not in pinned(_problem(clean, ("E_cover",)))
 
@@ -67,10 +70,20 @@ def test_judge_applies_the_naming_rule():
 
 
 def test_check_fit_reads_the_smallest_residual():
-    fits = {"base": {"residual_rms": 7.0, "predictive_noise_sd": 0.5, "dominant_phase": "closed",
-                     "pvalues": {"gap_index": 0.0, "f0": 0.4}},
-            "leak": {"residual_rms": 4.6, "predictive_noise_sd": 0.46, "dominant_phase": "opening",
-                     "pvalues": {"gap_index": 0.3, "SQ": 0.01, "jitter": float("nan")}}}
+    fits = {
+        "base": {
+            "residual_rms": 7.0,
+            "predictive_noise_sd": 0.5,
+            "dominant_phase": "closed",
+            "pvalues": {"gap_index": 0.0, "f0": 0.4},
+        },
+        "leak": {
+            "residual_rms": 4.6,
+            "predictive_noise_sd": 0.46,
+            "dominant_phase": "opening",
+            "pvalues": {"gap_index": 0.3, "SQ": 0.01, "jitter": float("nan")},
+        },
+    }
     c = check_fit(fits)
     assert c.best == "leak" and c.ratio == pytest.approx(10.0) and not c.fits
     assert c.measures == ["SQ"]
@@ -86,13 +99,24 @@ def test_a_recording_with_wrong_fixed_parameters_is_explained_by_freeing_them(cl
     diagnosis must say the fixed parameters were wrong, name no catalogue entry, and find the fit."""
     from vfcore.diagnose.pipeline import diagnose
     from vfcore.params import Params
+
     truth = Params(**{**TABLE3.as_dict(), "eta": 6.5, "E_cover": 520.0})
     r = simulate(truth, CFG)
     y = np.asarray(r.gaw_hr[37::HR_OVERSAMPLE][:200]) + 0.2 * np.random.default_rng(5).standard_normal(200)
     pb = _problem(y, ("E_body", "E_cover", "p_sub"))
     assert pinned(pb) == ["E_lig", "eta"]
-    rep = diagnose(pb, n_particles=16, refit_particles=None, seed=1, candidates=["scale"], base_runs=1, continuation=False,
-                   regularity_check=False, mode_checks=0, local_check=False)
+    rep = diagnose(
+        pb,
+        n_particles=16,
+        refit_particles=None,
+        seed=1,
+        candidates=["scale"],
+        base_runs=1,
+        continuation=False,
+        regularity_check=False,
+        mode_checks=0,
+        local_check=False,
+    )
     m = rep.material
     assert m is not None and m["found"], m
     assert m["kept"] == "free" and m["rms_gain"] >= 0.3
@@ -103,18 +127,31 @@ def test_a_recording_with_wrong_fixed_parameters_is_explained_by_freeing_them(cl
 
 
 def _one_parameter(y):
-    return Problem(y, FPS, Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"}),
-                   config=CFG)
+    return Problem(
+        y, FPS, Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"}), config=CFG
+    )
 
 
-SMALL = dict(free_material=False, continuation=False, continuation_entries=None, refit_particles=None, n_particles=12, seed=2, base_runs=1, regularity_check=False, mode_checks=0,
-             local_check=False, candidates=["scale", "leak"])
+SMALL = dict(
+    free_material=False,
+    continuation=False,
+    continuation_entries=None,
+    refit_particles=None,
+    n_particles=12,
+    seed=2,
+    base_runs=1,
+    regularity_check=False,
+    mode_checks=0,
+    local_check=False,
+    candidates=["scale", "leak"],
+)
 
 
 def test_a_base_fit_at_the_noise_stops_before_the_catalogue(clean):
     """A recording of the model itself: the base fit leaves about the noise, no entry could lower
     its RMS by 30 %, so nothing is screened or refitted and nothing is named."""
     from vfcore.diagnose.pipeline import diagnose
+
     y = clean + 0.4 * np.random.default_rng(3).standard_normal(clean.size)
     rep = diagnose(_one_parameter(y), **SMALL)
     assert rep.before["residual_rms"] < 1.43 * rep.before["predictive_noise_sd"]
@@ -129,9 +166,11 @@ def test_an_effect_outside_the_catalogue_is_not_named(clean):
     error nor a leak reproduces it, the best fit stays far above the noise, and the verdict says
     the model does not fit instead of naming the entry that absorbed most."""
     from vfcore.diagnose.pipeline import diagnose
+
     r = simulate(TABLE3, CFG)
-    idx = np.searchsorted(np.asarray(r.cycles.t_start), (37 + HR_OVERSAMPLE * np.arange(200)) / (FPS * HR_OVERSAMPLE),
-                          side="right")
+    idx = np.searchsorted(
+        np.asarray(r.cycles.t_start), (37 + HR_OVERSAMPLE * np.arange(200)) / (FPS * HR_OVERSAMPLE), side="right"
+    )
     y = clean * np.where(idx % 2 == 0, 1.3, 0.7) + 0.3 * np.random.default_rng(4).standard_normal(clean.size)
     rep = diagnose(_one_parameter(y), **SMALL)
     assert not rep.fits and rep.winner is None

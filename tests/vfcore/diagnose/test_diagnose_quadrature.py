@@ -1,5 +1,6 @@
 """Integrating waveform-level extension parameters out of each simulation's likelihood
 (vfcore.diagnose.quadrature, ExtendedEvaluator(integrate=True))."""
+
 import math
 
 import numpy as np
@@ -60,13 +61,15 @@ def base_run():
     return simulate(TABLE3, CFG)
 
 
-@pytest.mark.parametrize("name,phi,n_dense", [("scale", {"scale": 1.13}, 4001),
-                                              ("frame_rate", {"rate_ratio": 1.037}, 8001)])
+@pytest.mark.parametrize(
+    "name,phi,n_dense", [("scale", {"scale": 1.13}, 4001), ("frame_rate", {"rate_ratio": 1.037}, 8001)]
+)
 def test_integrated_likelihood_equals_a_dense_grid_average(base_run, name, phi, n_dense):
     """The evaluator's integrated log-likelihood of one simulation equals the log of the average
     likelihood over a dense grid of the parameter's prior (the definition of the integral), and
     its conditional mean recovers the value hidden in the recording."""
     from vfcore.diagnose.extensions import get
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(5)
     hr0 = np.asarray(base_run.gaw_hr)
@@ -75,14 +78,21 @@ def test_integrated_likelihood_equals_a_dense_grid_average(base_run, name, phi, 
     ev = ExtendedEvaluator(pb, name, integrate=True)
     assert ev.prior.names == ("E_cover",)
     out = ev(np.array([[TABLE3.E_cover]]))
-    (pname, (lo, hi)), = get(name).bounds().items()
+    ((pname, (lo, hi)),) = get(name).bounds().items()
     grid = lo + (np.arange(n_dense) + 0.5) * (hi - lo) / n_dense
     max_lag, n_cmp = pb.window
     lls = []
     for v in grid:
         hr = observe_extended(name, hr0, FPS, {pname: v})
-        seg, _, _ = align(hr[::HR_OVERSAMPLE], pb.obs_gaw, FPS, (max_lag, n_cmp), sim_hr=hr,
-                          oversample=HR_OVERSAMPLE, method=pb.alignment)
+        seg, _, _ = align(
+            hr[::HR_OVERSAMPLE],
+            pb.obs_gaw,
+            FPS,
+            (max_lag, n_cmp),
+            sim_hr=hr,
+            oversample=HR_OVERSAMPLE,
+            method=pb.alignment,
+        )
         lls.append(gaussian_loglik(seg, pb.obs_compared, pb.sigma_e))
     want = float(logsumexp(lls) - math.log(n_dense))
     assert abs(out.loglik[0] - want) < 0.05, (out.loglik[0], want)
@@ -91,17 +101,27 @@ def test_integrated_likelihood_equals_a_dense_grid_average(base_run, name, phi, 
 
 def test_integrated_prior_keeps_only_what_needs_a_simulation():
     base = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in ("E_cover", "p_sub")})
-    assert ExtendedPrior(bounds={}, base=base, extension="lr_stiffness", integrate=True).names == \
-        ("E_cover", "p_sub", "log2_lr_Q")
+    assert ExtendedPrior(bounds={}, base=base, extension="lr_stiffness", integrate=True).names == (
+        "E_cover",
+        "p_sub",
+        "log2_lr_Q",
+    )
     # the zipper's delay shape is sampled with the material parameters, its lag and taper integrated
-    assert ExtendedPrior(bounds={}, base=base, extension="zipper", integrate=True).names == \
-        ("E_cover", "p_sub", "ap_power")
-    assert ExtendedPrior(bounds={}, base=base, extension="sep_ratio", integrate=True).names == \
-        ("E_cover", "p_sub", "sep_ratio")
+    assert ExtendedPrior(bounds={}, base=base, extension="zipper", integrate=True).names == (
+        "E_cover",
+        "p_sub",
+        "ap_power",
+    )
+    assert ExtendedPrior(bounds={}, base=base, extension="sep_ratio", integrate=True).names == (
+        "E_cover",
+        "p_sub",
+        "sep_ratio",
+    )
 
 
 def test_delayed_slices_equal_interpolation_with_held_ends():
     from vfcore.diagnose.observers import delayed_copy
+
     rng = np.random.default_rng(2)
     y = rng.standard_normal(500)
     t = np.arange(y.size, dtype=float)
@@ -119,6 +139,7 @@ def test_null_drop_rejects_a_null_between_two_modes(base_run, lag):
     lag 0) tells the two apart: hundreds of nats for a real lag, ~0 without one."""
     from vfcore.diagnose.fit import pair_observer
     from vfcore.diagnose.rank import null_consistent
+
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n != "E_cover"})
     rng = np.random.default_rng(11)
     hr0 = np.asarray(base_run.gaw_hr)
@@ -129,14 +150,12 @@ def test_null_drop_rejects_a_null_between_two_modes(base_run, lag):
     assert out.ok[0]
     m, s, drop = out.extra[0]
     if lag:
-        assert abs(m) < 2 * s and s > 0.5 * lag              # the mean +- sd test cannot see it
+        assert abs(m) < 2 * s and s > 0.5 * lag  # the mean +- sd test cannot see it
         assert drop > 50.0
-        assert not null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness",
-                                   drops={"lr_lag": drop})
+        assert not null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness", drops={"lr_lag": drop})
     else:
         assert 0.0 <= drop < 2.0
-        assert null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness",
-                               drops={"lr_lag": drop})
+        assert null_consistent(("log2_lr_Q", "lr_lag"), [0.0, m], [0.02, s], "lr_stiffness", drops={"lr_lag": drop})
 
 
 def test_integrated_membranous_chink_recovers_its_area_and_fraction(base_run):
@@ -159,10 +178,18 @@ def test_integrated_membranous_chink_recovers_its_area_and_fraction(base_run):
 
     def ll(a, f):
         hr = observe_extended("leak", hr0, FPS, {"leak_mm2": a, "chink_fraction": f})
-        seg, _, _ = align(hr[::HR_OVERSAMPLE], pb.obs_gaw, FPS, (max_lag, n_cmp), sim_hr=hr,
-                          oversample=HR_OVERSAMPLE, method=pb.alignment)
+        seg, _, _ = align(
+            hr[::HR_OVERSAMPLE],
+            pb.obs_gaw,
+            FPS,
+            (max_lag, n_cmp),
+            sim_hr=hr,
+            oversample=HR_OVERSAMPLE,
+            method=pb.alignment,
+        )
         return gaussian_loglik(seg, pb.obs_compared, pb.sigma_e)
-    n_a, n_f = 240, 80                                   # the whole prior box [0, 3] x [0, 1]
+
+    n_a, n_f = 240, 80  # the whole prior box [0, 3] x [0, 1]
     grid = [ll((i + 0.5) * 3.0 / n_a, (k + 0.5) / n_f) for i in range(n_a) for k in range(n_f)]
     want = float(logsumexp(grid) - math.log(n_a * n_f))
     assert abs(out.loglik[0] - want) < 0.1, (out.loglik[0], want)

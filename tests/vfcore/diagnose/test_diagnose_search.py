@@ -1,4 +1,5 @@
 """Window-continuation search (vfcore.diagnose.search) and its use in the diagnosis."""
+
 import math
 
 import numpy as np
@@ -49,7 +50,7 @@ def test_a_window_without_an_f0_of_its_own_is_left_out(scaled_problem):
     """A recording whose first cycles are nearly still (a tremor's quiet stretch): the first window
     is no usable recording by itself and is left out instead of failing the search."""
     y = np.asarray(scaled_problem.obs_gaw, dtype=float).copy()
-    y[:60] = y[:60].mean()                       # ~4 cycles without oscillation
+    y[:60] = y[:60].mean()  # ~4 cycles without oscillation
     pb = Problem(y, FPS, scaled_problem.prior, config=CFG, sigma_e=0.3)
     full = window_problems(scaled_problem, 3.0)
     probs = window_problems(pb, 3.0)
@@ -68,6 +69,7 @@ def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically
     (the exact spike is the simulation that made the recording), so the search is not asked to
     land on it."""
     from vfcore.diagnose.fit import ExtendedEvaluator
+
     found = continuation_search(scaled_problem, "scale", seed=4, **SMALL)
     assert found.names == ("E_cover",)
     grid = np.linspace(250.0, 950.0, 71)[:, None]
@@ -79,7 +81,7 @@ def test_search_finds_a_hidden_scale_and_the_material_and_reruns_bit_identically
     assert again.theta.tobytes() == found.theta.tobytes() and again.loglik == found.loglik
 
 
-@pytest.mark.slow      # 27 s on 2 cores; make test-all runs it
+@pytest.mark.slow  # 27 s on 2 cores; make test-all runs it
 def test_searches_run_together_give_each_search_exactly(scaled_problem):
     """The continuation stage sends the starts of every entry's search through the map at once
     (search.continuation_searches), with halving or without: each result equals that search run
@@ -89,17 +91,20 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
     from vfcore.diagnose.progress import ProgressTracker
     from vfcore.diagnose.search import continuation_searches
 
-    def reversed_map(fn, parts):                 # runs the last part first, returns them in order
+    def reversed_map(fn, parts):  # runs the last part first, returns them in order
         parts = list(parts)
         return [r for r in reversed([fn(p) for p in reversed(parts)])]
 
     start = np.array([[600.0, 1.2]])
     small = {**SMALL, "maxfev0": 8, "maxfev_step": 4, "halving": False}
-    alone = [continuation_search(scaled_problem, "scale", seed=4, **small),
-             continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small)]
+    alone = [
+        continuation_search(scaled_problem, "scale", seed=4, **small),
+        continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small),
+    ]
     track = ProgressTracker(None, 0.0)
-    together = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)],
-                                     map=track.wrap(reversed_map), **small)
+    together = continuation_searches(
+        scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)], map=track.wrap(reversed_map), **small
+    )
     for a, b in zip(alone, together):
         assert a.names == b.names and a.theta.tobytes() == b.theta.tobytes(), (a, b)
         assert (a.loglik, a.n_simulations, a.start_logliks) == (b.loglik, b.n_simulations, b.start_logliks)
@@ -111,16 +116,19 @@ def test_searches_run_together_give_each_search_exactly(scaled_problem):
     # the halving search runs its jobs together window by window, each as alone; its rows carry
     # running counts from window to window, and the count is still the simulations run
     small["halving"] = True
-    halved = [continuation_search(scaled_problem, "scale", seed=4, **small),
-              continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small)]
+    halved = [
+        continuation_search(scaled_problem, "scale", seed=4, **small),
+        continuation_search(scaled_problem, "sep_ratio", starts=start, seed=9, **small),
+    ]
     track = ProgressTracker(None, 0.0)
-    joint = continuation_searches(scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)],
-                                  map=track.wrap(reversed_map), **small)
+    joint = continuation_searches(
+        scaled_problem, [("scale", (), 4), ("sep_ratio", start, 9)], map=track.wrap(reversed_map), **small
+    )
     for a, b in zip(halved, joint):
         assert a.names == b.names and a.theta.tobytes() == b.theta.tobytes(), (a, b)
         assert (a.loglik, a.n_simulations, a.start_logliks) == (b.loglik, b.n_simulations, b.start_logliks)
     assert track.simulations == sum(r.n_simulations for r in joint)
-    assert joint[1].n_simulations < together[1].n_simulations     # a start was dropped after a window
+    assert joint[1].n_simulations < together[1].n_simulations  # a start was dropped after a window
 
 
 class _Quadratic:
@@ -132,6 +140,7 @@ class _Quadratic:
 
     def __call__(self, thetas):
         from vfcore.inference.problem import Evaluation
+
         d2 = np.sum(((np.asarray(thetas) - self.centre) / self.w) ** 2, axis=1)
         ll = np.where(d2 < 1.0, -d2, -1000.0) if self.spike else -d2
         return Evaluation(loglik=ll, ok=np.ones(len(ll), bool))
@@ -146,11 +155,12 @@ def test_search_never_returns_less_than_its_start():
     from types import SimpleNamespace
 
     from vfcore.diagnose.search import CONTINUATION, _Continuer
+
     prior = SimpleNamespace(lo=np.zeros(2), width=np.ones(2))
     evs = [_Quadratic(0.2, 0.3), _Quadratic(0.2, 0.3), _Quadratic(0.8, 0.01, spike=True)]
     res = _Continuer(evs, {**CONTINUATION, "prior": prior})(np.array([[0.8, 0.8], [0.5, 0.5]]))
     assert res.loglik[0] >= 0.0 and np.allclose(res.extra[0, :2], 0.8)
-    assert res.loglik[1] == -1000.0                    # a start off the spike does not reach it
+    assert res.loglik[1] == -1000.0  # a start off the spike does not reach it
     assert res.extra[0, 2] >= 1 and np.all(np.isfinite(res.loglik))
 
 
@@ -162,6 +172,7 @@ def test_halving_drops_the_worse_half_after_each_window_and_keeps_the_leaders_pa
     from types import SimpleNamespace
 
     from vfcore.diagnose.search import CONTINUATION, _Continuer, _halving_search
+
     prior = SimpleNamespace(lo=np.zeros(2), width=np.ones(2), ndim=2)
     evs = [_Quadratic(0.3, 0.3), _Quadratic(0.3, 0.2), _Quadratic(0.3, 0.1)]
     starts = np.array([[0.9, 0.9], [0.32, 0.28], [0.05, 0.95], [0.5, 0.4]])
@@ -171,7 +182,7 @@ def test_halving_drops_the_worse_half_after_each_window_and_keeps_the_leaders_pa
     lead = int(np.argmax(full.loglik))
     assert int(np.argmax(half.loglik)) == lead == 1
     assert half.loglik[lead] == full.loglik[lead] and half.extra[lead].tobytes() == full.extra[lead].tobytes()
-    for i in (0, 2):                              # far from the optimum: dropped after the first window
+    for i in (0, 2):  # far from the optimum: dropped after the first window
         assert half.loglik[i] == evs[-1](starts[i][None, :]).loglik[0]
     assert half.extra[:, 2].sum() < full.extra[:, 2].sum()
 
@@ -194,10 +205,21 @@ def test_continued_fit_estimates_the_evidence_from_the_found_mode(scaled_problem
 @pytest.mark.slow
 def test_blind_diagnosis_with_continuation_names_the_scale(scaled_problem):
     from vfcore.diagnose.pipeline import diagnose
+
     # seed 2: its first scale refit ends below the continued one, so the continued refit and its mode check run
     # (seeds 0, 1, 3 and 4 keep the first refit and name the scale all the same)
-    rep = diagnose(scaled_problem, free_material=False, n_particles=16, refit_particles=None, continuation_entries=None, seed=2, candidates=["scale", "exposure"], base_runs=1,
-                   continuation=True, continuation_options=SMALL)
+    rep = diagnose(
+        scaled_problem,
+        free_material=False,
+        n_particles=16,
+        refit_particles=None,
+        continuation_entries=None,
+        seed=2,
+        candidates=["scale", "exposure"],
+        base_runs=1,
+        continuation=True,
+        continuation_options=SMALL,
+    )
     assert rep.winner == "scale", rep.verdict
     mc = rep.before["mode_checks"]["continuation"]
     assert math.isfinite(mc["log_evidence_bound"]) and mc["continuation"]["n_simulations"] > 0
@@ -205,7 +227,7 @@ def test_blind_diagnosis_with_continuation_names_the_scale(scaled_problem):
     assert abs(rep.after["scale"]["params"]["scale"]["mean"] - 1.1) < 0.02
     # the winner's mode check: the base searched from the scale fit's optimum (scale dropped)
     # gets the search the entry got, and stays below it (the scale is physics, not a mode)
-    assert rep.after["scale"]["continuation"]["n_simulations"] > 0      # the continued refit was kept
+    assert rep.after["scale"]["continuation"]["n_simulations"] > 0  # the continued refit was kept
     mcc = rep.before["mode_checks"]["scale continued"]
     assert mcc["continuation"]["start_logliks"] and mcc["continuation"]["n_simulations"] > 0
     assert mcc["log_evidence_bound"] < rep.after["scale"]["log_evidence"] - 3.0
@@ -223,7 +245,8 @@ def test_every_entry_contains_the_base_model(scaled_problem):
 
     from vfcore.diagnose.extensions import CATALOGUE
     from vfcore.diagnose.search import model_evaluator, model_prior
-    material = np.array([560.0])                                 # E_cover, Pa (Table 3: 636.2)
+
+    material = np.array([560.0])  # E_cover, Pa (Table 3: 636.2)
     base = float(model_evaluator(scaled_problem, None)(material[None]).loglik[0])
     assert math.isfinite(base)
 
@@ -232,8 +255,10 @@ def test_every_entry_contains_the_base_model(scaled_problem):
         rows = np.array([np.concatenate([material, c]) for c in itertools.product(*(values[n] for n in own))])
         return base - float(np.max(model_evaluator(scaled_problem, name, integrate=False)(rows).loglik))
 
-    at_null = {name: gap(name, {p.name: [p.null] if p.null is not None else [p.lo, p.hi] for p in ext.params})
-               for name, ext in CATALOGUE.items()}
+    at_null = {
+        name: gap(name, {p.name: [p.null] if p.null is not None else [p.lo, p.hi] for p in ext.params})
+        for name, ext in CATALOGUE.items()
+    }
     nested = {n for n, g in at_null.items() if abs(g) <= 1e-6}
     assert nested == set(CATALOGUE), at_null
     # off their nulls the two are live models, beyond an Occam factor of a few nats from the base

@@ -1,4 +1,5 @@
 """Extended fits run together (vfcore.diagnose.together): each equals its fit alone, bit for bit."""
+
 import numpy as np
 import pytest
 
@@ -45,7 +46,7 @@ def test_the_pool_scores_each_row_as_its_own_evaluator(problem):
     batches = [(j, ev.prior.sample(3 + j, rng)) for j, ev in enumerate(evs)]
     rows, where = pool.rows(batches)
     assert rows.shape == (3 + 4 + 5 + 6, 1 + max(ev.prior.ndim for ev in evs))
-    assert list(rows[:4, 0]) == [0, 1, 2, 3]              # interleaved: one row of each batch in turn
+    assert list(rows[:4, 0]) == [0, 1, 2, 3]  # interleaved: one row of each batch in turn
     ev = pool(rows)
     for (j, th), idx in zip(batches, where):
         alone = evs[j](th)
@@ -59,7 +60,7 @@ def test_the_pool_scores_each_row_as_its_own_evaluator(problem):
 
 def test_fits_run_together_equal_each_fit_alone(problem):
     jobs = [(n, 10, 40 + i) for i, n in enumerate(ENTRIES[:3])]
-    split = BalancedMap(map, 2)                           # every batch in two equal parts, as on 2 workers
+    split = BalancedMap(map, 2)  # every batch in two equal parts, as on 2 workers
     batches = []
 
     def counting(fn, parts):
@@ -68,8 +69,9 @@ def test_fits_run_together_equal_each_fit_alone(problem):
         return split(fn, parts)
 
     done = []
-    together = fit_extended_many(problem, jobs, map=counting, chunk_size=8, max_moves=2,
-                                 on_done=lambda i, post: done.append(i))
+    together = fit_extended_many(
+        problem, jobs, map=counting, chunk_size=8, max_moves=2, on_done=lambda i, post: done.append(i)
+    )
     n_together = len(batches)
     alone = [fit_extended(problem, n, n_particles=k, seed=s, map=split, chunk_size=8, max_moves=2) for n, k, s in jobs]
     for a, b in zip(together, alone):
@@ -86,29 +88,32 @@ def test_fits_run_together_refuse_options_that_are_not_the_samplers(problem):
         fit_extended_many(problem, [("scale", 12, 1)], screen=problem)
 
 
-@pytest.mark.slow          # the same machinery as the refits together, with a reference per fit
+@pytest.mark.slow  # the same machinery as the refits together, with a reference per fit
 def test_rescues_run_together_equal_each_rescue_alone(problem):
     """Reference-started refits (the rescue) of two entries, run together, equal each one alone."""
     from types import SimpleNamespace
 
     from vfcore.diagnose.mode_fits import reference_refit, reference_refits
+
     names = problem.prior.names
     mid = 0.5 * (problem.prior.lo + problem.prior.hi)
     base = SimpleNamespace(names=names, mean=mid, cov=np.diag((0.05 * problem.prior.width) ** 2))
     jobs = [("scale", 10, 7), ("sep_ratio", 10, 9)]
     together = reference_refits(problem, base, jobs, map=BalancedMap(map, 2), chunk_size=8, max_moves=2)
     for (name, n, seed), (z, se, post) in zip(jobs, together):
-        z1, se1, alone = reference_refit(problem, base, name, n_particles=n, seed=seed, map=BalancedMap(map, 2),
-                                         chunk_size=8, max_moves=2)
+        z1, se1, alone = reference_refit(
+            problem, base, name, n_particles=n, seed=seed, map=BalancedMap(map, 2), chunk_size=8, max_moves=2
+        )
         assert (z, se) == (z1, se1)
         _same(post, alone)
         assert post.info["reference"] == alone.info["reference"]
 
 
-@pytest.mark.slow          # the same machinery as the refits together, with a reference per fit
+@pytest.mark.slow  # the same machinery as the refits together, with a reference per fit
 def test_continued_fits_run_together_equal_each_fit_alone(problem):
     """The continuation stage's fits from each entry's optimum, run together, equal each fit alone."""
     from vfcore.diagnose.search import SearchResult, continued_fit, continued_fits, model_prior
+
     jobs = []
     for k, (name, seed) in enumerate((("scale", 3), ("sep_ratio", 4))):
         prior = model_prior(problem, name)
@@ -116,8 +121,9 @@ def test_continued_fits_run_together_equal_each_fit_alone(problem):
         jobs.append((SearchResult(tuple(prior.names), theta, -100.0, 50), name, seed))
     together = continued_fits(problem, jobs, n_particles=10, map=BalancedMap(map, 2), chunk_size=8, max_moves=2)
     for (found, name, seed), (z, se, post) in zip(jobs, together):
-        z1, se1, alone = continued_fit(problem, found, name, n_particles=10, seed=seed, map=BalancedMap(map, 2),
-                                       chunk_size=8, max_moves=2)
+        z1, se1, alone = continued_fit(
+            problem, found, name, n_particles=10, seed=seed, map=BalancedMap(map, 2), chunk_size=8, max_moves=2
+        )
         assert (z, se) == (z1, se1)
         _same(post, alone)
         assert post.info["continuation"] == alone.info["continuation"]

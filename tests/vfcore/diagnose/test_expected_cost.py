@@ -1,5 +1,6 @@
 """The cost a diagnosis announces before it starts (vfcore.diagnose.expected): at the defaults it is the
 held-out suite's measured ranges, and it moves with the settings that set the simulation count."""
+
 from __future__ import annotations
 
 import pytest
@@ -18,8 +19,9 @@ def test_the_defaults_announce_the_measured_ranges_and_minutes_follow_the_probe(
     c = expected_cost(DiagnoseOptions(), 0.04, 2)
     assert c.floor == FLOOR_SIMULATIONS and c.catalogue == CATALOGUE_SIMULATIONS and c.guide == ()
     assert c.floor_minutes == pytest.approx([s * 0.04 * FLOOR_TIME_FACTOR / 2 / 60 for s in FLOOR_SIMULATIONS])
-    assert c.catalogue_minutes == pytest.approx([s * 0.04 * CATALOGUE_TIME_FACTOR / 2 / 60
-                                                 for s in CATALOGUE_SIMULATIONS])
+    assert c.catalogue_minutes == pytest.approx(
+        [s * 0.04 * CATALOGUE_TIME_FACTOR / 2 / 60 for s in CATALOGUE_SIMULATIONS]
+    )
     # one worker takes twice as long for the same simulations
     one = expected_cost(DiagnoseOptions(), 0.04, 1)
     assert one.catalogue == c.catalogue and one.catalogue_minutes == pytest.approx([2 * m for m in c.catalogue_minutes])
@@ -36,8 +38,12 @@ def test_the_count_moves_with_the_settings_that_set_it_and_says_it_is_scaled():
     # the catalogue stages are unchanged: only the base share grows
     assert more.catalogue[1] - more.floor[1] == d.catalogue[1] - d.floor[1]
     assert "n_particles 80" in "\n".join(more.lines())
-    for fewer in (DiagnoseOptions(refit_particles=12), DiagnoseOptions(continuation=False),
-                  DiagnoseOptions(continuation_entries=2), DiagnoseOptions(max_refits=0)):
+    for fewer in (
+        DiagnoseOptions(refit_particles=12),
+        DiagnoseOptions(continuation=False),
+        DiagnoseOptions(continuation_entries=2),
+        DiagnoseOptions(max_refits=0),
+    ):
         c = expected_cost(fewer, 0.04, 2)
         assert c.floor == d.floor and c.catalogue[0] < d.catalogue[0] and c.catalogue[1] < d.catalogue[1]
         assert c.guide, fewer
@@ -83,8 +89,10 @@ def test_the_base_fits_follow_the_given_fit_and_what_is_freed(monkeypatch):
     for held, want in (([], {None: 1, "same": 0, "other": 1}), (["p_sub"], {None: 2, "same": 1, "other": 1})):
         monkeypatch.setattr(M, "pinned", lambda p, held=held: held)
         for free in (True, False):
-            got = {k: base_fits(problem, DiagnoseOptions(free_material=free), post)
-                   for k, post in ((None, None), ("same", same), ("other", other))}
+            got = {
+                k: base_fits(problem, DiagnoseOptions(free_material=free), post)
+                for k, post in ((None, None), ("same", same), ("other", other))
+            }
             assert got == (want if free else {None: 1, "same": 0, "other": 1}), (held, free)
     monkeypatch.setattr(M, "pinned", lambda p: ["p_sub"])
     c = expected_for(problem, DiagnoseOptions(candidates=["leak", "asymmetry"]), None, 2)

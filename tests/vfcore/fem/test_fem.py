@@ -3,6 +3,7 @@
 Expected values are derived from mechanics (patch test, rigid-body modes, total mass,
 a manufactured Navier solution), never recorded from the code's output.
 """
+
 import math
 
 import numpy as np
@@ -24,7 +25,7 @@ def _boundary_nodes(tri: np.ndarray) -> np.ndarray:
 def _patch_solve(K: sp.spmatrix, pts: np.ndarray, nodes: np.ndarray, bnd: np.ndarray, A, b):
     """Impose u = A x + b on ``bnd`` (interleaved dofs), solve K u = 0 on the rest of ``nodes``."""
     n_full = 2 * len(pts)
-    exact = (pts @ np.asarray(A).T + b).ravel()       # interleaved: (x0, z0, x1, z1, ...)
+    exact = (pts @ np.asarray(A).T + b).ravel()  # interleaved: (x0, z0, x1, z1, ...)
     dof_b = np.sort(np.concatenate([2 * bnd, 2 * bnd + 1]))
     inner = np.setdiff1d(nodes, bnd)
     dof_i = np.sort(np.concatenate([2 * inner, 2 * inner + 1]))
@@ -49,10 +50,10 @@ def test_patch_test_homogeneous(mesh_name, nu):
     """Homogeneous material: an affine field imposed on the whole boundary is reproduced exactly inside."""
     mesh = load_mesh(mesh_name)
     U = assemble_unit(mesh, nu)
-    K = sum(U.K_layers)                          # E = 1 everywhere
+    K = sum(U.K_layers)  # E = 1 everywhere
     bnd = _boundary_nodes(mesh.triangles)
     nodes = np.arange(mesh.n_nodes)
-    assert np.setdiff1d(nodes, bnd).size > 10    # there are interior nodes to check
+    assert np.setdiff1d(nodes, bnd).size > 10  # there are interior nodes to check
     for A, b in AFFINE:
         ui, ex = _patch_solve(K, mesh.points, nodes, bnd, A, b)
         assert np.max(np.abs(ui - ex)) <= 1e-10 * np.max(np.abs(ex))
@@ -75,7 +76,7 @@ def test_patch_test_each_layer(nu):
         nodes = np.unique(tri)
         bnd = _boundary_nodes(tri)
         inner = np.setdiff1d(nodes, bnd)
-        if inner.size == 0:       # thin layer without interior nodes: nothing to check
+        if inner.size == 0:  # thin layer without interior nodes: nothing to check
             continue
         for A, b in AFFINE:
             ui, ex = _patch_solve(U.K_layers[k], mesh.points, nodes, bnd, A, b)
@@ -108,15 +109,18 @@ def test_rigid_body_modes_null_space(nu):
     E = (12150.0, 1808.0, 636.2)
     K = sum(e * Kl for e, Kl in zip(E, U.K_layers))
     x, z = mesh.points[:, 0], mesh.points[:, 1]
-    modes = [np.column_stack([np.ones_like(x), 0 * x]), np.column_stack([0 * x, np.ones_like(x)]),
-             np.column_stack([-z, x])]
+    modes = [
+        np.column_stack([np.ones_like(x), 0 * x]),
+        np.column_stack([0 * x, np.ones_like(x)]),
+        np.column_stack([-z, x]),
+    ]
     scale = abs(K).max()
     for r in modes:
         r = r.ravel()
         assert np.max(np.abs(K @ r)) <= 1e-10 * scale * np.max(np.abs(r))
         assert np.max(np.abs(U.D1 @ r)) <= 1e-10 * abs(U.D1).max() * np.max(np.abs(r))
     # and the null space is exactly three-dimensional: a non-rigid mode has positive energy
-    strain = np.column_stack([x, 0 * x]).ravel()       # uniform stretch
+    strain = np.column_stack([x, 0 * x]).ravel()  # uniform stretch
     assert strain @ (K @ strain) > 1e-6 * scale * (strain @ strain)
 
 
@@ -125,8 +129,13 @@ def test_mass_total_and_symmetry():
         mesh = load_mesh(name)
         U = assemble_unit(mesh, 0.4995)
         p = mesh.points[mesh.triangles]
-        area = 0.5 * np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                            - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0])).sum()
+        area = (
+            0.5
+            * np.abs(
+                (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0])
+            ).sum()
+        )
         rho = 1051.0
         assert rho * U.M1.sum() == pytest.approx(rho * area * 2, rel=1e-12)
         # x- and z-blocks each carry the full mass, and do not couple
@@ -166,9 +175,9 @@ def _manufactured_error(level: int, nu: float) -> tuple[float, float]:
 
     def derivs(x, y):
         s = np.sin(pi * x) * np.sin(pi * y)
-        u1xx = -pi ** 2 * s
-        u1yy = -pi ** 2 * s
-        u1xy = pi ** 2 * np.cos(pi * x) * np.cos(pi * y)
+        u1xx = -(pi**2) * s
+        u1yy = -(pi**2) * s
+        u1xy = pi**2 * np.cos(pi * x) * np.cos(pi * y)
         u2xx = -2 * y * (1 - y)
         u2yy = -2 * x * (1 - x)
         u2xy = (1 - 2 * x) * (1 - 2 * y)
@@ -192,7 +201,7 @@ def _manufactured_error(level: int, nu: float) -> tuple[float, float]:
         x, y = w.x[0], w.x[1]
         e1 = w["uh"].value[0] - np.sin(pi * x) * np.sin(pi * y)
         e2 = w["uh"].value[1] - x * (1 - x) * y * (1 - y)
-        return e1 ** 2 + e2 ** 2
+        return e1**2 + e2**2
 
     e = math.sqrt(asm(err2, basis, uh=basis.interpolate(uh)))
     h = 1.0 / 2 ** (level + 1)

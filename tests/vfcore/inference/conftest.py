@@ -1,4 +1,5 @@
 """Shared fixtures for the inference tests: a synthetic GAW and a cheap fake forward model."""
+
 from __future__ import annotations
 
 import sys

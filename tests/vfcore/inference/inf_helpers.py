@@ -1,5 +1,6 @@
 """Helpers for the inference tests (a module with a unique name: ``conftest`` is ambiguous when
 several test folders are collected together)."""
+
 from __future__ import annotations
 
 import math
@@ -28,8 +29,7 @@ class FakeSimulator:
         if params.E_lig > 2.9:
             raise FloatingPointError("synthetic blow-up")
         if params.p_sub < 450:
-            return SimResult(ok=False, message="synthetic divergence", params=params, config=config,
-                             fps=config.fps)
+            return SimResult(ok=False, message="synthetic divergence", params=params, config=config, fps=config.fps)
         n = int(math.floor((config.duration - config.discard) * config.fps + 1e-9)) + 1
         t = np.arange(n) / config.fps
         f0 = 100.0 + 5.0 * (params.E_body - 12.0)
@@ -37,11 +37,28 @@ class FakeSimulator:
         gaw = amp * np.maximum(np.sin(2 * math.pi * f0 * t + 0.7), 0.0)
         flow = 1e-4 * gaw / amp
         cp = np.tile((amp * 10.0 * np.maximum(-np.sin(2 * math.pi * f0 * t), 0.0))[:, None], (1, 3))
-        cyc = CycleSummary(t_start=np.zeros(2), period=np.full(2, 1 / f0), peak_area=np.full(2, amp),
-                           min_area=np.zeros(2), mean_flow=np.full(2, flow.mean()),
-                           mean_peak_contact_pressure_unconverged=np.full(2, cp.max(axis=1).mean()),
-                           max_contact_pressure_unconverged=np.full(2, cp.max()),
-                           contact_impulse=np.full(2, 1e-3 * amp), contact_duration=np.full(2, 0.5 / f0),
-                           contact_pressure_in_contact=np.full(2, 5.0 * amp))
-        return SimResult(ok=True, message="", params=params, config=config, fps=config.fps, t=t, gaw=gaw,
-                         width=gaw / config.length_mm, flow=flow, contact_pressure=cp, cycles=cyc)
+        cyc = CycleSummary(
+            t_start=np.zeros(2),
+            period=np.full(2, 1 / f0),
+            peak_area=np.full(2, amp),
+            min_area=np.zeros(2),
+            mean_flow=np.full(2, flow.mean()),
+            mean_peak_contact_pressure_unconverged=np.full(2, cp.max(axis=1).mean()),
+            max_contact_pressure_unconverged=np.full(2, cp.max()),
+            contact_impulse=np.full(2, 1e-3 * amp),
+            contact_duration=np.full(2, 0.5 / f0),
+            contact_pressure_in_contact=np.full(2, 5.0 * amp),
+        )
+        return SimResult(
+            ok=True,
+            message="",
+            params=params,
+            config=config,
+            fps=config.fps,
+            t=t,
+            gaw=gaw,
+            width=gaw / config.length_mm,
+            flow=flow,
+            contact_pressure=cp,
+            cycles=cyc,
+        )

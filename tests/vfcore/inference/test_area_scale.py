@@ -1,5 +1,6 @@
 """Unknown area scale (uncalibrated px/mm): k integrated out of the likelihood in closed form
 (vfcore.inference.likelihood; :ref:`inference-scale-unknown-area-scale`)."""
+
 from __future__ import annotations
 
 import math
@@ -33,18 +34,17 @@ def _by_quadrature(single, seg, obs, k_lo, k_hi, ref):
     k_hat = float(obs @ seg / (seg @ seg))
     pts = [min(max(k_hat, k_lo), k_hi)]
     pts = pts if k_lo < pts[0] < k_hi else None
-    v, _ = quad(lambda k: math.exp(single(k * seg) - ref), k_lo, k_hi, points=pts, epsabs=0.0, epsrel=1e-13,
-                limit=400)
+    v, _ = quad(lambda k: math.exp(single(k * seg) - ref), k_lo, k_hi, points=pts, epsabs=0.0, epsrel=1e-13, limit=400)
     return ref + math.log(v) - math.log(k_hi - k_lo)
 
 
 CASES = [  # (k_lo, k_hi, noise sd, sigma bounds of the marginal noise)
-    (0.25, 4.0, 0.5, (0.01, 100.0)),      # k_hat deep inside: the closed form alone
-    (1.0, 1.69, 0.5, (0.01, 100.0)),      # the truth just beyond k_hi: the box cuts k's conditional
-    (1.7, 3.0, 1.5, (0.01, 100.0)),       # k_hat at k_lo
-    (0.2, 0.5, 0.5, (0.01, 100.0)),       # k_hat far outside the box
-    (1.0, 2.0, 0.5, (0.45, 0.6)),         # a narrow noise prior: both truncations at once
-    (1.65, 1.75, 2.0, (0.01, 100.0)),     # a box narrower than k's spread
+    (0.25, 4.0, 0.5, (0.01, 100.0)),  # k_hat deep inside: the closed form alone
+    (1.0, 1.69, 0.5, (0.01, 100.0)),  # the truth just beyond k_hi: the box cuts k's conditional
+    (1.7, 3.0, 1.5, (0.01, 100.0)),  # k_hat at k_lo
+    (0.2, 0.5, 0.5, (0.01, 100.0)),  # k_hat far outside the box
+    (1.0, 2.0, 0.5, (0.45, 0.6)),  # a narrow noise prior: both truncations at once
+    (1.65, 1.75, 2.0, (0.01, 100.0)),  # a box narrower than k's spread
 ]
 
 
@@ -61,7 +61,7 @@ def test_unknown_noise_marginal_equals_quadrature_over_k(k_lo, k_hi, sd, sb):
     seg, obs = _pair(sd=sd)
     a = scaled_marginal_gaussian_loglik(seg, obs, *sb, k_lo, k_hi)
     b = _by_quadrature(lambda s: marginal_gaussian_loglik(s, obs, *sb), seg, obs, k_lo, k_hi, a)
-    assert abs(a - b) <= 1e-8           # |log L_a - log L_q| <= 1e-8: the likelihoods agree to 1e-8 relative
+    assert abs(a - b) <= 1e-8  # |log L_a - log L_q| <= 1e-8: the likelihoods agree to 1e-8 relative
 
 
 def test_a_narrow_box_gives_the_likelihood_at_that_scale():
@@ -73,8 +73,10 @@ def test_a_narrow_box_gives_the_likelihood_at_that_scale():
 
 def _problem(**kw):
     seg, obs = _pair(n=600)
-    prior = Prior(bounds={"p_sub": (700.0, 1300.0)},
-                  fixed={"E_body": 12.15, "E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4})
+    prior = Prior(
+        bounds={"p_sub": (700.0, 1300.0)},
+        fixed={"E_body": 12.15, "E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+    )
     return Problem(obs, FPS, prior, sigma_e=0.5, **kw)
 
 
@@ -86,11 +88,14 @@ def test_calibrated_problems_score_exactly_as_eq15(noise):
     rng = np.random.default_rng(1)
     for _ in range(5):
         seg = pb.obs_compared + rng.normal(size=pb.n_compare)
-        want = (marginal_gaussian_loglik(seg, pb.obs_compared, *pb.sigma_bounds) if noise == "marginal"
-                else gaussian_loglik(seg, pb.obs_compared, pb.sigma_e))
+        want = (
+            marginal_gaussian_loglik(seg, pb.obs_compared, *pb.sigma_bounds)
+            if noise == "marginal"
+            else gaussian_loglik(seg, pb.obs_compared, pb.sigma_e)
+        )
         assert pb.loglik(seg) == want
         r = (seg - pb.obs_compared) / pb.sigma_e
-        if noise == "fixed":            # Eq. 15 written out
+        if noise == "fixed":  # Eq. 15 written out
             assert want == float(-0.5 * np.dot(r, r) - r.size * (math.log(pb.sigma_e) + 0.5 * math.log(2 * math.pi)))
 
 
@@ -117,8 +122,11 @@ def test_the_conditional_draws_of_k_match_its_posterior(noise):
     rng = np.random.default_rng(5)
     kw = {"sigma": 1.0} if noise == "fixed" else {"sigma_bounds": sb}
     ks = np.array([sample_area_scale(seg, obs, rng, box, **kw) for _ in range(4000)])
-    one = (lambda s: gaussian_loglik(s, obs, 1.0)) if noise == "fixed" else \
-        (lambda s: marginal_gaussian_loglik(s, obs, *sb))
+    one = (
+        (lambda s: gaussian_loglik(s, obs, 1.0))
+        if noise == "fixed"
+        else (lambda s: marginal_gaussian_loglik(s, obs, *sb))
+    )
     ref = one(1.7 * seg)
     z = quad(lambda k: math.exp(one(k * seg) - ref), *box, epsrel=1e-10)[0]
     m1 = quad(lambda k: k * math.exp(one(k * seg) - ref), *box, epsrel=1e-10)[0] / z
@@ -135,11 +143,13 @@ def test_an_uncalibrated_recording_is_not_outside_for_its_area_only_for_its_f0(m
     with k in [1, 16] (true 12.5-200 mm^2); an f0 beyond the reach stays outside whatever the scale."""
     import sys
     from pathlib import Path
+
     monkeypatch.setenv("VFINFER_CACHE_DIR", str(tmp_path / "cache"))
     sys.path.insert(0, str(Path(__file__).parent))
     from test_reach import rec_at, synthetic  # the hand-made ensemble of the reach tests
 
     from vfcore.inference import reach as rc
+
     ens = synthetic()
     big = rec_at(ens, max_area_mm2=200.0)
     assert rc.check_reach(big, ens).verdict == "outside"
@@ -167,6 +177,7 @@ def test_an_fe_twin_recorded_at_area_scale_1p7_recovers_k_and_the_parameters():
     from vfcore.inference import make_twin, smc
     from vfcore.inference.problem import evaluate
     from vfcore.params import PARAM_NAMES, TABLE3
+
     free = ("E_body", "E_cover")
     prior = Prior.default(fixed={n: getattr(TABLE3, n) for n in PARAM_NAMES if n not in free})
     cfg = SimConfig(mesh="coarse", dt=1e-4, duration=0.45, discard=0.25)
@@ -182,7 +193,7 @@ def test_an_fe_twin_recorded_at_area_scale_1p7_recovers_k_and_the_parameters():
     print(post.format_summary(), "\ntruth", tw.truth_dict, "k 90 %", kq, "mean", ks.mean(), "q", q)
     assert kq[0] <= 1.7 <= kq[1], kq
     d = post.mean - tw.truth
-    m2 = float(d @ np.linalg.solve(post.cov, d))          # squared Mahalanobis distance of the truth
+    m2 = float(d @ np.linalg.solve(post.cov, d))  # squared Mahalanobis distance of the truth
     assert m2 < 9.21 and np.all(np.abs(d) / post.sd < 3.0), (m2, q, tw.truth)
     ll = evaluate(np.vstack([tw.truth, post.mean]), pb).loglik
     assert ll[1] > ll[0] - 2.0, ll
@@ -200,12 +211,23 @@ def test_recorded_gaws_scale_each_draw_by_its_clipped_least_squares_k():
     a = np.vstack([np.sin(np.pi * t) ** 2, 2.0 * np.sin(np.pi * t) ** 2, np.sin(np.pi * t) ** 2])
     y = 0.5 * a[0]
     ev = Evaluation(loglik=np.zeros(3), ok=np.array([True, True, False]), gaw=a.astype(np.float32))
-    post = Posterior(names=("E_body",), samples=np.zeros((3, 1)), log_weights=np.log(np.full(3, 1 / 3)),
-                     resampled=np.arange(3), ess=3.0, pareto_k=0.0, log_evidence=0.0, log_evidence_se=0.0,
-                     n_simulations=3, predictive=ev, obs_gaw=y, fps=2000.0)
+    post = Posterior(
+        names=("E_body",),
+        samples=np.zeros((3, 1)),
+        log_weights=np.log(np.full(3, 1 / 3)),
+        resampled=np.arange(3),
+        ess=3.0,
+        pareto_k=0.0,
+        log_evidence=0.0,
+        log_evidence_se=0.0,
+        n_simulations=3,
+        predictive=ev,
+        obs_gaw=y,
+        fps=2000.0,
+    )
     assert np.array_equal(post.recorded_gaws(), a[:2].astype(np.float32).astype(float))
     post.area_scale = (0.3, 4.0)
     g = post.recorded_gaws()
     assert g.shape == (2, 50)
-    np.testing.assert_allclose(g[0], y, rtol=1e-6)                 # k = 0.5, inside the box
+    np.testing.assert_allclose(g[0], y, rtol=1e-6)  # k = 0.5, inside the box
     np.testing.assert_allclose(g[1], 0.3 * 2.0 * a[0], rtol=1e-6)  # k = 0.25, clipped to 0.3

@@ -1,4 +1,5 @@
 """BalancedMap: every batch in equal parts, one per worker, with the results of plain chunks."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,6 +22,7 @@ def _recording_map(seen):
         parts = list(parts)
         seen.append([p.shape[0] for p in parts])
         return map(fn, parts)
+
     return imap
 
 
@@ -50,6 +52,7 @@ def test_worker_count_is_read_at_each_batch_and_never_exceeds_the_rows():
 
 class _LongRows:
     """A batch function whose rows are long jobs of their own (a continuation start)."""
+
     row_tasks = True
 
     def __call__(self, rows):

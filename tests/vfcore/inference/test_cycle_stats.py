@@ -1,4 +1,5 @@
 """The summary-statistics likelihood: blind to phase, sharp in amplitude and period."""
+
 from __future__ import annotations
 
 import math

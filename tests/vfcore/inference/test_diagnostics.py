@@ -22,7 +22,7 @@ def test_ess_known_weights():
     assert ess(np.array([0.0, 0.0, -np.inf, -np.inf])) == pytest.approx(2.0)
     assert ess(np.array([0.0, -np.inf, -np.inf])) == pytest.approx(1.0)
     w = np.array([0.5, 0.25, 0.25])
-    assert ess(np.log(w) + 123.0) == pytest.approx(1.0 / np.sum(w ** 2))
+    assert ess(np.log(w) + 123.0) == pytest.approx(1.0 / np.sum(w**2))
     with pytest.raises(RuntimeError, match="all weights are zero"):
         ess(np.full(3, -np.inf))
 
@@ -39,7 +39,7 @@ def test_log_evidence_known():
     z, se = log_evidence_is(ll)
     L = np.exp(ll)
     assert z == pytest.approx(math.log(L.mean()))
-    assert se == pytest.approx(L.std(ddof=1) / math.sqrt(L.size) / L.mean())   # delta method
+    assert se == pytest.approx(L.std(ddof=1) / math.sqrt(L.size) / L.mean())  # delta method
     assert log_evidence_is(np.full(3, -np.inf))[0] == -math.inf
 
 
@@ -48,7 +48,7 @@ def test_log_evidence_se_is_calibrated():
     rng = np.random.default_rng(0)
     ests, ses = [], []
     for _ in range(400):
-        ll = -0.5 * (rng.uniform(-1, 1, 2000) / 0.2) ** 2      # Z = 0.2 sqrt(2 pi)/2 * erf-ish
+        ll = -0.5 * (rng.uniform(-1, 1, 2000) / 0.2) ** 2  # Z = 0.2 sqrt(2 pi)/2 * erf-ish
         z, se = log_evidence_is(ll)
         ests.append(z)
         ses.append(se)

@@ -1,4 +1,5 @@
 """evaluate / Problem / products / export on a cheap analytic stand-in for the FE model."""
+
 import math
 
 import numpy as np
@@ -50,10 +51,14 @@ def test_gaussian_loglik():
 
 
 def test_evaluate_counts_failures(problem):
-    th = np.array([[12.5, 1.5, 1000.0],     # truth (E_body, E_lig, p_sub)
-                   [12.5, 1.5, 420.0],      # ok=False
-                   [12.5, 2.95, 1000.0],    # raises
-                   [10.0, 1.0, 1500.0]])
+    th = np.array(
+        [
+            [12.5, 1.5, 1000.0],  # truth (E_body, E_lig, p_sub)
+            [12.5, 1.5, 420.0],  # ok=False
+            [12.5, 2.95, 1000.0],  # raises
+            [10.0, 1.0, 1500.0],
+        ]
+    )
     ev = evaluate(th, problem, simulate_fn=FakeSimulator())
     assert list(ev.ok) == [True, False, False, True]
     assert ev.loglik[1] == -np.inf and ev.loglik[2] == -np.inf and ev.n_failed == 2
@@ -73,7 +78,7 @@ def test_evaluate_counts_failures(problem):
 @pytest.fixture(scope="module")
 def fitted(problem):
     ev = ProblemEvaluator(problem, FakeSimulator())
-    with pytest.warns(DegenerateEnsembleWarning):   # the likelihood is far too sharp for 3000 prior draws
+    with pytest.warns(DegenerateEnsembleWarning):  # the likelihood is far too sharp for 3000 prior draws
         post_is = importance_sample(_Wrapped(problem, ev), problem.prior, n=3000, seed=1, chunk_size=500)
     post_smc = smc(_Wrapped(problem, ev), problem.prior, n_particles=150, seed=1)
     return post_is, post_smc
@@ -94,7 +99,7 @@ def test_twin_with_fake_model(problem, fitted):
     assert post_is.ess < 100 and post_is.warnings and post_is.n_failed > 0
     for post in (post_smc,):
         assert post.predictive is not None
-        for name, true in (("E_body", 12.5), ("p_sub", 1000.0)):   # E_lig does not enter the fake model
+        for name, true in (("E_body", 12.5), ("p_sub", 1000.0)):  # E_lig does not enter the fake model
             j = post.names.index(name)
             assert abs(post.mean[j] - true) < 2 * post.sd[j] + 1e-9, post.format_summary()
     assert post_smc.n_simulations == 150 + sum(g["n_simulations"] for g in post_smc.info["generations"])
@@ -108,9 +113,13 @@ def test_products(problem, fitted, tmp_path):
         bn = predictive_bands(post, level=0.9, sigma_e=1.0)
         assert np.all(bn["hi"] - bn["lo"] >= b["hi"] - b["lo"] - 1e-9)
         rows = flow_contact_table(post)
-        assert [r["quantity"] for r in rows] == ["flow rate Q", "contact impulse per cycle", "pressure in contact",
-                                             "mean nodal peak contact pressure (not converged)",
-                                             "max nodal contact pressure (not converged)"]
+        assert [r["quantity"] for r in rows] == [
+            "flow rate Q",
+            "contact impulse per cycle",
+            "pressure in contact",
+            "mean nodal peak contact pressure (not converged)",
+            "max nodal contact pressure (not converged)",
+        ]
         assert rows[0]["mean"] > 0 and rows[0]["unit"] == "mL/s"
         assert plot_predictive(post, tmp_path / f"pp_{post.method}.png").stat().st_size > 1000
         assert plot_marginals(post, tmp_path / f"m_{post.method}.png", truth={"E_body": 12.5}).exists()
@@ -134,8 +143,9 @@ def test_compare_matches_scipy(fitted):
 
 def test_export_roundtrip(problem, fitted, tmp_path):
     from vfcore.inference.problem import model_record
+
     for post in fitted:
-        assert post.model is None                   # a callable target: the model it ran is unknown
+        assert post.model is None  # a callable target: the model it ran is unknown
         post.obs_gaw, post.fps, post.model = problem.obs_compared, problem.fps, model_record(problem)
         p = post.to_csv(tmp_path / "s.csv")
         q = Posterior.from_csv(p)
@@ -159,9 +169,13 @@ def test_export_roundtrip(problem, fitted, tmp_path):
 
 def test_sensitivity(problem, fitted, tmp_path):
     post_is, _ = fitted
-    rows = ensemble_size_study(post_is, [100, 300, 1000, 3000], truth={"E_body": 12.5, "p_sub": 1000.0,
-                                                                       "E_lig": 1.5},
-                               n_repeats=3, figure_path=tmp_path / "fig7.png")
+    rows = ensemble_size_study(
+        post_is,
+        [100, 300, 1000, 3000],
+        truth={"E_body": 12.5, "p_sub": 1000.0, "E_lig": 1.5},
+        n_repeats=3,
+        figure_path=tmp_path / "fig7.png",
+    )
     assert {r["n"] for r in rows} == {100, 300, 1000, 3000} and (tmp_path / "fig7.png").exists()
     assert len(rows) == 4 * 3
     sim = FakeSimulator()
@@ -170,8 +184,9 @@ def test_sensitivity(problem, fitted, tmp_path):
         return smc(ProblemEvaluator(p, sim), p.prior, n_particles=60, seed=0)
 
     cfgs = {"dt=1e-4": problem.config, "mesh=medium": problem.config.replace(mesh="medium")}
-    rows = numerics_study(problem, cfgs, sampler, truth={"E_body": 12.5, "p_sub": 1000.0, "E_lig": 1.5},
-                          figure_path=tmp_path / "fig8.png")
+    rows = numerics_study(
+        problem, cfgs, sampler, truth={"E_body": 12.5, "p_sub": 1000.0, "E_lig": 1.5}, figure_path=tmp_path / "fig8.png"
+    )
     assert len(rows) == 2 * 3 and (tmp_path / "fig8.png").exists()
     with pytest.raises(ValueError):
         ensemble_size_study(fitted[1], [10])
@@ -179,6 +194,7 @@ def test_sensitivity(problem, fitted, tmp_path):
 
 def test_make_twin_with_fake_model():
     from vfcore.inference import make_twin
+
     prior = Prior({"E_body": (9.0, 15.0), "p_sub": (400.0, 1800.0)})
     tw = make_twin(prior, SimConfig(mesh="coarse"), seed=4, simulate_fn=FakeSimulator())
     tw2 = make_twin(prior, SimConfig(mesh="coarse"), seed=4, simulate_fn=FakeSimulator())

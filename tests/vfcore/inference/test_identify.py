@@ -5,6 +5,7 @@ five scale-invariant combinations, the posterior along the common-scale ray is t
 density there: uniform in the parameters, i.e. ``prop. to prod theta_i = c^k`` in log coordinates, on the
 stretch of the ray inside the box. The draws below are built that way (plus a small jitter across the
 ridge), so what the table must say about them is known in advance."""
+
 from __future__ import annotations
 
 import json
@@ -21,8 +22,14 @@ from vfcore.params import TABLE3
 BRIEF = "absolute moduli, p_sub, contact pressure and flow are set by the prior's box along the common scale"
 
 
-def ridge_posterior(prior: Prior, log_c: np.ndarray, weights: np.ndarray, seed: int = 0, jitter: float = 0.002,
-                    x0: tuple[float, float] = (8.0, 0.005)) -> Posterior:
+def ridge_posterior(
+    prior: Prior,
+    log_c: np.ndarray,
+    weights: np.ndarray,
+    seed: int = 0,
+    jitter: float = 0.002,
+    x0: tuple[float, float] = (8.0, 0.005),
+) -> Posterior:
     """Draws at Table 3 multiplied by ``c = exp(log_c)`` in the free scaled parameters, each jittered by
     ``jitter`` in log; a free x0 is drawn independently from N(x0)."""
     rng = np.random.default_rng(seed)
@@ -79,10 +86,10 @@ def test_the_ray_sd_is_that_of_the_truncated_exponential(length, rate):
 
 
 def test_exact_ridge_is_the_least_narrowed_direction_and_warns():
-    prior = Prior.default()                                  # all seven free; x0 independent of the ridge
+    prior = Prior.default()  # all seven free; x0 independent of the ridge
     post = ridge_posterior(prior, *on_the_ray(prior, 40_000))
     d = identify(post, prior).to_dict()
-    json.dumps(d)                                             # JSON-able as stored with a job
+    json.dumps(d)  # JSON-able as stored with a job
     # (b) the least narrowed principal direction is the common scale, with no weight on x0
     first = d["principal"][0]
     assert first["scale_alignment"] > 0.999
@@ -105,7 +112,7 @@ def test_exact_ridge_is_the_least_narrowed_direction_and_warns():
     combo = {c["label"]: c for c in d["combinations"]}
     assert combo["E_cover/p_sub"]["value"] == pytest.approx(636.2 / 989.9, rel=2e-3)
     assert combo["E_body/p_sub"]["value"] == pytest.approx(12.15e3 / 989.9, rel=2e-3)
-    assert combo["eta^2/(rho*p_sub)"]["value"] == pytest.approx(0.3079 ** 2 / (1051.0 * 989.9), rel=2e-3)
+    assert combo["eta^2/(rho*p_sub)"]["value"] == pytest.approx(0.3079**2 / (1051.0 * 989.9), rel=2e-3)
     assert combo["eta^2/(rho*p_sub)"]["unit"] == "m^2" and combo["rho/p_sub"]["unit"] == "s^2/m^2"
     assert combo["eta/p_sub"]["unit"] == "s" and combo["E_lig/p_sub"]["unit"] == "1"
     assert all(c["ratio"] < 0.02 for c in d["combinations"])
@@ -168,11 +175,11 @@ def test_a_posterior_piled_against_the_box_along_the_scale_warns():
     """Narrow along the scale but pressed against the E_body box (the data want a larger scale than the
     box allows): the draws' own positions along their rays show it."""
     prior = Prior.default(fixed={"x0": 8.4, "rho": 1051.0})
-    top = math.log(15.0 / 12.15) - 0.004                     # E_body's upper bound limits the ray
+    top = math.log(15.0 / 12.15) - 0.004  # E_body's upper bound limits the ray
     lc = top - np.abs(np.random.default_rng(7).normal(0.0, 0.005, 20_000))
     d = identify(ridge_posterior(prior, lc, np.ones(lc.size), seed=7, jitter=0.0005), prior).to_dict()
     s = d["scale"]
-    assert s["ray_ratio"] < 0.1                                # narrow: not the width that warns
+    assert s["ray_ratio"] < 0.1  # narrow: not the width that warns
     assert s["edge_mass"][1] > 0.5 and s["set_by_prior"]
     assert any("outer 5%" in w for w in d["warnings"])
 

@@ -1,4 +1,5 @@
 """Unknown noise level: the noise sd integrated out of Eq. 15 (Problem(noise="marginal"))."""
+
 from __future__ import annotations
 
 import math
@@ -22,13 +23,19 @@ def _numeric(sim, obs, lo, hi, m=2_000_001):
     return top + math.log(np.trapezoid(np.exp(v - top), t)) - math.log(math.log(hi / lo))
 
 
-@pytest.mark.parametrize("n, sd, lo, hi", [
-    (5, 1.0, 0.01, 100.0), (50, 0.3, 0.01, 100.0), (400, 2.0, 0.01, 100.0),
-    (400, 0.5, 0.4, 0.6),            # a narrow prior: the truncation term matters
-    (20, 1.0, 0.5, 2.0),
-    (400, 0.003, 0.01, 100.0),       # a fit closer than the lower bound: the series branch
-    (400, 0.0102, 0.01, 100.0),      # at the bound
-    (10, 50.0, 0.01, 100.0)])
+@pytest.mark.parametrize(
+    "n, sd, lo, hi",
+    [
+        (5, 1.0, 0.01, 100.0),
+        (50, 0.3, 0.01, 100.0),
+        (400, 2.0, 0.01, 100.0),
+        (400, 0.5, 0.4, 0.6),  # a narrow prior: the truncation term matters
+        (20, 1.0, 0.5, 2.0),
+        (400, 0.003, 0.01, 100.0),  # a fit closer than the lower bound: the series branch
+        (400, 0.0102, 0.01, 100.0),  # at the bound
+        (10, 50.0, 0.01, 100.0),
+    ],
+)
 def test_closed_form_equals_the_integral_over_sigma(n, sd, lo, hi):
     rng = np.random.default_rng(n)
     obs = rng.normal(size=n)
@@ -54,18 +61,24 @@ def test_a_perfect_fit_is_finite_and_matches_the_limit():
 
 def _toy_problem(noise, sigma, seed):
     """The toy's amplitude parameter (p_sub) free, the rest at Table 3 (its f0 and damping known)."""
-    prior = Prior(bounds={"p_sub": (700.0, 1300.0)},
-                  fixed={"E_body": 12.15, "E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4})
+    prior = Prior(
+        bounds={"p_sub": (700.0, 1300.0)},
+        fixed={"E_body": 12.15, "E_cover": 636.2, "E_lig": 1.808, "rho": 1051.0, "eta": 3.079, "x0": 8.4},
+    )
     y = toy_observation({"p_sub": 989.9}, noise=sigma, seed=seed)
-    return Problem(np.asarray(y), 4000.0, prior, sigma_e=1.0, noise=noise,
-                   config=SimConfig(duration=0.35, discard=0.2)), np.array([989.9])
+    return Problem(
+        np.asarray(y), 4000.0, prior, sigma_e=1.0, noise=noise, config=SimConfig(duration=0.35, discard=0.2)
+    ), np.array([989.9])
 
 
 def test_problem_validates_and_round_trips_the_noise_model():
     pb, _ = _toy_problem("marginal", 0.5, 0)
     back = Problem.from_dict(pb.to_dict())
     assert back.noise == "marginal" and back.sigma_bounds == (0.01, 100.0)
-    assert Problem.from_dict({k: v for k, v in pb.to_dict().items() if k not in ("noise", "sigma_bounds")}).noise == "fixed"
+    assert (
+        Problem.from_dict({k: v for k, v in pb.to_dict().items() if k not in ("noise", "sigma_bounds")}).noise
+        == "fixed"
+    )
     with pytest.raises(ValueError, match="noise must be one of"):
         _toy_problem("student", 0.5, 0)
     for bad in [(1.0, 0.5), (0.0, 1.0), (0.1, math.inf), "wide"]:

@@ -1,5 +1,6 @@
 """Measured parameters (Problem(measurements={name: (mean, sd)})): an independent Gaussian term added to
 the GAW log-likelihood of every draw, in every path that scores a draw; validated before any simulation."""
+
 from __future__ import annotations
 
 import math
@@ -32,8 +33,12 @@ def test_the_term_is_the_gaussian_log_density():
     meas = {"p_sub": (1000.0, 50.0), "E_cover": (600.0, 30.0)}
     pb = _toy_problem(meas)
     p = TABLE3.replace(E_cover=655.0, p_sub=1111.0)
-    hand = (-0.5 * ((1111.0 - 1000.0) / 50.0) ** 2 - math.log(50.0 * math.sqrt(2 * math.pi))
-            - 0.5 * ((655.0 - 600.0) / 30.0) ** 2 - math.log(30.0 * math.sqrt(2 * math.pi)))
+    hand = (
+        -0.5 * ((1111.0 - 1000.0) / 50.0) ** 2
+        - math.log(50.0 * math.sqrt(2 * math.pi))
+        - 0.5 * ((655.0 - 600.0) / 30.0) ** 2
+        - math.log(30.0 * math.sqrt(2 * math.pi))
+    )
     assert pb.measurement_loglik(p) == pytest.approx(hand, abs=1e-12)
     assert hand == pytest.approx(stats.norm.logpdf(1000.0, 1111.0, 50.0) + stats.norm.logpdf(600.0, 655.0, 30.0))
     assert pb.measurement_loglik(p.as_dict()) == pb.measurement_loglik(p.as_array()) == pb.measurement_loglik(p)
@@ -66,12 +71,17 @@ def test_every_scoring_path_adds_the_term():
     np.testing.assert_array_equal(ProblemEvaluator(meas, sim)(th).loglik, b.loglik)
     hr = np.repeat(r.gaw, 10)[: 10 * (r.gaw.size - 1) + 1]
     assert aligned_loglik(hr, meas, r.params)[0] - aligned_loglik(hr, plain)[0] == pytest.approx(
-        stats.norm.logpdf(950.0, 1000.0, 40.0), abs=1e-9)
+        stats.norm.logpdf(950.0, 1000.0, 40.0), abs=1e-9
+    )
     # the worker's analytic stand-in
     tp, tm = _toy_problem(), _toy_problem({"p_sub": (1020.0, 15.0)})
     rows = np.array([[600.0, 900.0], [700.0, 1100.0]])
-    np.testing.assert_allclose(ToyEvaluator(tm)(rows).loglik - ToyEvaluator(tp)(rows).loglik,
-                               stats.norm.logpdf(1020.0, rows[:, 1], 15.0), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        ToyEvaluator(tm)(rows).loglik - ToyEvaluator(tp)(rows).loglik,
+        stats.norm.logpdf(1020.0, rows[:, 1], 15.0),
+        rtol=0,
+        atol=1e-9,
+    )
 
 
 def test_a_measurement_multiplies_the_posterior():
@@ -88,9 +98,10 @@ def test_a_measurement_multiplies_the_posterior():
         w /= w.sum()
         mu = float(w @ grid)
         return mu, float(math.sqrt(w @ (grid - mu) ** 2))
+
     mu, s = moments(ll_gaw + stats.norm.logpdf(m, grid, sd))
     mu0, s0 = moments(ll_gaw)
-    assert abs(mu - mu0) > 3 * s                           # the two posteriors are told apart
+    assert abs(mu - mu0) > 3 * s  # the two posteriors are told apart
     assert abs(post.mean[0] - mu) < 0.25 * s
     assert 0.8 < post.sd[0] / s < 1.2
 
@@ -105,18 +116,21 @@ def test_round_trip_and_pickle():
     assert Problem.from_dict({k: v for k, v in d.items() if k != "measurements"}).measurements == {}
 
 
-@pytest.mark.parametrize("bad, match", [
-    ({"p_subglottal": (1000.0, 50.0)}, "unknown parameter 'p_subglottal'"),
-    ({"p_sub": (1000.0, 0.0)}, "sd > 0"),
-    ({"p_sub": (1000.0, -5.0)}, "sd > 0"),
-    ({"p_sub": (math.nan, 5.0)}, "finite"),
-    ({"p_sub": (1000.0, math.inf)}, "finite"),
-    ({"p_sub": (1000.0,)}, "pair"),
-    ({"p_sub": "1000:50"}, "pair"),
-    ({"p_sub": ("a", 5.0)}, "pair"),
-    ({"rho": (1051.0, 10.0)}, "rho: the parameter is fixed"),
-    ([("p_sub", (1000.0, 50.0))], "mapping"),
-])
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        ({"p_subglottal": (1000.0, 50.0)}, "unknown parameter 'p_subglottal'"),
+        ({"p_sub": (1000.0, 0.0)}, "sd > 0"),
+        ({"p_sub": (1000.0, -5.0)}, "sd > 0"),
+        ({"p_sub": (math.nan, 5.0)}, "finite"),
+        ({"p_sub": (1000.0, math.inf)}, "finite"),
+        ({"p_sub": (1000.0,)}, "pair"),
+        ({"p_sub": "1000:50"}, "pair"),
+        ({"p_sub": ("a", 5.0)}, "pair"),
+        ({"rho": (1051.0, 10.0)}, "rho: the parameter is fixed"),
+        ([("p_sub", (1000.0, 50.0))], "mapping"),
+    ],
+)
 def test_bad_measurements_raise_one_clear_line(bad, match):
     with pytest.raises(ValueError, match=match) as exc:
         _toy_problem(bad)
@@ -124,7 +138,7 @@ def test_bad_measurements_raise_one_clear_line(bad, match):
 
 
 def test_a_measurement_of_a_parameter_neither_estimated_nor_fixed_is_refused():
-    prior = Prior(bounds={"p_sub": (700.0, 1300.0)})        # the rest at Table 3 values, not estimated
+    prior = Prior(bounds={"p_sub": (700.0, 1300.0)})  # the rest at Table 3 values, not estimated
     with pytest.raises(ValueError, match="E_cover: the parameter is not estimated"):
         validate_measurements({"E_cover": (600.0, 10.0)}, prior)
     assert validate_measurements({"p_sub": [1000, 5]}, prior) == {"p_sub": (1000.0, 5.0)}

@@ -1,5 +1,6 @@
 """The store of batch evaluations (vfcore.inference.memo.CachedMap): a rerun reads back what was
 simulated, an interrupted run resumes, and a diagnosis resumed from the store is bit-identical."""
+
 import pickle
 import threading
 
@@ -43,7 +44,7 @@ def test_a_second_run_reads_every_part_back_and_a_changed_function_or_part_is_si
     assert CALLS == [5, 5, 5, 4, 4] and again.misses == 5
     assert np.allclose(other[0].loglik, 2.0 * first[0].loglik)
     p = _parts()
-    p[2] = p[2] + 1e-12                                   # one parameter moved by 1e-12
+    p[2] = p[2] + 1e-12  # one parameter moved by 1e-12
     CALLS.clear()
     again(_Square(), p)
     assert CALLS == [5]
@@ -51,9 +52,10 @@ def test_a_second_run_reads_every_part_back_and_a_changed_function_or_part_is_si
 
 def test_a_store_left_by_other_code_is_not_read(tmp_path, monkeypatch):
     import vfcore.inference.memo as M
+
     CachedMap(map, tmp_path)(_Square(), _parts())
     assert [p.name for p in tmp_path.iterdir()] == [M.code_fingerprint()[:16]]
-    monkeypatch.setattr(M, "code_fingerprint", lambda: "f" * 64)     # as after an upgrade of vfcore
+    monkeypatch.setattr(M, "code_fingerprint", lambda: "f" * 64)  # as after an upgrade of vfcore
     other = CachedMap(map, tmp_path)
     other(_Square(), _parts())
     assert (other.hits, other.misses) == (0, 5)
@@ -65,11 +67,13 @@ class Killed(Exception):
 
 def dies_after(k):
     """A map whose worker dies before its ``k``-th part."""
+
     def inner(fn, parts):
         for i, part in enumerate(parts):
             if i == k:
                 raise Killed
             yield fn(part)
+
     return inner
 
 
@@ -81,7 +85,7 @@ def test_an_interrupted_run_resumes_from_the_parts_it_finished(tmp_path):
     out = resumed(_Square(), _parts())
     assert (resumed.hits, resumed.misses) == (3, 2) and CALLS == [4, 4]
     assert _same(out, list(map(_Square(), _parts())))
-    assert not list(tmp_path.rglob("*.tmp"))             # nothing half-written is left
+    assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written is left
 
 
 class _Slow(_Square):
@@ -93,6 +97,7 @@ class _Slow(_Square):
 
     def __call__(self, rows):
         import time
+
         time.sleep(self.delay)
         return super().__call__(rows)
 
@@ -101,7 +106,8 @@ def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path, 
     import time
 
     from vfcore.inference import memo
-    monkeypatch.setattr(memo, "NOTE_EVERY_S", 0.0)      # note every part
+
+    monkeypatch.setattr(memo, "NOTE_EVERY_S", 0.0)  # note every part
     fn = _Slow(0.05)
     t0 = time.perf_counter()
     with pytest.raises(Killed):
@@ -121,25 +127,26 @@ def test_a_resumed_run_counts_the_wall_time_of_the_attempts_before_it(tmp_path, 
     (second.root / "attempts" / "zz-broken.json").write_text("{not json")
     third = CachedMap(map, tmp_path)
     assert third.earlier_attempts == 3 and third.earlier_wall_s >= 0.25
-    assert account({"wall_s": 1.0}, None) == {"wall_s": 1.0}      # no store: unchanged
+    assert account({"wall_s": 1.0}, None) == {"wall_s": 1.0}  # no store: unchanged
 
 
 def test_the_attempt_record_is_rewritten_at_most_every_few_seconds_and_after_each_call(tmp_path, monkeypatch):
     import json
 
     from vfcore.inference import memo
+
     monkeypatch.setattr(memo, "NOTE_EVERY_S", 3600.0)
 
     def records(store):
         return [json.loads(f.read_text()) for f in (store.root / "attempts").glob("*.json")]
 
-    with pytest.raises(Killed):                      # killed inside a call: nothing noted since the start
+    with pytest.raises(Killed):  # killed inside a call: nothing noted since the start
         dying = CachedMap(dies_after(3), tmp_path)
         dying(_Square(), _parts())
     assert [r["parts_stored"] for r in records(dying)] == [0]
-    whole = CachedMap(map, tmp_path)                 # a call that ends is always noted
+    whole = CachedMap(map, tmp_path)  # a call that ends is always noted
     whole(_Square(), _parts())
-    assert sorted(r["parts_stored"] for r in records(whole)) == [0, 2]   # 3 read back, 2 stored
+    assert sorted(r["parts_stored"] for r in records(whole)) == [0, 2]  # 3 read back, 2 stored
 
 
 def test_an_unreadable_entry_is_simulated_again_and_an_unpicklable_function_runs_uncached(tmp_path):
@@ -149,12 +156,12 @@ def test_an_unreadable_entry_is_simulated_again_and_an_unpicklable_function_runs
     victim.write_bytes(b"not a pickle")
     cm2 = CachedMap(map, tmp_path)
     assert _same(cm2(_Square(), _parts()), list(map(_Square(), _parts()))) and cm2.misses == 1
-    assert pickle.loads(victim.read_bytes()).loglik.shape[0] in (4, 5)   # rewritten whole
+    assert pickle.loads(victim.read_bytes()).loglik.shape[0] in (4, 5)  # rewritten whole
 
     class Locked(_Square):
         def __init__(self):
             super().__init__()
-            self.lock = threading.Lock()                 # neither pickle nor cloudpickle takes a lock
+            self.lock = threading.Lock()  # neither pickle nor cloudpickle takes a lock
 
     cm3 = CachedMap(map, tmp_path)
     assert _same(cm3(Locked(), _parts()), list(map(_Square(), _parts())))
@@ -192,25 +199,38 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
     small = {"n_design": 4, "n_keep": 1, "maxfev0": 6, "maxfev_step": 3}
 
     def go(mapper, progress=None):
-        rep = diagnose(pb, free_material=False, n_particles=12, refit_particles=10, seed=3, candidates=["scale"], base_runs=1, map=mapper,
-                       continuation=True, continuation_options=small, progress=progress)
-        def strip(x):                                    # wall times are the only clock readings
+        rep = diagnose(
+            pb,
+            free_material=False,
+            n_particles=12,
+            refit_particles=10,
+            seed=3,
+            candidates=["scale"],
+            base_runs=1,
+            map=mapper,
+            continuation=True,
+            continuation_options=small,
+            progress=progress,
+        )
+
+        def strip(x):  # wall times are the only clock readings
             if isinstance(x, dict):
                 return {k: strip(v) for k, v in x.items() if k != "wall_s"}
             return [strip(v) for v in x] if isinstance(x, (list, tuple)) else x
+
         return json.dumps(strip(rep.to_dict()), sort_keys=True, default=float)
 
     first = CachedMap(map, tmp_path / "a")
     ref = go(first)
     n = first.misses
-    assert n > 10 and first.hits == 0 and first.uncached == 0     # every part of a diagnosis is stored
+    assert n > 10 and first.hits == 0 and first.uncached == 0  # every part of a diagnosis is stored
 
     class Killed(Exception):
         pass
 
     done = []
 
-    def dies(fn, parts):                                 # a worker killed after n // 2 parts
+    def dies(fn, parts):  # a worker killed after n // 2 parts
         for part in parts:
             if len(done) >= n // 2:
                 raise Killed
@@ -221,18 +241,24 @@ def test_a_diagnosis_resumed_from_the_store_is_bit_identical(tmp_path):
         go(CachedMap(dies, tmp_path / "b"))
     resumed = CachedMap(map, tmp_path / "b")
     events = []
-    assert go(resumed, events.append) == ref             # progress reporting changes nothing
+    assert go(resumed, events.append) == ref  # progress reporting changes nothing
     assert resumed.hits == n // 2 and resumed.misses == n - n // 2
     replay = CachedMap(lambda fn, parts: pytest.fail("simulated on a replay"), tmp_path / "a")
     with pytest.warns(RuntimeWarning, match="progress callback raised ZeroDivisionError"):
-        assert go(replay, lambda ev: 1 / 0) == ref and replay.hits == n     # a broken display neither
+        assert go(replay, lambda ev: 1 / 0) == ref and replay.hits == n  # a broken display neither
     # the stages in order, the counts only growing, one report after each of the n parts
     stages = [(e["stage"], e["entry"], e["step"], e["steps"]) for e in events]
     assert [s for i, s in enumerate(stages) if i == 0 or s != stages[i - 1]] == [
-        ("base fit", None, None, None), ("regularity check", None, None, None), ("screening", None, None, 1),
-        ("refit", "scale", 1, 1), ("continuation", "base", 0, 1), ("continuation", "entries", 1, 1),
+        ("base fit", None, None, None),
+        ("regularity check", None, None, None),
+        ("screening", None, None, 1),
+        ("refit", "scale", 1, 1),
+        ("continuation", "base", 0, 1),
+        ("continuation", "entries", 1, 1),
         ("continuation", "scale", 1, 1),
-        ("mode check", "scale", None, None), ("done", None, None, None)]
+        ("mode check", "scale", None, None),
+        ("done", None, None, None),
+    ]
     sims = [e["simulations"] for e in events]
     assert sims == sorted(sims) and sims[-1] >= n and len(set(sims)) == n + 1
     assert [e["elapsed_s"] for e in events] == sorted(e["elapsed_s"] for e in events)
@@ -274,6 +300,7 @@ def test_the_diagnosis_batch_functions_have_the_same_key_in_a_new_process():
     import os
     import subprocess
     import sys
+
     outs = []
     for salt in ("1", "2"):
         env = {**os.environ, "PYTHONHASHSEED": salt}

@@ -20,14 +20,17 @@ def test_valid_observation_passes(obs_gaw):
     assert y.dtype == float and y.shape == obs_gaw.shape
 
 
-@pytest.mark.parametrize("mutate,match", [
-    (lambda y: np.where(np.arange(y.size) == 17, np.nan, y), "NaN"),
-    (lambda y: np.where(np.arange(y.size) == 3, np.inf, y), "NaN/inf"),
-    (lambda y: np.full(600, 3.0), "constant"),
-    (lambda y: y[:25], "cycles"),           # 25 frames at 2000 fps = 1.5 cycles of 120 Hz
-    (lambda y: y.reshape(20, 30), "1D"),
-    (lambda y: y[:2], "two cycles"),
-])
+@pytest.mark.parametrize(
+    "mutate,match",
+    [
+        (lambda y: np.where(np.arange(y.size) == 17, np.nan, y), "NaN"),
+        (lambda y: np.where(np.arange(y.size) == 3, np.inf, y), "NaN/inf"),
+        (lambda y: np.full(600, 3.0), "constant"),
+        (lambda y: y[:25], "cycles"),  # 25 frames at 2000 fps = 1.5 cycles of 120 Hz
+        (lambda y: y.reshape(20, 30), "1D"),
+        (lambda y: y[:2], "two cycles"),
+    ],
+)
 def test_bad_observation(obs_gaw, mutate, match):
     with pytest.raises(ValueError, match=match):
         validate_observation(mutate(obs_gaw), 2000.0)
@@ -54,14 +57,20 @@ def test_problem_rejects_before_simulation(obs_gaw):
 
 
 def test_problem_roundtrip_and_window(obs_gaw):
-    p = Problem(obs_gaw, 2000.0, Prior.default(fixed={"x0": 8.4}), sigma_e=1.5,
-                config=SimConfig(mesh="coarse", fps=4000.0, dt=1e-4))
-    assert p.config.fps == 2000.0               # camera rate wins
+    p = Problem(
+        obs_gaw,
+        2000.0,
+        Prior.default(fixed={"x0": 8.4}),
+        sigma_e=1.5,
+        config=SimConfig(mesh="coarse", fps=4000.0, dt=1e-4),
+    )
+    assert p.config.fps == 2000.0  # camera rate wins
     max_lag, n_cmp = p.window
     assert n_cmp <= obs_gaw.size and max_lag > 0
     q = Problem.from_dict(p.to_dict())
     assert np.array_equal(q.obs_gaw, p.obs_gaw) and q.prior == p.prior and q.config == p.config
     import pickle
+
     r = pickle.loads(pickle.dumps(p))
     assert r.window == p.window and r.sigma_e == 1.5
 

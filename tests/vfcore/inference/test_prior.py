@@ -43,23 +43,27 @@ def test_roundtrip_dict():
     q = Prior.from_dict(p.to_dict())
     assert q == p
     import json
+
     json.dumps(p.to_dict())
 
 
-@pytest.mark.parametrize("bounds,fixed,match", [
-    ({"E_bodyy": (9, 15)}, {}, "unknown parameter name"),
-    ({"E_body": (15, 9)}, {}, "lo < hi"),
-    ({"E_body": (9, 9)}, {}, "lo < hi"),
-    ({"E_body": (-1, 9)}, {}, "> 0"),
-    ({"p_sub": (-10, 9)}, {}, ">= 0"),
-    ({"x0": (7.4, 9.0)}, {}, "x0"),
-    ({"E_body": (9, float("nan"))}, {}, "finite"),
-    ({"E_body": (9, 15)}, {"E_body": 12}, "both estimated"),
-    ({"E_body": (9, 15)}, {"rho": -5}, "> 0"),
-    ({"E_body": (9, 15)}, {"bogus": 1}, "unknown parameter name"),
-    ({}, {"E_body": 12}, "at least one"),
-    ({"E_body": (9,)}, {}, "pair"),
-])
+@pytest.mark.parametrize(
+    "bounds,fixed,match",
+    [
+        ({"E_bodyy": (9, 15)}, {}, "unknown parameter name"),
+        ({"E_body": (15, 9)}, {}, "lo < hi"),
+        ({"E_body": (9, 9)}, {}, "lo < hi"),
+        ({"E_body": (-1, 9)}, {}, "> 0"),
+        ({"p_sub": (-10, 9)}, {}, ">= 0"),
+        ({"x0": (7.4, 9.0)}, {}, "x0"),
+        ({"E_body": (9, float("nan"))}, {}, "finite"),
+        ({"E_body": (9, 15)}, {"E_body": 12}, "both estimated"),
+        ({"E_body": (9, 15)}, {"rho": -5}, "> 0"),
+        ({"E_body": (9, 15)}, {"bogus": 1}, "unknown parameter name"),
+        ({}, {"E_body": 12}, "at least one"),
+        ({"E_body": (9,)}, {}, "pair"),
+    ],
+)
 def test_prior_validation(bounds, fixed, match):
     with pytest.raises(ValueError, match=match):
         Prior(bounds, fixed)

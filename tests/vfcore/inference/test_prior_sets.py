@@ -1,4 +1,5 @@
 """Named prior sets: the paper's Table 2 and human tissue (:ref:`inference-reach-prior-sets`)."""
+
 import numpy as np
 import pytest
 
@@ -21,10 +22,12 @@ def test_prior_sets_by_name():
 def test_job_spec_carries_the_prior_set():
     import sys
     from pathlib import Path
+
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "service"))
     from svc_helpers import toy_spec
 
     from worker.jobspec import JobSpec
+
     spec = JobSpec.model_validate({**toy_spec(), "priors": None, "fixed": {"x0": 8.4}, "prior_set": "human"})
     pr = spec.to_prior()
     assert np.allclose(pr.lo, [HUMAN_BOUNDS[n][0] for n in pr.names])
@@ -69,6 +72,7 @@ def test_a_human_recording_is_outside_the_papers_reach_and_inside_the_human_sets
     """A 176-Hz twin against the shipped coarse ensembles (the CLI's default configuration): beyond every
     draw of the paper's priors, with the hint to use the human set; inside the human set's 5-95 % range."""
     from vfcore.inference.reach import reach_for
+
     cfg = SimConfig(mesh="coarse", dt=5e-5, duration=0.55, discard=0.25)
     human = Params(E_body=100.0, E_cover=5000.0, E_lig=15.0, p_sub=1500.0, rho=1050.0, eta=3.0, x0=8.4)
     r = simulate(human, cfg)

@@ -1,5 +1,6 @@
 """The model's reach (vfcore.inference.reach): the verdict on synthetic ensembles, the phonation rule, the
 on-disk cache (round trip, atomic writes, key sensitivity) and the shipped ensembles."""
+
 from __future__ import annotations
 
 import math
@@ -33,14 +34,25 @@ def synthetic(n_phon=150, n_quiet=50, correlated=False, seed=0):
     rng = np.random.default_rng(seed)
     u = np.linspace(0, 1, n_phon) if correlated else rng.random(n_phon)
     v = u if correlated else rng.random(n_phon)
-    meas = {"f0_hz": 55 + 25 * u, "max_area_mm2": 10 + 40 * v, "open_quotient": 0.3 + 0.5 * rng.random(n_phon),
-            "speed_quotient": 1 + 3 * rng.random(n_phon), "closing_quotient": 0.1 + 0.2 * rng.random(n_phon)}
+    meas = {
+        "f0_hz": 55 + 25 * u,
+        "max_area_mm2": 10 + 40 * v,
+        "open_quotient": 0.3 + 0.5 * rng.random(n_phon),
+        "speed_quotient": 1 + 3 * rng.random(n_phon),
+        "closing_quotient": 0.1 + 0.2 * rng.random(n_phon),
+    }
     meas = {k: np.concatenate([a, np.full(n_quiet, np.nan)]) for k, a in meas.items()}
     n = n_phon + n_quiet
     prior = Prior.default()
-    return rc.ReachEnsemble(config=rc.config_key_dict(CFG), prior=prior.to_dict(),
-                            params=prior.full_array(prior.sample(n, rng)), ok=np.ones(n, bool),
-                            phonates=np.arange(n) < n_phon, measures=meas, seed=seed)
+    return rc.ReachEnsemble(
+        config=rc.config_key_dict(CFG),
+        prior=prior.to_dict(),
+        params=prior.full_array(prior.sample(n, rng)),
+        ok=np.ones(n, bool),
+        phonates=np.arange(n) < n_phon,
+        measures=meas,
+        seed=seed,
+    )
 
 
 def rec_at(ens, **over):
@@ -63,8 +75,10 @@ def test_outside_high_f0_names_the_numbers_and_what_would_help():
     v = rc.check_reach(rec_at(ens, f0_hz=200.0), ens)
     assert v.verdict == "outside" and v.outside
     assert v.measures["f0_hz"]["verdict"] == "outside" and v.measures["max_area_mm2"]["verdict"] == "inside"
-    assert (f"recording f0 200 Hz; this model and prior reach {st['q05']:.0f}-{st['q95']:.0f} Hz (5-95 %), "
-            f"at most {st['max']:.0f} Hz") in v.message
+    assert (
+        f"recording f0 200 Hz; this model and prior reach {st['q05']:.0f}-{st['q95']:.0f} Hz (5-95 %), "
+        f"at most {st['max']:.0f} Hz"
+    ) in v.message
     assert "150 of 200 prior draws phonate" in v.message
     assert "soft synthetic" in v.message and "--prior E_body" in v.message
     assert "\n" not in v.message
@@ -136,8 +150,8 @@ def _fake(f0, f0_sim=None, decay=0.0):
 
 def test_phonation_rule():
     assert rc.draw_measures(_fake(70.0))[0]
-    assert not rc.draw_measures(_fake(70.0, decay=15.0))[0]              # decays: a transient, not phonation
-    assert not rc.draw_measures(_fake(420.0, f0_sim=60.0))[0]            # GAW pitch != the fold's cycle rate
+    assert not rc.draw_measures(_fake(70.0, decay=15.0))[0]  # decays: a transient, not phonation
+    assert not rc.draw_measures(_fake(420.0, f0_sim=60.0))[0]  # GAW pitch != the fold's cycle rate
     assert not rc.draw_measures(SimpleNamespace(ok=False, gaw=np.zeros(5), fps=4000.0, f0=math.nan))[0]
     ph, m = rc.draw_measures(_fake(70.0))
     assert abs(m["f0_hz"] - 70.0) < 0.5 and abs(m["max_area_mm2"] - 20.0) < 0.1
@@ -145,21 +159,24 @@ def test_phonation_rule():
 
 def fake_simulate(rows, config, block=32):
     """f0 = 6 E_body Hz, peak area p_sub / 50 mm^2; draws with E_cover > 900 Pa fail."""
-    return [_fake(6.0 * r[0]) if r[1] <= 900 else SimpleNamespace(ok=False, gaw=np.zeros(0), fps=4000.0, f0=math.nan)
-            for r in rows]
+    return [
+        _fake(6.0 * r[0]) if r[1] <= 900 else SimpleNamespace(ok=False, gaw=np.zeros(0), fps=4000.0, f0=math.nan)
+        for r in rows
+    ]
 
 
 def test_cache_round_trip_and_lookup(empty_cache):
     prior = Prior.default()
     seen = []
-    ens = rc.build_ensemble(CFG, prior, n=40, seed=3, block=16, simulate_fn=fake_simulate,
-                            progress=lambda d, t, e: seen.append((d, t)))
+    ens = rc.build_ensemble(
+        CFG, prior, n=40, seed=3, block=16, simulate_fn=fake_simulate, progress=lambda d, t, e: seen.append((d, t))
+    )
     assert seen == [(16, 40), (32, 40), (40, 40)]
     assert ens.phonates.sum() == np.sum(ens.params[:, PARAM_NAMES.index("E_cover")] <= 900)
     assert rc.find_ensemble(CFG, prior) == (None, False)
     path = rc.save_cached(ens)
     assert path.parent == empty_cache and path.name == f"reach_{rc.reach_key(CFG, prior)}.csv"
-    assert [p.name for p in empty_cache.iterdir()] == [path.name]          # no temporary left behind
+    assert [p.name for p in empty_cache.iterdir()] == [path.name]  # no temporary left behind
     got, exact = rc.find_ensemble(CFG, prior)
     assert exact and got.key == ens.key and got.n == 40 and got.seed == 3
     np.testing.assert_allclose(got.params, ens.params, rtol=1e-9)
@@ -183,6 +200,7 @@ def test_failed_write_keeps_the_old_file(empty_cache, monkeypatch):
 
     def boom(self):
         raise OSError("disk full")
+
     monkeypatch.setattr(rc.ReachEnsemble, "to_csv_text", boom)
     with pytest.raises(OSError):
         rc.save_cached(ens)
@@ -200,11 +218,16 @@ def test_tampered_key_is_refused(empty_cache):
 def test_key_sensitivity():
     p = Prior.default()
     k = rc.reach_key(CFG, p)
-    assert rc.reach_key(CFG.replace(fps=2000.0), p) == k                    # the camera rate is not physics
+    assert rc.reach_key(CFG.replace(fps=2000.0), p) == k  # the camera rate is not physics
     assert rc.reach_key(CFG.replace(keep_trajectories=True), p) == k
     assert rc.reach_key(CFG.replace(dt=1.0e-4), p) == k
-    for other in (CFG.replace(dt=5e-5), CFG.replace(mesh="medium"), CFG.replace(element="anp"),
-                  CFG.replace(duration=0.5), CFG.replace(closure_gap_mm=0.0)):
+    for other in (
+        CFG.replace(dt=5e-5),
+        CFG.replace(mesh="medium"),
+        CFG.replace(element="anp"),
+        CFG.replace(duration=0.5),
+        CFG.replace(closure_gap_mm=0.0),
+    ):
         assert rc.reach_key(other, p) != k
     assert rc.reach_key(CFG, Prior({**p.bounds, "p_sub": (400.0, 1801.0)})) != k
     assert rc.reach_key(CFG, Prior.default(fixed={"x0": 8.4})) != rc.reach_key(CFG, Prior.default(fixed={"x0": 8.3}))
@@ -230,6 +253,7 @@ def test_the_flow_rule_keys_the_ensemble_and_the_paper_rule_keeps_the_shipped_ke
     shipped ensemble still matches; the continuous load gets an ensemble of its own."""
     from vfcore.config import SimConfig
     from vfcore.inference.reach_ensemble import config_key_dict, reach_key
+
     prior = Prior.default()
     paper, cont = SimConfig(flow="paper"), SimConfig(flow="continuous")
     assert "flow" not in config_key_dict(paper) and config_key_dict(cont)["flow"] == "continuous"

@@ -1,4 +1,5 @@
 """SMC started from a reference distribution (generalized stepping-stone path) against exact answers."""
+
 from __future__ import annotations
 
 import math
@@ -19,13 +20,13 @@ def prior3():
 
 def test_reference_density_is_normalised_and_matches_its_samples(prior3):
     rng = np.random.default_rng(0)
-    mu = prior3.lo + 0.9 * prior3.width            # near a corner: much of the Gaussian is truncated
+    mu = prior3.lo + 0.9 * prior3.width  # near a corner: much of the Gaussian is truncated
     ref = GaussianReference(prior3, mu, np.diag((0.2 * prior3.width) ** 2), eps=0.1)
     assert 0.05 < ref.p_inside[0] < 0.5
-    u = prior3.sample(400_000, rng)               # E_p[q / p] = 1: q integrates to one on the box
+    u = prior3.sample(400_000, rng)  # E_p[q / p] = 1: q integrates to one on the box
     r = np.exp(ref.logpdf(u) - prior3.logpdf(u))
     assert abs(r.mean() - 1.0) < 4 * r.std() / math.sqrt(r.size)
-    x = ref.sample(200_000, rng)                  # E_q[p / q] = 1: the samples follow the density
+    x = ref.sample(200_000, rng)  # E_q[p / q] = 1: the samples follow the density
     assert np.all(prior3.contains(x))
     s = np.exp(prior3.logpdf(x) - ref.logpdf(x))
     assert abs(s.mean() - 1.0) < 4 * s.std() / math.sqrt(s.size)

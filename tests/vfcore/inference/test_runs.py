@@ -1,5 +1,6 @@
 """Independent SMC runs pooled (``vfcore.inference.runs``): the rule on hand-made runs whose answer is known,
 and ``smc(runs=K)`` on the linear-Gaussian toy against its exact posterior."""
+
 import math
 
 import numpy as np
@@ -14,10 +15,20 @@ def _run(center, log_z, n, seed, peak=None):
     """A finished run about ``center``: its predictions' log-likelihood peaks at ``peak`` (default ``log_z``)."""
     rng = np.random.default_rng(seed)
     x = center + 0.1 * rng.standard_normal((n, 2))
-    p = Posterior.from_weighted(("a", "b"), x, np.zeros(n), rng=rng, log_evidence=log_z, log_evidence_se=0.3,
-                                n_simulations=10 * n, method="smc", check=False)
-    p.predictive = Evaluation(loglik=-((x - center) ** 2).sum(1) + (log_z if peak is None else peak),
-                              ok=np.ones(n, bool))
+    p = Posterior.from_weighted(
+        ("a", "b"),
+        x,
+        np.zeros(n),
+        rng=rng,
+        log_evidence=log_z,
+        log_evidence_se=0.3,
+        n_simulations=10 * n,
+        method="smc",
+        check=False,
+    )
+    p.predictive = Evaluation(
+        loglik=-((x - center) ** 2).sum(1) + (log_z if peak is None else peak), ok=np.ones(n, bool)
+    )
     p.predictive_index = np.arange(n)
     return p
 
@@ -26,8 +37,8 @@ def test_a_run_whose_best_particle_is_far_below_the_best_runs_is_left_out():
     """The default rule reads each run's best particle: runs of one basin reach the same peak whatever their
     evidence estimates say; a run that missed the basin peaks lower."""
     a = _run(0.0, -100.0, 40, 1, peak=-50.0)
-    b = _run(0.1, -130.0, 40, 2, peak=-50.5)       # same basin, evidence 30 nats lower by the sampler's luck
-    c = _run(5.0, -99.0, 40, 3, peak=-58.0)        # another basin, 8 nats short at its peak
+    b = _run(0.1, -130.0, 40, 2, peak=-50.5)  # same basin, evidence 30 nats lower by the sampler's luck
+    c = _run(5.0, -99.0, 40, 3, peak=-58.0)  # another basin, 8 nats short at its peak
     post = pool_runs([a, b, c])
     assert [r["kept"] for r in post.info["runs"]] == [True, True, False]
     assert post.info["run_rule"] == "loglik" and post.info["run_gap"] == 3.0
@@ -53,7 +64,9 @@ def test_a_run_far_below_the_best_evidence_is_left_out_and_the_rest_share_equall
     pred = post.resampled_predictive()
     x = post.resampled_samples
     centre = np.where(post.resampled < 40, 0.0, 0.2)
-    assert np.allclose(pred.loglik, -((x - centre[:, None]) ** 2).sum(1) + np.where(post.resampled < 40, -100.0, -103.0))
+    assert np.allclose(
+        pred.loglik, -((x - centre[:, None]) ** 2).sum(1) + np.where(post.resampled < 40, -100.0, -103.0)
+    )
     # a wider gap keeps c: three runs, equal shares
     wide = pool_runs([a, b, c], rule="evidence", gap=20.0)
     assert wide.info["runs_kept"] == 3 and np.allclose(wide.mean, (a.mean + b.mean + c.mean) / 3)

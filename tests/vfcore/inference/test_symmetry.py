@@ -4,6 +4,7 @@ The target here is a toy with the model's structure: a likelihood that depends o
 invariant under theta -> c theta on all coordinates), a uniform box prior, and optionally a Gaussian
 measurement of one coordinate that anchors the scale. Its exact posterior moments come from importance
 sampling of 2,000,000 prior draws (the likelihood is analytic and cheap)."""
+
 from __future__ import annotations
 
 import math
@@ -20,7 +21,7 @@ from vfcore.inference.symmetry import ScaleGroup, rescale_products, scale_group
 
 BOUNDS = {"E_body": (1.0, 3.0), "E_lig": (2.0, 5.0), "p_sub": (0.5, 2.0)}
 PRIOR = Prior(BOUNDS)
-MEAS = (1, 3.0, 0.3)          # a measurement of the second coordinate: mean 3, sd 0.3
+MEAS = (1, 3.0, 0.3)  # a measurement of the second coordinate: mean 3, sd 0.3
 
 
 def _loglik(th):
@@ -63,7 +64,7 @@ def test_a_group_move_leaves_the_target_invariant(measured):
     assert np.allclose(np.log(y[:, 0] / y[:, 1]), np.log(x[:, 0] / x[:, 1]), atol=1e-12)
     assert np.allclose(y, x * np.exp(t)[:, None], rtol=1e-12)
     assert np.allclose(d, (_offset(y) - _offset(x)) if measured else 0.0, atol=1e-9)
-    assert np.std(t) > 0.05                    # it moved
+    assert np.std(t) > 0.05  # it moved
     ref = _target_draws(measured, 20_000, seed=3)
     for a, b in ((np.log(y).sum(axis=1), np.log(ref).sum(axis=1)), (y[:, 0], ref[:, 0]), (y[:, 2], ref[:, 2])):
         assert stats.ks_2samp(a, b).pvalue > 1e-3

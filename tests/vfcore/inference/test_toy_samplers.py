@@ -4,6 +4,7 @@ Tolerances come from Monte Carlo standard errors: for self-normalised IS the del
 s.e. of a weighted mean, sqrt(sum w_i^2 (f_i - f_hat)^2); for SMC the spread over
 independent seeded replications (Student-t bound). Fixed seeds keep the tests deterministic.
 """
+
 import math
 from concurrent.futures import ThreadPoolExecutor
 
@@ -31,7 +32,7 @@ def _is_se(post, f):
     """Delta-method s.e. of the self-normalised IS estimate of E[f]."""
     w = post.weights
     fhat = w @ f
-    return math.sqrt(np.sum(w ** 2 * (f - fhat) ** 2))
+    return math.sqrt(np.sum(w**2 * (f - fhat) ** 2))
 
 
 def test_toy_is_exact(prior2):
@@ -67,7 +68,7 @@ def test_toy_smc_exact(prior3, init_factor):
     for s in range(R):
         post = smc(toy, prior3, n_particles=300, seed=100 + s, init_factor=init_factor)
         means.append(post.mean)
-        variances.append(post.sd ** 2)
+        variances.append(post.sd**2)
         logz.append(post.log_evidence)
         sims.append(post.n_simulations)
     means, variances, logz = map(np.asarray, (means, variances, logz))
@@ -122,6 +123,7 @@ def test_smc_many_gives_each_run_as_alone(prior3):
     """Runs made together (one batch a round through the map) equal each run made alone, bit for bit, and
     go through the map in as many calls as the longest run's batches, not the sum of all runs'."""
     from vfcore.inference.smc import smc_many
+
     toy = LinearGaussianToy(prior3, seed=2)
     jobs = [(40, 3), (60, 8), (40, 11)]
     calls = []
@@ -158,7 +160,7 @@ def test_smc_ask_tell_and_failures(prior3):
 
     s = SMCSampler(prior3, n_particles=100, seed=0)
     first = s.ask()
-    assert s.ask() is first                     # idempotent until tell
+    assert s.ask() is first  # idempotent until tell
     n = 0
     while (th := s.ask()) is not None:
         s.tell(failing(th))
@@ -202,6 +204,7 @@ def test_delayed_acceptance_keeps_the_exact_posterior(prior3):
     screen saves full evaluations."""
     from vfcore.inference.importance import batch_function
     from vfcore.inference.problem import Evaluation
+
     toy = LinearGaussianToy(prior3, n_obs=6, noise=0.05, seed=0)
     full = batch_function(toy)
     tilt = np.array([0.3, 0.002, 0.4]) / np.asarray(prior3.width)
@@ -215,7 +218,7 @@ def test_delayed_acceptance_keeps_the_exact_posterior(prior3):
     for s in range(R):
         post = smc(toy, prior3, n_particles=300, seed=200 + s, screen=cheap)
         means.append(post.mean)
-        variances.append(post.sd ** 2)
+        variances.append(post.sd**2)
         sims.append(post.n_simulations)
         screened.append(post.info["n_screened"])
         assert post.info["delayed_acceptance"] and post.info["n_screen_rejected"] > 0

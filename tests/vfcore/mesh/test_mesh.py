@@ -1,4 +1,5 @@
 """Shipped fold meshes against the analytic M5-like profile (vfcore.mesh.geometry)."""
+
 import math
 
 import numpy as np
@@ -59,7 +60,7 @@ def test_shipped_mesh(name):
     # every node used; no duplicated nodes
     assert np.array_equal(np.unique(m.triangles), np.arange(m.n_nodes))
     d = np.linalg.norm(m.points[:, None] - m.points[None], axis=-1) + np.eye(m.n_nodes)
-    assert d.min() > 1e-5                                  # m
+    assert d.min() > 1e-5  # m
     # total area = analytic profile area (P1 chords of the arcs lose a little)
     a_mm2 = area.sum() * 1e6
     exact = _analytic_area_mm2()
@@ -87,7 +88,7 @@ def test_fixed_nodes_and_surface_chain(name):
     assert ps[0] == pytest.approx(p["B"], abs=1e-6)
     assert ps[-1] == pytest.approx(p["E"], abs=1e-6)
     assert np.all(m.fixed[s[[0, -1]]]) and not np.any(m.fixed[s[1:-1]])
-    assert np.all(np.diff(ps[:, 1]) >= -1e-9)               # z never decreases along the chain
+    assert np.all(np.diff(ps[:, 1]) >= -1e-9)  # z never decreases along the chain
     # consecutive surface nodes share a boundary edge
     edges = {tuple(sorted(e)) for t in m.triangles for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     assert all(tuple(sorted((a, b))) in edges for a, b in zip(s[:-1], s[1:]))

@@ -4,6 +4,7 @@ the paper's rule where no switch is near.
 The continuity checks bisect the largest change of the nodal forces along a line of surface positions: a
 Lipschitz load's change halves with the step, a jump keeps its size however small the step.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,8 +21,9 @@ def forces(gap, flow, nz=None, g_reg=G_REG, p_sup=P_SUP):
     nz = np.linspace(0.0, 1e-2, m) if nz is None else nz
     nx = np.full(m, 8.4e-3)
     fx, fz, pres = np.zeros(m), np.zeros(m), np.zeros(m)
-    out = kern.surface_loads(nx - gap, nz, nx, nz, np.array(gap, float), P_SUB, p_sup, SEP, 1e-9, g_reg, fx, fz,
-                             pres, flow)
+    out = kern.surface_loads(
+        nx - gap, nz, nx, nz, np.array(gap, float), P_SUB, p_sup, SEP, 1e-9, g_reg, fx, fz, pres, flow
+    )
     return np.r_[fx, fz], out, pres
 
 
@@ -50,15 +52,13 @@ def is_jump(first, last):
 
 def random_profile(rng, kind, m):
     t = np.linspace(-1.0, 1.0, m)
-    if kind == "one minimum":            # open or closed, separation anywhere along an edge
+    if kind == "one minimum":  # open or closed, separation anywhere along an edge
         c = rng.uniform(-0.5, 0.5)
         return (rng.uniform(-0.05, 0.3) + rng.uniform(0.2, 2.0) * (t - c) ** 2) * MM
-    if kind == "two closures":           # two narrow places, either or both at the midline: pockets
-        return (np.abs(np.sin(3.0 * t + rng.uniform(0, 6))) * rng.uniform(0.01, 0.5)
-                + rng.uniform(-0.05, 0.05)) * MM
-    if kind == "two minima":             # two near-equal narrowest points
-        return (np.minimum((t - 0.5) ** 2, (t + 0.3) ** 2 + rng.uniform(-0.02, 0.02))
-                + rng.uniform(-0.03, 0.05)) * MM
+    if kind == "two closures":  # two narrow places, either or both at the midline: pockets
+        return (np.abs(np.sin(3.0 * t + rng.uniform(0, 6))) * rng.uniform(0.01, 0.5) + rng.uniform(-0.05, 0.05)) * MM
+    if kind == "two minima":  # two near-equal narrowest points
+        return (np.minimum((t - 0.5) ** 2, (t + 0.3) ** 2 + rng.uniform(-0.02, 0.02)) + rng.uniform(-0.03, 0.05)) * MM
     return rng.uniform(-0.05, 0.3, m) * MM  # rough
 
 
@@ -134,7 +134,7 @@ def test_closed_glottis_pressure():
     of node 4, p_sup from it on (the paper's closed load), lumped by halves; the net force is that of p_sub on
     [0, 3.5 mm]."""
     m = 9
-    nz = np.linspace(0.0, 8e-3, m)                       # 1 mm edges
+    nz = np.linspace(0.0, 8e-3, m)  # 1 mm edges
     gap = np.array([0.6, 0.4, 0.3, 0.1, -0.3, -0.2, 0.1, 0.3, 0.5]) * MM
     F, (gmin, gsep, iclose), pres = forces(gap, kern.FLOW_CONTINUOUS, nz=nz, p_sup=200.0)
     assert iclose == 4 and gsep == 0.0 and gmin == 0.0
@@ -144,11 +144,14 @@ def test_closed_glottis_pressure():
     assert abs(F[m:].sum()) < 1e-15
 
 
-@pytest.mark.parametrize("gap_mm", [
-    [5, 4, 3, 2, 1, 1.2, 1.5, 2, 3],             # separation between nodes 5 and 6
-    [5, 4, 3, 2, 1, 1.2, 1.3, 1.5, 2, 3],        # separation on node 6
-    [3, 2.5, 2, 1.6, 1.3, 1.0, 0.8],             # convergent: attached to the exit
-])
+@pytest.mark.parametrize(
+    "gap_mm",
+    [
+        [5, 4, 3, 2, 1, 1.2, 1.5, 2, 3],  # separation between nodes 5 and 6
+        [5, 4, 3, 2, 1, 1.2, 1.3, 1.5, 2, 3],  # separation on node 6
+        [3, 2.5, 2, 1.6, 1.3, 1.0, 0.8],  # convergent: attached to the exit
+    ],
+)
 def test_equals_the_paper_rule_with_one_narrowest_node_open_wider_than_g_reg(gap_mm):
     """One narrowest node, no other within 10 % of it, open wider than g_reg, no narrowing behind separation:
     every blend weight is 0 or 1 and the nodal pressures are the paper's."""

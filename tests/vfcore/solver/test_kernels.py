@@ -1,4 +1,5 @@
 """numba kernels of the time integration against dense linear algebra and hand-computed Bernoulli flow."""
+
 import itertools
 
 import numpy as np
@@ -25,7 +26,7 @@ def _dense_symbolic(C):
     n = C.shape[0]
     S = np.tril(C.toarray() != 0) | np.eye(n, dtype=bool)
     for k in range(n):
-        rows = np.nonzero(S[k + 1:, k])[0] + k + 1
+        rows = np.nonzero(S[k + 1 :, k])[0] + k + 1
         S[np.ix_(rows, rows)] |= np.tril(np.ones((rows.size, rows.size), dtype=bool))
     return S
 
@@ -33,7 +34,7 @@ def _dense_symbolic(C):
 def _brute_minimum_degree(C):
     """Eliminate the least-degree live vertex (lowest index on ties) found by scanning all of them."""
     n = C.shape[0]
-    adj = [set(C.indices[C.indptr[i]:C.indptr[i + 1]].tolist()) - {i} for i in range(n)]
+    adj = [set(C.indices[C.indptr[i] : C.indptr[i + 1]].tolist()) - {i} for i in range(n)]
     alive, order = set(range(n)), []
     while alive:
         v = min(alive, key=lambda i: (len(adj[i]), i))
@@ -59,7 +60,7 @@ def test_symbolic_factor_and_ordering_match_the_dense_elimination(n, density):
         S = _dense_symbolic(Cp)
         assert Lp[-1] == S.sum()
         for i in range(n):
-            assert Lj[Lp[i]:Lp[i + 1]].tolist() == np.nonzero(S[i])[0].tolist()
+            assert Lj[Lp[i] : Lp[i + 1]].tolist() == np.nonzero(S[i])[0].tolist()
 
 
 @pytest.mark.parametrize("n,density", [(1, 1.0), (5, 0.3), (12, 0.2), (40, 0.08), (100, 0.03), (60, 0.5)])
@@ -67,7 +68,7 @@ def test_sparse_cholesky_and_solve_vs_dense(n, density):
     rng = np.random.default_rng(n * 100 + int(100 * density))
     A, C = _random_sparse_spd(n, density, rng)
     order = minimum_degree(C)
-    assert sorted(order.tolist()) == list(range(n))              # a permutation
+    assert sorted(order.tolist()) == list(range(n))  # a permutation
     Cp = sp.csr_matrix(C[order][:, order])
     Cp.sort_indices()
     Ap = A[np.ix_(order, order)]
@@ -76,7 +77,7 @@ def test_sparse_cholesky_and_solve_vs_dense(n, density):
     # the symbolic pattern holds every structural nonzero of the dense factor, diagonal last
     S = np.zeros((n, n), dtype=bool)
     for i in range(n):
-        cols = Lj[Lp[i]:Lp[i + 1]]
+        cols = Lj[Lp[i] : Lp[i + 1]]
         assert cols[-1] == i and np.all(np.diff(cols) > 0)
         S[i, cols] = True
     assert not np.any((np.abs(L_dense) > 1e-14 * np.abs(L_dense).max()) & ~S)
@@ -86,17 +87,17 @@ def test_sparse_cholesky_and_solve_vs_dense(n, density):
     L = np.zeros((n, n))
     for i in range(n):
         for q in range(Lp[i], Lp[i + 1]):
-            L[i, Lj[q]] = Lx[q] if Lj[q] != i else 1.0 / Lx[q]   # diagonal stored as 1 / L_ii
+            L[i, Lj[q]] = Lx[q] if Lj[q] != i else 1.0 / Lx[q]  # diagonal stored as 1 / L_ii
     np.testing.assert_allclose(L, L_dense, rtol=1e-12, atol=1e-12 * np.abs(A).max())
     B = 5
     rhs = rng.standard_normal((n, B))
     X = rhs.copy()
-    chol_solve_many(Lp, Lj, np.repeat(Lx[:, None], B, axis=1), X)       # batched: every column
+    chol_solve_many(Lp, Lj, np.repeat(Lx[:, None], B, axis=1), X)  # batched: every column
     for b in range(B):
         x = rhs[:, b].copy()
         kern.chol_solve(Lp, Lj, Lx, x)
         np.testing.assert_allclose(x, np.linalg.solve(Ap, rhs[:, b]), rtol=1e-10, atol=1e-12)
-        assert np.array_equal(X[:, b], x)                  # same operations in the same order
+        assert np.array_equal(X[:, b], x)  # same operations in the same order
 
 
 def test_sparse_cholesky_reports_indefinite_minor():
@@ -106,7 +107,7 @@ def test_sparse_cholesky_reports_indefinite_minor():
     Lp, Lj = cholesky_pattern(C)
     Lx = np.empty(Lj.size)
     args = (C.indptr.astype(np.int64), C.indices.astype(np.int64), C.data, Lp, Lj, Lx)
-    assert kern.sparse_cholesky(*args) == 3      # leading minor of order 3 fails
+    assert kern.sparse_cholesky(*args) == 3  # leading minor of order 3 fails
     C = sp.csr_matrix(np.diag([1.0, 0.0]))
     Lp, Lj = cholesky_pattern(C)
     Lx = np.empty(Lj.size)
@@ -118,6 +119,7 @@ def test_minimum_degree_reduces_fill_on_the_fold_meshes():
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
     from vfcore.solver.system import get_system
+
     for mesh in ("coarse", "medium", "fine"):
         s = get_system(mesh, 0.4995)
         pat = s.matrix(np.ones(s.indices.size))
@@ -133,7 +135,9 @@ def _loads(gap, p_sub, p_sup, sep=1.3, tol=1e-9, nx=None, nz=None):
     nx = np.zeros(m) if nx is None else np.asarray(nx, float)
     nz = np.linspace(0, 1e-2, m) if nz is None else np.asarray(nz, float)
     fx, fz, pres = np.empty(m), np.empty(m), np.empty(m)
-    out = kern.surface_loads(nx.copy(), nz.copy(), nx, nz, gap, p_sub, p_sup, sep, tol, 0.0, fx, fz, pres, kern.FLOW_PAPER)
+    out = kern.surface_loads(
+        nx.copy(), nz.copy(), nx, nz, gap, p_sub, p_sup, sep, tol, 0.0, fx, fz, pres, kern.FLOW_PAPER
+    )
     return out, pres, fx, fz
 
 
@@ -167,7 +171,7 @@ def test_surface_loads_net_force_on_vertical_wall(m):
     the nodal forces sum to -p Lw in x (into the fold, which lies at smaller x) and 0 in z."""
     Lw = 4e-3
     nz = np.linspace(0.0, Lw, m) ** 1.0
-    nz = np.sort(np.r_[0.0, np.random.default_rng(m).uniform(0, Lw, m - 2), Lw])   # uneven spacing
+    nz = np.sort(np.r_[0.0, np.random.default_rng(m).uniform(0, Lw, m - 2), Lw])  # uneven spacing
     nx = np.full(m, 8.4e-3)
     # closed at the first node -> p_sup everywhere
     (_, _, iclose), pres, fx, fz = _loads(np.zeros(m), 900.0, 333.0, nx=nx, nz=nz)
@@ -193,11 +197,11 @@ def _tiny_contact_system(seed):
     n = 8
     B = rng.standard_normal((n, n))
     K = B @ B.T + n * np.eye(n)
-    sdx = np.array([0, 2, 4, -1, 6], dtype=np.int64)      # one fixed surface node
+    sdx = np.array([0, 2, 4, -1, 6], dtype=np.int64)  # one fixed surface node
     sX = np.array([0.9, 1.0, 1.05, 1.2, 0.95])
     x_mid = 1.0
     f = rng.standard_normal(n) * 3.0
-    f[sdx[sdx >= 0]] += 4.0                               # push towards the midline
+    f[sdx[sdx >= 0]] += 4.0  # push towards the midline
     u0 = np.linalg.solve(K, f)
     G = np.zeros((n, sdx.size))
     for j, d in enumerate(sdx):
@@ -240,8 +244,8 @@ def test_contact_correct_matches_brute_force(seed):
     free = sdx >= 0
     xs = sX[free] + u[sdx[free]]
     assert np.all(xs <= x_mid * (1 + 1e-12))
-    assert np.all(lam <= 0.0)                       # compressive only
-    assert np.any(lam < 0.0)                        # the case does press on the midline
+    assert np.all(lam <= 0.0)  # compressive only
+    assert np.any(lam < 0.0)  # the case does press on the midline
     assert np.all(lam[~free] == 0.0)
     # complementarity: a multiplier only where the node touches the midline
     touching = np.abs(xs - x_mid) < 1e-12
@@ -256,7 +260,7 @@ def test_contact_correct_matches_brute_force(seed):
 
 def test_contact_correct_no_penetration_is_noop():
     K, f, u0, G, sdx, sX, x_mid = _tiny_contact_system(0)
-    u = np.full(K.shape[0], -1.0)                   # everything far from the midline
+    u = np.full(K.shape[0], -1.0)  # everything far from the midline
     ref = u.copy()
     lam = np.ones(sdx.size)
     active = np.ones(sdx.size, dtype=np.bool_)
