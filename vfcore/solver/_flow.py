@@ -49,6 +49,24 @@ def smoothstep(s):
 
 
 @njit(cache=True)
+def lump_pressures(nxs, nzs, pres, fx, fz):
+    """Nodal forces (N/m, into the fold) of the nodal pressures ``pres`` (m,), Pa: each node's pressure acts on
+    the halves of its two edges (the paper's lumping), along the inward normal rot90(e) = (-ez, ex) of the
+    reference edges ``nxs``, ``nzs``. Writes ``fx``, ``fz`` (m,)."""
+    m = pres.size
+    for i in range(m):
+        fx[i] = 0.0
+        fz[i] = 0.0
+    for i in range(m - 1):
+        ex = nxs[i + 1] - nxs[i]
+        ez = nzs[i + 1] - nzs[i]
+        fx[i] += 0.5 * pres[i] * (-ez)
+        fz[i] += 0.5 * pres[i] * ex
+        fx[i + 1] += 0.5 * pres[i + 1] * (-ez)
+        fz[i + 1] += 0.5 * pres[i + 1] * ex
+
+
+@njit(cache=True)
 def _min_weight(gap, k, gmin):
     """Weight of node k as the node the flow separates behind: 1 at the narrowest node, falling to 0 for a node
     ``MIN_BLEND * gmin`` wider."""
@@ -124,14 +142,5 @@ def surface_loads_continuous(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, g_r
             pres[i] *= smoothstep(rmin / g_reg) if g_reg > 0.0 else 0.0
     for i in range(m):
         pres[i] += p_sup
-        fx[i] = 0.0
-        fz[i] = 0.0
-    for i in range(m - 1):
-        ex = nxs[i + 1] - nxs[i]
-        ez = nzs[i + 1] - nzs[i]
-        # pressure on the edge acts along the inward normal rot90(e) = (-ez, ex); half of the edge to each end
-        fx[i] += 0.5 * pres[i] * (-ez)
-        fz[i] += 0.5 * pres[i] * ex
-        fx[i + 1] += 0.5 * pres[i + 1] * (-ez)
-        fz[i + 1] += 0.5 * pres[i + 1] * ex
+    lump_pressures(nxs, nzs, pres, fx, fz)
     return (gmin if gmin > 0.0 else 0.0), gsep, iclose

@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from ._args import Coupling, Stop, Work
-from ._flow import surface_loads_continuous
+from ._flow import lump_pressures, smoothstep, surface_loads_continuous
 
 #: ``flow`` argument of the kernels: the paper's node-wise load, or the continuous one of :mod:`._flow`
 FLOW_PAPER = 0
@@ -142,23 +142,11 @@ def surface_loads(xs, zs, nxs, nzs, gap, p_sub, p_sup, sep_ratio, closed_tol, g_
             else:
                 pres[i] = p_sup
         if gmin < g_reg:
-            s = gmin / g_reg
-            w = s * s * (3.0 - 2.0 * s)
+            w = smoothstep(gmin / g_reg)
             for i in range(m):
                 pc = p_sub if i < imin else p_sup
                 pres[i] = w * pres[i] + (1.0 - w) * pc
-    for i in range(m):
-        fx[i] = 0.0
-        fz[i] = 0.0
-    for i in range(m - 1):
-        ex = nxs[i + 1] - nxs[i]
-        ez = nzs[i + 1] - nzs[i]
-        # pressure on the edge acts along the inward normal: rot90(e) = (-ez, ex);
-        # half of the edge goes to each end node
-        fx[i] += 0.5 * pres[i] * (-ez)
-        fz[i] += 0.5 * pres[i] * ex
-        fx[i + 1] += 0.5 * pres[i + 1] * (-ez)
-        fz[i + 1] += 0.5 * pres[i + 1] * ex
+    lump_pressures(nxs, nzs, pres, fx, fz)
     return gmin, gsep, iclose
 
 
